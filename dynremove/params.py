@@ -1,0 +1,132 @@
+"""Parameters of the method (paper Sec. 3), in one frozen dataclass.
+
+Symbols follow the paper. Where the paper gives a value it is the default here;
+where it is silent (patch size, DBSCAN, t_r and the scalings that make the σ's
+meaningful) the value was chosen by measurement: see README "Design choices".
+
+Two presets:
+
+* ``paper``: the method as written; only the scalings the paper leaves open
+  (SIFT, HoG and coordinate units, p, ε, minPts, t_r) are filled in.
+* ``default``: the best variant the evidence supports (same core, plus the
+  engineered steps named in the fields below).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+CORRESPONDENCE_METHODS = ("homography+flow", "homography", "flow")
+WRITE_MODES = ("patch", "pixel")
+
+
+@dataclass(frozen=True, kw_only=True, slots=True)
+class Params:
+    """Parameters of the method (paper Sec. 3). Make variants with ``replace``."""
+
+    # --- features (Sec. 3.1) -------------------------------------------------
+    patch_size: int = 9  # p      : patch side for f_c, f_g and removal (not given)
+    sift_scale: float = 0.4  # SIFT / set-max is multiplied by this (unit of σ_g)
+    hog_bins: int = 8  # bins of the rotation-invariant HoG g_h
+    hog_scale: float = 10.0  # unit-L2 HoG is multiplied by this (unit of σ_h)
+    coord_scale_px: float = 8.0  # Sampson distance is measured in units of this
+
+    # --- similarity, Eq. (1) and H ------------------------------------------
+    lambda1: float = 0.15  # λ1 : Lab weight in C_s and H
+    lambda2: float = 0.40  # λ2 : SIFT weight in C_s and H
+    lambda3: float = 0.45  # λ3 : epipolar weight in C_s and H
+    sigma_c: float = 4.8  # σ_c : Lab (CIE units)
+    sigma_g: float = 0.25  # σ_g : SIFT (after sift_scale)
+    sigma_e: float = 0.17  # σ_e : squared Sampson distance (coord units)
+
+    # --- decision, Eq. (DB_cost) and M --------------------------------------
+    dbscan_eps: float = 0.5  # ε of DBSCAN on the distance B
+    dbscan_min_pts: int = 2  # minPts of DBSCAN (the point itself counts)
+    t_r: float = 0.3  # t_r : static if M(x) > t_r
+
+    # --- removal, patch choice q* -------------------------------------------
+    lambda6: float = 0.12  # λ6 : Lab term of q*
+    lambda7: float = 0.36  # λ7 : HoG term of q*
+    lambda8: float = 0.03  # λ8 : epipolar term of q*
+    sigma_h: float = 4.8  # σ_h : HoG (after hog_scale)
+    tie_tol: float = 1e-3  # patches within this of the best score tie
+    write: str = "patch"  # "patch": write p×p; "pixel": centre only
+
+    # --- scans ---------------------------------------------------------------
+    max_scans: int = 4  # stop earlier when a scan finds no dynamic pixel
+    update: bool = True  # update f, N and C after a write (Sec. 3.2.3)
+    use_epipolar: bool = True  # λ3/λ8 terms on (off: weights renormalised)
+    use_hog: bool = True  # λ7 term on
+
+    # --- correspondences ----------------------------------------------------
+    correspondence: str = "homography+flow"  # N_{r→s}: pre-warp + DIS flow
+    flow_preset: str = "medium"  # DIS preset: "fast", "medium", "ultrafast"
+
+    # --- engineered steps (default preset only; all off in "paper") ---------
+    clean_mask: bool = False  # morphological clean-up of L (open/close, holes)
+    min_region_px: int = 0  # drop dynamic components smaller than this
+
+    seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
+
+    def __post_init__(self) -> None:
+        if self.patch_size < 3 or self.patch_size % 2 == 0:
+            raise ValueError(f"patch_size must be odd and >= 3, got {self.patch_size}")
+        if self.dbscan_eps <= 0:
+            raise ValueError(f"dbscan_eps must be > 0, got {self.dbscan_eps}")
+        if self.dbscan_min_pts < 1:
+            raise ValueError(f"dbscan_min_pts must be >= 1, got {self.dbscan_min_pts}")
+        if not 0.0 <= self.t_r <= 1.0:
+            raise ValueError(f"t_r must be in [0, 1], got {self.t_r}")
+        if self.max_scans < 1:
+            raise ValueError(f"max_scans must be >= 1, got {self.max_scans}")
+        for name in ("sigma_c", "sigma_g", "sigma_e", "sigma_h", "sift_scale",
+                     "hog_scale", "coord_scale_px"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.correspondence not in CORRESPONDENCE_METHODS:
+            raise ValueError(
+                f"correspondence must be one of {CORRESPONDENCE_METHODS}, "
+                f"got {self.correspondence!r}")
+        if self.write not in WRITE_MODES:
+            raise ValueError(f"write must be one of {WRITE_MODES}, got {self.write!r}")
+        if self.flow_preset not in ("fast", "medium", "ultrafast"):
+            raise ValueError(f"flow_preset must be fast/medium/ultrafast, got {self.flow_preset!r}")
+        if self.hog_bins < 2:
+            raise ValueError(f"hog_bins must be >= 2, got {self.hog_bins}")
+
+    # λ4, λ5 of Eq. (DB_cost) and M
+    @property
+    def lambda4(self) -> float:
+        return self.lambda1 / (self.lambda1 + self.lambda2)
+
+    @property
+    def lambda5(self) -> float:
+        return self.lambda2 / (self.lambda1 + self.lambda2)
+
+    def replace(self, **changes: object) -> "Params":
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+PAPER = Params()
+DEFAULT = Params(clean_mask=True, min_region_px=64)
+
+PRESETS: dict[str, Params] = {"default": DEFAULT, "paper": PAPER}
+
+
+def preset(name: str) -> Params:
+    """Return the named preset (``"default"`` or ``"paper"``)."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise ValueError(f"unknown preset {name!r}; choose from {sorted(PRESETS)}") from None
+
+
+def params_fields() -> list[dataclasses.Field]:
+    return list(dataclasses.fields(Params))
+
+
+__all__ = ["Params", "PRESETS", "PAPER", "DEFAULT", "preset", "params_fields", "field"]
