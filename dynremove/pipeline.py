@@ -1,0 +1,222 @@
+"""The whole method: features → geometry → correspondences → scans → result."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from dynremove import correspondence, features, geometry, postprocess
+from dynremove.events import EventSink, NullSink, RunInfo
+from dynremove.params import DEFAULT, Params
+from dynremove.scan import _kernels as kn
+from dynremove.scan.driver import ScanInputs, pack_params, run_scans
+
+Progress = Callable[[str, float], None]
+
+
+class InputError(ValueError):
+    """The inputs cannot be processed (the CLI exits with code 2)."""
+
+
+@dataclass
+class Result:
+    """What a run produces. Images are BGR uint8; masks are (H, W) bool."""
+
+    clean: npt.NDArray[np.uint8]  # (H, W, 3) the reference with dynamic objects removed
+    dynamic: npt.NDArray[np.bool_]  # (H, W) final dynamic map L (after clean-up, if on)
+    dynamic_raw: npt.NDArray[np.bool_]  # (H, W) L as the scans left it
+    M: list[np.ndarray]  # (H, W) float32 M map of every scan
+    coverage: npt.NDArray[np.uint8]  # (H, W) sources whose final match agrees with the output
+    scans: np.ndarray  # SCAN_SUMMARY_DTYPE records
+    timings: dict[str, float]  # seconds per stage
+    N: np.ndarray  # (S, H, W, 2) int32 final correspondences
+    C: np.ndarray  # (S, H, W) float32 final similarity
+    ref_index: int
+    params: dict
+    geometry: list[dict] = field(default_factory=list)  # matches/inliers per source
+    warnings: list[str] = field(default_factory=list)
+
+
+def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
+    """Raise InputError unless images are ≥ 2 same-size (H, W, 3) uint8 arrays."""
+    if len(images) < 2:
+        raise InputError(f"need at least 2 images, got {len(images)}")
+    shape = images[0].shape
+    for i, im in enumerate(images):
+        if not isinstance(im, np.ndarray) or im.dtype != np.uint8 or im.ndim != 3 or im.shape[2] != 3:
+            raise InputError(f"image {i}: expected (H, W, 3) uint8, got "
+                             f"{getattr(im, 'shape', None)} {getattr(im, 'dtype', None)}")
+        if im.shape != shape:
+            raise InputError(f"image {i} is {im.shape[1]}x{im.shape[0]}, image 0 is "
+                             f"{shape[1]}x{shape[0]}: all images must have the same size")
+    if shape[0] < 8 or shape[1] < 8:
+        raise InputError(f"images are too small ({shape[1]}x{shape[0]}); need at least 8x8")
+    if not 0 <= ref < len(images):
+        raise InputError(f"reference index {ref} out of range 0..{len(images) - 1}")
+
+
+def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
+            timings: dict[str, float] | None = None,
+            progress: Progress | None = None) -> tuple[ScanInputs, list[geometry.TwoView]]:
+    """Features, geometry, dense correspondences and similarity maps (Sec. 3.1)."""
+    timings = {} if timings is None else timings
+    p = params.patch_size
+    srcs = [i for i in range(len(images)) if i != ref]
+    t = time.perf_counter()
+    grays = [features.to_gray(im) for im in images]
+    labs = [features.to_lab(im) for im in images]
+    fc = [cv2.blur(lab, (p, p), borderType=cv2.BORDER_REFLECT_101) for lab in labs]
+    fg = []
+    for i, g in enumerate(grays):
+        fg.append(features.dense_sift(g, patch_size=p))
+        if progress:
+            progress("features", (i + 1) / len(grays))
+    unit = features.sift_unit(fg, sift_scale=params.sift_scale)
+    timings["features"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    g8 = [np.clip(g + 0.5, 0, 255).astype(np.uint8) for g in grays]
+    views = geometry.geometry_for_sources(g8[ref], [g8[s] for s in srcs], seed=params.seed)
+    timings["geometry"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    Ns = []
+    for k, s in enumerate(srcs):
+        Ns.append(correspondence.dense_correspondence(
+            g8[ref], g8[s], views[k].H, method=params.correspondence,
+            flow_preset=params.flow_preset))
+        if progress:
+            progress("correspondence", (k + 1) / len(srcs))
+    N = np.ascontiguousarray(np.stack(Ns))
+    timings["correspondence"] = time.perf_counter() - t
+
+    S = len(srcs)
+    F = np.zeros((S, 3, 3), np.float64)
+    hasF = np.zeros(S, np.bool_)
+    for k, v in enumerate(views):
+        if v.F is not None:
+            F[k], hasF[k] = v.F, True
+    st = ScanInputs(
+        img=images[ref].copy(), lab=labs[ref].copy(), gray=grays[ref].copy(),
+        fc_r=fc[ref].copy(), fg_r=fg[ref].copy(),
+        src_img=np.ascontiguousarray(np.stack([images[s] for s in srcs])),
+        src_lab=np.ascontiguousarray(np.stack([labs[s] for s in srcs])),
+        src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
+        fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
+        fg_s=np.ascontiguousarray(np.stack([fg[s] for s in srcs])),
+        N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF, sift_unit=unit)
+    t = time.perf_counter()
+    pf, pi = pack_params(params, sift_unit=unit)
+    st.C = kn._similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F, st.hasF, pf, pi)
+    timings["similarity"] = time.perf_counter() - t
+    return st, views
+
+
+def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
+                   params: Params = DEFAULT, sink: EventSink | None = None,
+                   probes: Sequence[tuple[int, int]] = (), sample_static: float = 0.0,
+                   names: Sequence[str] | None = None, preset_name: str = "custom",
+                   kernel: str = "numba", chunk_rows: int | None = None,
+                   progress: Progress | None = None) -> Result:
+    """Detect the moving objects in the reference and replace them (Algorithm 1).
+
+    Parameters
+    ----------
+    images : sequence of (H, W, 3) uint8 BGR ndarrays
+        The set; all the same size.
+    ref : int, optional
+        Index of the reference (default: the middle image).
+    params : Params
+    sink : EventSink, optional
+        Observer of the scans (default NullSink: nothing recorded).
+    probes : sequence of (x, y)
+        Pixels whose every decision is recorded, static or not.
+    sample_static : float
+        Fraction of static decisions recorded (deterministic sample).
+    kernel : {"numba", "reference"}
+        The compiled scan or the slow readable one (tests).
+
+    Returns
+    -------
+    Result
+    """
+    ref = len(images) // 2 if ref is None else int(ref)
+    validate_images(images, ref)
+    sink = NullSink() if sink is None else sink
+    H, W = images[0].shape[:2]
+    for (x, y) in probes:
+        if not (0 <= x < W and 0 <= y < H):
+            raise InputError(f"probe pixel ({x}, {y}) is outside the {W}x{H} image")
+    names = list(names) if names is not None else [f"image{i}" for i in range(len(images))]
+    timings: dict[str, float] = {}
+    t_all = time.perf_counter()
+    st, views = prepare(images, ref, params, timings=timings, progress=progress)
+    msgs = []
+    srcs = [i for i in range(len(images)) if i != ref]
+    for k, v in enumerate(views):
+        if v.F is None:
+            msgs.append(f"{names[srcs[k]]}: only {v.n_matches} keypoint matches with the "
+                        "reference; no epipolar term and no homography pre-warp for it")
+    if all(v.F is None for v in views) and params.use_epipolar:
+        msgs.append("no source has a fundamental matrix: the epipolar terms are off")
+    for m in msgs:
+        warnings.warn(m, stacklevel=2)
+    probe = np.zeros((H, W), np.bool_)
+    for (x, y) in probes:
+        probe[y, x] = True
+    if sink.enabled:
+        cov0 = _coverage(st, params)
+        sink.start(RunInfo(
+            names=names, ref_index=ref, source_indices=srcs, images=list(images),
+            params=params.to_dict(), preset=preset_name, versions=_versions(),
+            size=(H, W), N0=st.N.copy(), C0=st.C.copy(), coverage=cov0,
+            probes=[(int(x), int(y)) for x, y in probes]))
+    t = time.perf_counter()
+
+    def scan_progress(scan: int, done: int, total: int) -> None:
+        if progress:
+            progress(f"scan {scan}", done / total)
+
+    L, M_maps, summaries = run_scans(st, params, sink=sink, probe=probe,
+                                     sample_static=sample_static, chunk_rows=chunk_rows,
+                                     kernel=kernel, progress=scan_progress)
+    timings["scans"] = time.perf_counter() - t
+    t = time.perf_counter()
+    dyn = postprocess.clean_mask(L, params) if params.clean_mask else L.copy()
+    cov = _coverage(st, params)
+    timings["post"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t_all
+    result = Result(
+        clean=st.img, dynamic=dyn, dynamic_raw=L, M=M_maps, coverage=cov,
+        scans=np.array(summaries), timings=timings, N=st.N, C=st.C, ref_index=ref,
+        params=params.to_dict(),
+        geometry=[{"source": names[srcs[k]], "matches": v.n_matches,
+                   "inliers_F": v.n_inliers_F, "inliers_H": v.n_inliers_H}
+                  for k, v in enumerate(views)],
+        warnings=msgs)
+    sink.finish(result)
+    return result
+
+
+def _coverage(st: ScanInputs, params: Params) -> np.ndarray:
+    """Sources whose current match agrees with the reference's current features."""
+    pf, _ = pack_params(params, sift_unit=st.sift_unit)
+    return kn._appearance_support(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, pf)
+
+
+def _versions() -> dict[str, str]:
+    import platform
+
+    import numba
+    import sklearn
+
+    import dynremove
+    return {"dynremove": dynremove.__version__, "numpy": np.__version__,
+            "opencv": cv2.__version__, "numba": numba.__version__,
+            "scikit-learn": sklearn.__version__, "python": platform.python_version()}

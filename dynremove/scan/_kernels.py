@@ -1,0 +1,637 @@
+"""Compiled kernels of the scan (Sec. 3.2, Algorithm 1). @njit only.
+
+No I/O, no logging, no globals. Parameters come packed in two arrays (``pf``
+floats, ``pi`` ints; indices below) built by ``driver.pack_params``. Events are
+written into preallocated struct-of-arrays buffers with counters that keep
+counting past capacity, so overflow is detectable (the driver sizes buffers
+for the worst case of a chunk, so it does not happen).
+
+Shapes: reference (H, W); S sources of the same size; K = 2·S candidate slots.
+Points are (x, y); arrays are indexed [y, x].
+"""
+
+import math
+
+import numba
+import numpy as np
+
+# --- indices into pf (float64) ------------------------------------------------
+LAM1, LAM2, LAM3, LAM4, LAM5, LAM6, LAM7, LAM8 = 0, 1, 2, 3, 4, 5, 6, 7
+SIG_C, SIG_G, SIG_E, SIG_H, T_R, EPS, SIFT_UNIT = 8, 9, 10, 11, 12, 13, 14
+HOG_SCALE, COORD_SCALE, TIE_TOL, SAMPLE_RATE = 15, 16, 17, 18
+N_PF = 19
+# --- indices into pi (int64) ----------------------------------------------------
+P, MIN_PTS, HOG_BINS, WRITE_PATCH, UPDATE, USE_EPI, USE_HOG = 0, 1, 2, 3, 4, 5, 6
+N_PI = 7
+
+# columns of the integer event buffers
+D_SCAN, D_STEP, D_X, D_Y, D_WHY, D_NCAND, D_WIN, D_NCL, D_CHOSEN, D_DYN = range(10)
+N_DI = 10
+R_SCAN, R_STEP, R_X, R_Y, R_SRC, R_SX, R_SY, R_TIE, R_NP = range(9)
+N_RI = 9
+U_SCAN, U_STEP, U_X, U_Y, U_SRC, U_CASE, U_NX, U_NY = range(8)
+N_UI = 8
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _se(d2, sigma):
+    """S_e = exp(−‖·‖² / 2σ²) given the squared distance."""
+    return math.exp(-d2 / (2.0 * sigma * sigma))
+
+
+@numba.njit(cache=True, nogil=True)
+def _sampson(F, s, xr, yr, xs, ys):
+    """Squared Sampson distance (px²) of x_r ↔ x_s under F[s] (x_sᵀ F x_r = 0)."""
+    a = F[s, 0, 0] * xr + F[s, 0, 1] * yr + F[s, 0, 2]
+    b = F[s, 1, 0] * xr + F[s, 1, 1] * yr + F[s, 1, 2]
+    c = F[s, 2, 0] * xr + F[s, 2, 1] * yr + F[s, 2, 2]
+    ta = F[s, 0, 0] * xs + F[s, 1, 0] * ys + F[s, 2, 0]
+    tb = F[s, 0, 1] * xs + F[s, 1, 1] * ys + F[s, 2, 1]
+    e = xs * a + ys * b + c
+    den = a * a + b * b + ta * ta + tb * tb
+    if den < 1e-300:
+        den = 1e-300
+    return e * e / den
+
+
+@numba.njit(cache=True, nogil=True)
+def _sf(F, hasF, s, xr, yr, xs, ys, pf):
+    """S_f = exp(−d_s / 2σ_e²), d_s in coordinate units (px / coord_scale)²."""
+    if not hasF[s]:
+        return 0.0
+    cs = pf[COORD_SCALE]
+    d = _sampson(F, s, xr, yr, xs, ys) / (cs * cs)
+    return math.exp(-d / (2.0 * pf[SIG_E] * pf[SIG_E]))
+
+
+@numba.njit(cache=True, nogil=True)
+def _lab_d2(a, ya, xa, b, yb, xb):
+    d = 0.0
+    for c in range(3):
+        t = np.float64(a[ya, xa, c]) - np.float64(b[yb, xb, c])
+        d += t * t
+    return d
+
+
+@numba.njit(cache=True, nogil=True)
+def _sift_d2(a, ya, xa, b, yb, xb):
+    """Squared distance of two uint8 descriptors as an exact integer."""
+    d = 0
+    for k in range(a.shape[2]):
+        t = np.int64(a[ya, xa, k]) - np.int64(b[yb, xb, k])
+        d += t * t
+    return d
+
+
+@numba.njit(cache=True, nogil=True)
+def _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, s, xs, ys, F, hasF, pf, pi):
+    """H(x_r, x, F_s) of Sec. 3.2.3 (= C_s of Eq. 1 at the match).
+
+    Without the epipolar term (switched off, or no F for this source) the two
+    appearance terms are rescaled to the same total weight λ1+λ2+λ3.
+    """
+    lam1, lam2, lam3 = pf[LAM1], pf[LAM2], pf[LAM3]
+    u = pf[SIFT_UNIT]
+    sc = _se(_lab_d2(fc_r, y, x, fc_s[s], ys, xs), pf[SIG_C])
+    sg = _se(float(_sift_d2(fg_r, y, x, fg_s[s], ys, xs)) * u * u, pf[SIG_G])
+    if pi[USE_EPI] != 0 and hasF[s]:
+        return lam1 * sc + lam2 * sg + lam3 * _sf(F, hasF, s, x, y, xs, ys, pf)
+    return (lam1 * sc + lam2 * sg) * (lam1 + lam2 + lam3) / (lam1 + lam2)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _similarity_map(N, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi):
+    """C_s (Eq. 1) for every pixel and source. N (S, H, W, 2) int32 → (S, H, W) float32.
+
+    Matches outside the source get C = 0.
+    """
+    S, H, W = N.shape[0], N.shape[1], N.shape[2]
+    C = np.zeros((S, H, W), np.float32)
+    for y in numba.prange(H):
+        for s in range(S):
+            for x in range(W):
+                xs = N[s, y, x, 0]
+                ys = N[s, y, x, 1]
+                if 0 <= xs < W and 0 <= ys < H:
+                    C[s, y, x] = _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, s, xs, ys, F, hasF, pf, pi)
+    return C
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _appearance_support(N, fc_r, fg_r, fc_s, fg_s, pf):
+    """Number of sources whose match agrees with the reference's features.
+
+    Agreement is the decision test of Eq. (M) applied to a single match:
+    λ4 S_e(f_c) + λ5 S_e(f_g) > t_r. Returns (H, W) uint8.
+    """
+    S, H, W = N.shape[0], N.shape[1], N.shape[2]
+    out = np.zeros((H, W), np.uint8)
+    u = pf[SIFT_UNIT]
+    for y in numba.prange(H):
+        for x in range(W):
+            n = 0
+            for s in range(S):
+                xs = N[s, y, x, 0]
+                ys = N[s, y, x, 1]
+                if 0 <= xs < W and 0 <= ys < H:
+                    m = pf[LAM4] * _se(_lab_d2(fc_r, y, x, fc_s[s], ys, xs), pf[SIG_C]) + \
+                        pf[LAM5] * _se(float(_sift_d2(fg_r, y, x, fg_s[s], ys, xs)) * u * u,
+                                       pf[SIG_G])
+                    if m > pf[T_R]:
+                        n += 1
+            out[y, x] = n
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _dbscan(D, n, eps, min_pts, labels, is_core, stack):
+    """DBSCAN on the precomputed (n, n) distance D, exactly as scikit-learn does.
+
+    Neighbourhoods are ``D[i, j] <= eps`` (the point itself included) in index
+    order; core points have at least ``min_pts`` neighbours; clusters grow by a
+    depth-first search from each unlabelled core point in index order (a stack,
+    neighbours pushed in index order), so border points join the first cluster
+    that pops them. Writes labels (−1 = noise) and returns the cluster count.
+    """
+    for i in range(n):
+        labels[i] = -1
+        c = 0
+        for j in range(n):
+            if D[i, j] <= eps:
+                c += 1
+        is_core[i] = c >= min_pts
+    k = 0
+    for i0 in range(n):
+        if labels[i0] != -1 or not is_core[i0]:
+            continue
+        top = 0
+        i = i0
+        while True:
+            if labels[i] == -1:
+                labels[i] = k
+                if is_core[i]:
+                    for v in range(n):
+                        if D[i, v] <= eps and labels[v] == -1:
+                            stack[top] = v
+                            top += 1
+            if top == 0:
+                break
+            top -= 1
+            i = stack[top]
+        k += 1
+    return k
+
+
+@numba.njit(cache=True, nogil=True)
+def _region_stats(lab, gray, x0, y0, lab2, gray2, x1, y1, ulo, uhi, vlo, vhi,
+                  nb, hog_scale, gc0, gh0, gc1, gh1):
+    """Lab mean g_c and rotation-invariant HoG g_h of one overlap region in two images.
+
+    The region is the window offsets u ∈ [ulo, uhi], v ∈ [vlo, vhi] around (x0, y0)
+    in image 0 and (x1, y1) in image 1; pixels outside either image are skipped
+    in both, so the two descriptors always cover the same pixels. Returns the
+    pixel count (0: no overlap).
+    """
+    H0, W0 = gray.shape
+    H1, W1 = gray2.shape
+    for c in range(3):
+        gc0[c] = 0.0
+        gc1[c] = 0.0
+    for b in range(nb):
+        gh0[b] = 0.0
+        gh1[b] = 0.0
+    cnt = 0
+    for v in range(vlo, vhi + 1):
+        ya = y0 + v
+        yb = y1 + v
+        if ya < 0 or ya >= H0 or yb < 0 or yb >= H1:
+            continue
+        for u in range(ulo, uhi + 1):
+            xa = x0 + u
+            xb = x1 + u
+            if xa < 0 or xa >= W0 or xb < 0 or xb >= W1:
+                continue
+            cnt += 1
+            for c in range(3):
+                gc0[c] += lab[ya, xa, c]
+                gc1[c] += lab2[yb, xb, c]
+            _hog_add(gray, xa, ya, nb, gh0)
+            _hog_add(gray2, xb, yb, nb, gh1)
+    if cnt > 0:
+        for c in range(3):
+            gc0[c] /= cnt
+            gc1[c] /= cnt
+        _hog_finish(gh0, nb, hog_scale)
+        _hog_finish(gh1, nb, hog_scale)
+    return cnt
+
+
+@numba.njit(cache=True, nogil=True)
+def _hog_add(gray, x, y, nb, h):
+    H, W = gray.shape
+    gx = (np.float64(gray[y, min(x + 1, W - 1)]) - np.float64(gray[y, max(x - 1, 0)])) * 0.5
+    gy = (np.float64(gray[min(y + 1, H - 1), x]) - np.float64(gray[max(y - 1, 0), x])) * 0.5
+    m = math.sqrt(gx * gx + gy * gy)
+    if m > 0.0:
+        a = math.atan2(gy, gx) + math.pi
+        b = int(a * nb / (2.0 * math.pi))
+        if b >= nb:
+            b = nb - 1
+        h[b] += m
+
+
+@numba.njit(cache=True, nogil=True)
+def _hog_finish(h, nb, scale):
+    """Rotate so the dominant bin comes first (rotation invariance), L2 → ×scale."""
+    best = 0
+    for b in range(1, nb):
+        if h[b] > h[best]:
+            best = b
+    tmp = np.empty(nb)
+    n = 0.0
+    for b in range(nb):
+        tmp[b] = h[(b + best) % nb]
+        n += tmp[b] * tmp[b]
+    n = math.sqrt(n)
+    for b in range(nb):
+        h[b] = tmp[b] / n * scale if n > 0.0 else 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
+               N, C, F, hasF, L, Mmap, probe, pf, pi, scan, direction, r0, r1, rec,
+               dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
+               rep_i, rep_f, upd_i, upd_f, counts, stats):
+    """Visit rows r0..r1−1 (in visiting order) of one scan; mutate the state in place.
+
+    State: img (H, W, 3) uint8, lab (H, W, 3) float32 and gray (H, W) float32 of
+    the current reference; fc_r (H, W, 3) float32 and fg_r (H, W, 128) uint8 its
+    features; sources src_img/src_lab/src_gray/fc_s/fg_s with a leading S axis;
+    N (S, H, W, 2) int32, C (S, H, W) float32; F (S, 3, 3) float64, hasF (S,) bool;
+    L (H, W) uint8 (1 = dynamic in some scan); Mmap (H, W) float32 of this scan;
+    probe (H, W) bool. direction +1: top-left → bottom-right, −1: the reverse.
+
+    Events (when ``rec``): decisions for dynamic, probe and sampled static pixels;
+    every replacement; every correspondence update. ``counts`` = [decisions,
+    replacements, updates] written (may exceed capacity: overflow). ``stats`` +=
+    [dynamic, replaced, undecided].
+    """
+    H, W = gray.shape
+    S = N.shape[0]
+    K = 2 * S
+    p = pi[P]
+    h = p // 2
+    nb = pi[HOG_BINS]
+    eps = pf[EPS]
+    u = pf[SIFT_UNIT]
+    lam4, lam5 = pf[LAM4], pf[LAM5]
+    # per-pixel work arrays
+    cs = np.empty(K, np.int64)
+    cx = np.empty(K, np.int64)
+    cy = np.empty(K, np.int64)
+    cB = np.empty(K, np.float64)
+    slot = np.empty(K, np.int64)
+    D = np.empty((K, K), np.float64)
+    labels = np.empty(K, np.int64)
+    is_core = np.empty(K, np.bool_)
+    stack = np.empty(K * K + 1, np.int64)
+    bk = np.empty(K + 1, np.float64)
+    fhat_c = np.empty(3, np.float64)
+    fhat_g = np.empty(fg_r.shape[2], np.float64)
+    score = np.empty(K, np.float64)
+    gc0 = np.empty(3)
+    gc1 = np.empty(3)
+    gh0 = np.empty(nb)
+    gh1 = np.empty(nb)
+    nx_ = np.empty(2, np.int64)
+    ny_ = np.empty(2, np.int64)
+    ox_ = np.empty(2, np.int64)
+    oy_ = np.empty(2, np.int64)
+    # neighbours (x + dx, y + dy) and the offset their match is moved by
+    if direction > 0:
+        ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
+    else:
+        ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
+    for vi in range(r0, r1):
+        y = vi if direction > 0 else H - 1 - vi
+        for xi in range(W):
+            x = xi if direction > 0 else W - 1 - xi
+            step = np.int64(scan) * H * W + np.int64(vi) * W + xi
+            # ---- candidates P, B (Sec. 3.2.1) ---------------------------------
+            nn = 0
+            xa, ya = x + ndx0, y + ndy0
+            if 0 <= xa < W and 0 <= ya < H:
+                nx_[nn] = xa
+                ny_[nn] = ya
+                ox_[nn] = -ndx0
+                oy_[nn] = -ndy0
+                nn += 1
+            xa, ya = x + ndx1, y + ndy1
+            if 0 <= xa < W and 0 <= ya < H:
+                nx_[nn] = xa
+                ny_[nn] = ya
+                ox_[nn] = -ndx1
+                oy_[nn] = -ndy1
+                nn += 1
+            n = 0
+            for s in range(S):
+                if nn == 0:  # first pixel of a scan: no neighbour, use its own match
+                    mx = N[s, y, x, 0]
+                    my = N[s, y, x, 1]
+                    if 0 <= mx < W and 0 <= my < H:
+                        cs[n] = s
+                        cx[n] = mx
+                        cy[n] = my
+                        cB[n] = C[s, y, x]
+                        slot[n] = 2 * s
+                        n += 1
+                for a in range(nn):
+                    mx = N[s, ny_[a], nx_[a], 0] + ox_[a]
+                    my = N[s, ny_[a], nx_[a], 1] + oy_[a]
+                    if 0 <= mx < W and 0 <= my < H:
+                        cs[n] = s
+                        cx[n] = mx
+                        cy[n] = my
+                        cB[n] = C[s, ny_[a], nx_[a]]
+                        slot[n] = 2 * s + a
+                        n += 1
+            # ---- DBSCAN on B (Eq. DB_cost) -----------------------------------
+            for i in range(n):
+                D[i, i] = 1.0 - lam4 - lam5
+                for j in range(i + 1, n):
+                    dc = _lab_d2(fc_s[cs[i]], cy[i], cx[i], fc_s[cs[j]], cy[j], cx[j])
+                    dg = float(_sift_d2(fg_s[cs[i]], cy[i], cx[i], fg_s[cs[j]], cy[j], cx[j]))
+                    d = 1.0 - lam4 * _se(dc, pf[SIG_C]) - lam5 * _se(dg * u * u, pf[SIG_G])
+                    D[i, j] = d
+                    D[j, i] = d
+            k = _dbscan(D, n, eps, pi[MIN_PTS], labels, is_core, stack) if n > 0 else 0
+            M = np.nan
+            m = -1
+            bm = 0.0
+            cdist = np.nan
+            dynamic = False
+            if k > 0:
+                for c in range(k):
+                    bk[c] = 0.0
+                for i in range(n):
+                    if labels[i] >= 0:
+                        bk[labels[i]] += cB[i]
+                m = 0
+                for c in range(1, k):
+                    if bk[c] > bk[m]:
+                        m = c
+                bm = bk[m]
+                # consensus features (f̂_c, f̂_g), weights B_l / b_m
+                cnt = 0
+                for i in range(n):
+                    if labels[i] == m:
+                        cnt += 1
+                for c in range(3):
+                    fhat_c[c] = 0.0
+                for j in range(fhat_g.shape[0]):
+                    fhat_g[j] = 0.0
+                for i in range(n):
+                    if labels[i] != m:
+                        continue
+                    w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
+                    for c in range(3):
+                        fhat_c[c] += w * fc_s[cs[i], cy[i], cx[i], c]
+                    for j in range(fhat_g.shape[0]):
+                        fhat_g[j] += w * (fg_s[cs[i], cy[i], cx[i], j] * u)
+                dc = 0.0
+                for c in range(3):
+                    t = fc_r[y, x, c] - fhat_c[c]
+                    dc += t * t
+                dg = 0.0
+                for j in range(fhat_g.shape[0]):
+                    t = fg_r[y, x, j] * u - fhat_g[j]
+                    dg += t * t
+                cdist = dg
+                M = lam4 * _se(dc, pf[SIG_C]) + lam5 * _se(dg, pf[SIG_G])
+                dynamic = M <= pf[T_R]
+            else:
+                stats[2] += 1
+            Mmap[y, x] = M
+            chosen = -1
+            if dynamic:
+                stats[0] += 1
+                L[y, x] = 1
+                chosen = _remove(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray,
+                                 fc_s, fg_s, N, C, F, hasF, pf, pi, x, y, ndx0, ndy0, ndx1,
+                                 ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g, score,
+                                 gc0, gc1, gh0, gh1, nx_, ny_, nn, scan, step, rec,
+                                 rep_i, rep_f, upd_i, upd_f, counts)
+                stats[1] += 1
+            # ---- record the decision ------------------------------------------
+            if rec:
+                why = 0
+                if dynamic:
+                    why |= 1
+                if probe[y, x]:
+                    why |= 2
+                if why == 0 and pf[SAMPLE_RATE] > 0.0:
+                    hsh = (np.uint64(x) * np.uint64(73856093)) ^ \
+                        (np.uint64(y) * np.uint64(19349663)) ^ \
+                        (np.uint64(scan) * np.uint64(83492791))
+                    if float(hsh % np.uint64(1000003)) < pf[SAMPLE_RATE] * 1000003.0:
+                        why |= 4
+                if why != 0:
+                    e = counts[0]
+                    if e < dec_i.shape[0]:
+                        dec_i[e, D_SCAN] = scan
+                        dec_i[e, D_STEP] = step
+                        dec_i[e, D_X] = x
+                        dec_i[e, D_Y] = y
+                        dec_i[e, D_WHY] = why
+                        dec_i[e, D_NCAND] = n
+                        dec_i[e, D_WIN] = m
+                        dec_i[e, D_NCL] = k
+                        dec_i[e, D_CHOSEN] = chosen
+                        dec_i[e, D_DYN] = 1 if dynamic else 0
+                        dec_f[e, 0] = M
+                        dec_f[e, 1] = bm
+                        dec_f[e, 2] = cdist
+                        for q in range(K):
+                            dec_cs[e, q] = -1
+                            dec_cxy[e, q, 0] = -1
+                            dec_cxy[e, q, 1] = -1
+                            dec_cB[e, q] = 0.0
+                            dec_ccl[e, q] = -1
+                        for i in range(n):
+                            q = slot[i]
+                            dec_cs[e, q] = cs[i]
+                            dec_cxy[e, q, 0] = cx[i]
+                            dec_cxy[e, q, 1] = cy[i]
+                            dec_cB[e, q] = cB[i]
+                            dec_ccl[e, q] = labels[i]
+                    counts[0] = e + 1
+
+
+@numba.njit(cache=True, nogil=True)
+def _remove(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
+            N, C, F, hasF, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1, n, cs, cx, cy, labels,
+            m, fhat_c, fhat_g, score, gc0, gc1, gh0, gh1, nx_, ny_, nn, scan, step, rec,
+            rep_i, rep_f, upd_i, upd_f, counts):
+    """Removal (Sec. 3.2.2) and update (Sec. 3.2.3) at a dynamic pixel. Returns s*."""
+    H, W = gray.shape
+    S = N.shape[0]
+    h = pi[P] // 2
+    nb = pi[HOG_BINS]
+    u = pf[SIFT_UNIT]
+    lam4, lam5 = pf[LAM4], pf[LAM5]
+    use_epi = pi[USE_EPI] != 0
+    # ---- q*: overlap Lab mean + rotation-invariant HoG + epipolar term -------------
+    best = -1.0e300
+    for i in range(n):
+        score[i] = -1.0e300
+        if labels[i] != m:
+            continue
+        s = cs[i]
+        sc = 0.0
+        for t in range(2):
+            dxn = ndx0 if t == 0 else ndx1
+            dyn = ndy0 if t == 0 else ndy1
+            if not (0 <= x + dxn < W and 0 <= y + dyn < H):
+                continue  # the neighbour patch does not exist at the border
+            ulo = max(-h, dxn - h)
+            uhi = min(h, dxn + h)
+            vlo = max(-h, dyn - h)
+            vhi = min(h, dyn + h)
+            cnt = _region_stats(src_lab[s], src_gray[s], cx[i], cy[i], lab, gray, x, y,
+                                ulo, uhi, vlo, vhi, nb, pf[HOG_SCALE], gc0, gh0, gc1, gh1)
+            if cnt == 0:
+                continue
+            d = 0.0
+            for c in range(3):
+                d += (gc0[c] - gc1[c]) ** 2
+            sc += pf[LAM6] * _se(d, pf[SIG_C])
+            if pi[USE_HOG] != 0:
+                d = 0.0
+                for b in range(nb):
+                    d += (gh0[b] - gh1[b]) ** 2
+                sc += pf[LAM7] * _se(d, pf[SIG_H])
+        if use_epi:
+            sc += pf[LAM8] * _sf(F, hasF, s, x, y, cx[i], cy[i], pf)
+        score[i] = sc
+        if sc > best:
+            best = sc
+    # tie-break: among near-best patches, the closest to the consensus features
+    ntie = 0
+    for i in range(n):
+        if labels[i] == m and score[i] >= best - pf[TIE_TOL]:
+            ntie += 1
+    ibest = -1
+    bestd = 1.0e300
+    for i in range(n):
+        if labels[i] != m or score[i] < best - pf[TIE_TOL]:
+            continue
+        if ntie == 1:
+            ibest = i
+            break
+        dc = 0.0
+        for c in range(3):
+            dc += (fhat_c[c] - fc_s[cs[i], cy[i], cx[i], c]) ** 2
+        dg = 0.0
+        for j in range(fhat_g.shape[0]):
+            dg += (fhat_g[j] - fg_s[cs[i], cy[i], cx[i], j] * u) ** 2
+        d = lam4 * dc + lam5 * dg
+        if d < bestd:
+            bestd = d
+            ibest = i
+    s = cs[ibest]
+    qx = cx[ibest]
+    qy = cy[ibest]
+    # ---- write -------------------------------------------------------------------
+    hw = h if pi[WRITE_PATCH] != 0 else 0
+    for v in range(-hw, hw + 1):
+        ry = y + v
+        sy = qy + v
+        if ry < 0 or ry >= H or sy < 0 or sy >= H:
+            continue
+        for w_ in range(-hw, hw + 1):
+            rx = x + w_
+            sx = qx + w_
+            if rx < 0 or rx >= W or sx < 0 or sx >= W:
+                continue
+            for c in range(3):
+                img[ry, rx, c] = src_img[s, sy, sx, c]
+                lab[ry, rx, c] = src_lab[s, sy, sx, c]
+            gray[ry, rx] = src_gray[s, sy, sx]
+    for c in range(3):
+        fc_r[y, x, c] = fc_s[s, qy, qx, c]
+    for j in range(fg_r.shape[2]):
+        fg_r[y, x, j] = fg_s[s, qy, qx, j]
+    if rec:
+        e = counts[1]
+        if e < rep_i.shape[0]:
+            rep_i[e, R_SCAN] = scan
+            rep_i[e, R_STEP] = step
+            rep_i[e, R_X] = x
+            rep_i[e, R_Y] = y
+            rep_i[e, R_SRC] = s
+            rep_i[e, R_SX] = qx
+            rep_i[e, R_SY] = qy
+            rep_i[e, R_TIE] = 1 if ntie > 1 else 0
+            rep_i[e, R_NP] = ntie
+            rep_f[e] = best
+        counts[1] = e + 1
+    # ---- update N and C (three cases) ----------------------------------------------
+    if pi[UPDATE] != 0:
+        for t in range(S):
+            nin = 0
+            bi = -1
+            bh = -1.0e300
+            for i in range(n):
+                if cs[i] == t and labels[i] == m:
+                    nin += 1
+                    hv = _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, t, cx[i], cy[i], F, hasF, pf, pi)
+                    if hv > bh:
+                        bh = hv
+                        bi = i
+            if nin > 0:
+                nxs = cx[bi]
+                nys = cy[bi]
+                case = 1 if nin == 1 else 2
+            else:
+                # case 3: geometry only, over X = this source's candidates + the
+                # neighbours' matches; the smallest Sampson distance wins.
+                bd = 1.0e300
+                nxs = -1
+                nys = -1
+                for i in range(n):
+                    if cs[i] == t:
+                        d = _sampson(F, t, x, y, cx[i], cy[i]) if hasF[t] else 0.0
+                        if d < bd:
+                            bd = d
+                            nxs = cx[i]
+                            nys = cy[i]
+                for a in range(nn):
+                    mx = N[t, ny_[a], nx_[a], 0]
+                    my = N[t, ny_[a], nx_[a], 1]
+                    if 0 <= mx < W and 0 <= my < H:
+                        d = _sampson(F, t, x, y, mx, my) if hasF[t] else 0.0
+                        if d < bd:
+                            bd = d
+                            nxs = mx
+                            nys = my
+                if nxs < 0:
+                    continue
+                case = 3
+                bh = _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, t, nxs, nys, F, hasF, pf, pi)
+            N[t, y, x, 0] = nxs
+            N[t, y, x, 1] = nys
+            C[t, y, x] = bh
+            if rec:
+                e = counts[2]
+                if e < upd_i.shape[0]:
+                    upd_i[e, U_SCAN] = scan
+                    upd_i[e, U_STEP] = step
+                    upd_i[e, U_X] = x
+                    upd_i[e, U_Y] = y
+                    upd_i[e, U_SRC] = t
+                    upd_i[e, U_CASE] = case
+                    upd_i[e, U_NX] = nxs
+                    upd_i[e, U_NY] = nys
+                    upd_f[e] = bh
+                counts[2] = e + 1
+    return s
