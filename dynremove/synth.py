@@ -62,7 +62,7 @@ __all__ = ["Scene", "make_scene", "write_scene", "reference_flow"]
 
 _CAMERA_HEIGHT = 1.5  # h : camera height above the ground plane (world units)
 _FOCAL_FACTOR = 0.85  # f = _FOCAL_FACTOR * max(H, W) pixels (about 60 deg FOV)
-_STEP_FACTOR = 0.0075  # sideways camera step per view, as a fraction of d
+_STEP_FACTOR = 0.009  # sideways camera step per view, as a fraction of d
 _SHAKE_REF_PX = 640.0  # camera_shake_px is given for this image size
 _MAX_ATTEMPTS = 200  # object placements tried before giving up
 
@@ -342,21 +342,42 @@ class _Geometry:
 
 
 def _sample_cameras(rng, geo, n_views, ref, *, parallax, shake_px):
-    """Sideways walk with hand-held jitter; returns ``(V,3,3)`` R and ``(V,3)`` C."""
+    """Sideways walk with hand-held jitter; ``(V, 3, 3)`` R and ``(V, 3)`` C.
+
+    A view is redrawn (same generator) while its backdrop motion at the image
+    centre is below ``0.4 (shake + step)``, so no view is a near-duplicate.
+    """
     step = parallax * _STEP_FACTOR * geo.d_far
     direction = rng.choice([-1.0, 1.0])
     ang = shake_px * geo.scale / geo.f  # rotation giving ``shake`` px shift
     roll = 0.3 * shake_px * geo.scale / (0.5 * max(geo.H, geo.W))
+    min_motion = 0.4 * (shake_px * geo.scale + geo.f * step / geo.d_far)
+    centre = np.array([geo.cx, geo.cy, 1.0])
     rotations = np.tile(np.eye(3), (n_views, 1, 1))
     centers = np.zeros((n_views, 3))
     for i in range(n_views):
-        jitter = rng.uniform(-1, 1, 3) * np.array([0.3, 0.2, 0.5])
-        omega = rng.uniform(-1, 1, 3) * np.array([ang, ang, roll])
         if i == ref:
             continue
-        centers[i] = step * (np.array([direction * (i - ref), 0.0, 0.0]) + jitter)
-        rotations[i] = cv2.Rodrigues(omega.reshape(3, 1))[0]
+        for _ in range(50):
+            jitter = rng.uniform(-1, 1, 3) * np.array([0.3, 0.2, 0.5])
+            omega = rng.uniform(-1, 1, 3) * np.array([ang, ang, roll])
+            C = step * (np.array([direction * (i - ref), 0.0, 0.0]) + jitter)
+            R = cv2.Rodrigues(omega.reshape(3, 1))[0]
+            q = _plane_homography(geo, R, C, np.array([0, 0, 1.0]), geo.d_far) @ centre
+            if np.hypot(*(q[:2] / q[2] - centre[:2])) >= min_motion:
+                break
+        rotations[i], centers[i] = R, C
     return rotations, centers
+
+
+def _plane_homography(geo, R, C, normal, dist):
+    """Reference-to-view homography of the plane ``normal . X = dist``.
+
+    ``H = K R (I - C n^T / d) K^-1``, equivalently ``K (R + t n^T / d) K^-1``
+    with ``t = -R C``.
+    """
+    kinv = np.linalg.inv(geo.K)
+    return geo.K @ R @ (np.eye(3) - np.outer(C, normal) / dist) @ kinv
 
 
 # --------------------------------------------------------------------------- #
@@ -893,18 +914,24 @@ class _Object:
     half: int  # shade is centred on the anchor: S = 2 * half
 
 
-def _sample_object(rng, geo, *, step_x, x_center, k_mid, area_px):
-    """One object whose image path over the views is centred on ``x_center``."""
+def _sample_object(rng, geo, *, step_x, x_center, k_mid, n_views, area_px):
+    """One object whose image path over the views is centred on ``x_center``.
+
+    It moves by 0.8-1 of its width per view, less if the whole path would not
+    fit in the frame, and is shifted to lie inside the reference view.
+    """
     kind = "person" if rng.random() < 0.6 else "animal"
     unit_area, unit_width = _UNIT_SIZE[kind]
     y_feet = rng.uniform(0.8, 0.96) * geo.H
-    hgt = min(np.sqrt(area_px / unit_area), 0.95 * (y_feet - 2))
-    if kind == "animal":
-        hgt = min(hgt, 0.9 * geo.W / unit_width)
-    delta = rng.uniform(0.8, 1.0) * unit_width * hgt  # image motion per view
+    hgt = min(np.sqrt(area_px / unit_area), 0.95 * (y_feet - 2),
+              0.9 * geo.W / unit_width)
+    width = unit_width * hgt
+    delta = min(rng.uniform(0.8, 1.0) * width,  # image motion per view
+                (geo.W + 0.6 * width) / max(n_views - 1, 1))
     facing = rng.choice([-1.0, 1.0])
     z = geo.depth_of_ground_row(y_feet)
-    x_img = x_center - facing * delta * k_mid
+    margin = 0.55 * width + 2
+    x_img = np.clip(x_center - facing * delta * k_mid, margin, geo.W - margin)
     x_ref = (x_img - geo.cx) * z / geo.f
     velocity = step_x + facing * delta * z / geo.f
     if kind == "person":
@@ -963,51 +990,57 @@ def _place_objects(rng, geo, rotations, centers, statics, ref, n_objects):
     H, W = geo.H, geo.W
     step_x = (centers[-1, 0] - centers[0, 0]) / max(n_views - 1, 1)
     k_mid = (n_views - 1) / 2 - ref  # middle of the path, in views from ref
+    order = [ref] + [i for i in range(n_views) if i != ref]
     for _ in range(_MAX_ATTEMPTS):
         total = rng.uniform(0.045, 0.09) * H * W
         weights = rng.dirichlet(np.full(n_objects, 4.0))
-        objs = [_sample_object(rng, geo, step_x=step_x,
-                               x_center=W * rng.uniform(0.3, 0.7), k_mid=k_mid,
-                               area_px=total * wgt)
-                for wgt in weights]
-        objs.sort(key=lambda o: -o.z)
-        images, masks = [], []
-        ref_parts = []
-        for i in range(n_views):
+        slots = rng.permutation(n_objects)  # spread the paths across the frame
+        objs = [_sample_object(
+                    rng, geo, step_x=step_x, k_mid=k_mid, n_views=n_views,
+                    area_px=total * wgt,
+                    x_center=W * (0.5 + (slot + rng.uniform(-0.2, 1.2))
+                                  / n_objects) / 2)
+                for wgt, slot in zip(weights, slots)]
+        objs.sort(key=lambda o: -o.z)  # far to near
+        images, masks = [None] * n_views, [None] * n_views
+        for i in order:
             img, mask = statics[i].copy(), np.zeros((H, W), bool)
+            singles = []
             for obj in objs:
                 anchor = _object_anchor(geo, obj, rotations[i], centers[i], i - ref)
-                if i == ref:
-                    single = np.zeros((H, W), bool)
-                    _draw_object(geo, obj, anchor, 0, img.copy(), single)
-                    ref_parts.append(single)
-                _draw_object(geo, obj, anchor, i - ref, img, mask)
-            images.append(img)
-            masks.append(mask)
-        ok = _objects_ok(ref_parts, masks, images, statics[ref], ref)
-        if ok:
-            return images, masks
+                single = np.zeros((H, W), bool)
+                _draw_object(geo, obj, anchor, i - ref, img, single)
+                singles.append(single)
+                mask |= single
+            images[i], masks[i] = img, mask
+            if i == ref and not _ref_ok(singles, mask, img, statics[ref]):
+                break
+            if not mask.any():
+                break
+        else:
+            if _uncovered_ok(masks, ref):
+                return images, masks
     raise RuntimeError("could not place the moving objects; try another seed")
 
 
-def _objects_ok(ref_parts, masks, images, background, ref):
-    """The contract of the moving objects (see module docstring)."""
-    m_ref = masks[ref]
-    for single in ref_parts:  # fully inside the reference frame
+def _ref_ok(singles, mask, image, background):
+    """Objects lie inside the reference, apart, cover 3-12 %, stand out."""
+    for single in singles:
         if single[0].any() or single[-1].any() or single[:, 0].any() \
                 or single[:, -1].any():
             return False
-    if sum(int(p.sum()) for p in ref_parts) != int(m_ref.sum()):
-        return False  # objects overlap in the reference
-    frac = m_ref.mean()
-    if not 0.03 <= frac <= 0.12:
+    if sum(int(m.sum()) for m in singles) != int(mask.sum()):
+        return False  # the objects overlap in the reference
+    if not 0.03 <= mask.mean() <= 0.12:
         return False
-    if not all(m.any() for m in masks):
-        return False
+    diff = np.abs(image.astype(np.int16) - background.astype(np.int16))
+    return bool(diff[mask].mean() > 25.0)
+
+
+def _uncovered_ok(masks, ref):
+    """At most one other view covers half of the reference object region."""
+    m_ref = masks[ref]
     n_ref = m_ref.sum()
-    covered = [(m_ref & m).sum() / n_ref >= 0.5
+    covered = [(m_ref & m).sum() >= 0.5 * n_ref
                for i, m in enumerate(masks) if i != ref]
-    if sum(covered) > 1:
-        return False
-    diff = np.abs(images[ref].astype(np.int16) - background.astype(np.int16))
-    return bool(diff[m_ref].mean() > 25.0)
+    return sum(covered) <= 1

@@ -1,0 +1,352 @@
+"""Tests of the viewer package against fabricated runs (no algorithm needed)."""
+
+from __future__ import annotations
+
+import copy
+import os
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rr = pytest.importorskip("rerun")
+
+from test_viewer_fixtures import ROOT, fabricate_run, gt_for  # noqa: E402
+
+from dynremove import events as ev  # noqa: E402
+from viewer import RerunSink, make_blueprint, make_compare_blueprint  # noqa: E402
+from viewer import export, serve  # noqa: E402
+from viewer import inspect as vi  # noqa: E402
+from viewer import paths as P  # noqa: E402
+
+H, W, S = 48, 64, 3
+KINDS = ("decisions", "replacements", "updates")
+
+
+def cli_env(tmp: Path) -> dict[str, str]:
+    """Environment for the rerun CLI: private HOME, analytics off."""
+    home = tmp / "home"
+    home.mkdir(exist_ok=True)
+    env = {**os.environ, "HOME": str(home), "XDG_CONFIG_HOME": str(home / ".config"),
+           "XDG_DATA_HOME": str(home / ".local/share"), "XDG_CACHE_HOME": str(home / ".cache")}
+    subprocess.run([serve.rerun_binary(), "analytics", "disable"], env=env,
+                   capture_output=True, timeout=60)
+    return env
+
+
+def counts_of(mem: ev.MemorySink) -> dict[int, dict[str, int]]:
+    out: dict[int, dict[str, int]] = {}
+    for kind in KINDS:
+        arr = getattr(mem, kind)
+        for s in np.unique(arr["scan"]).tolist():
+            out.setdefault(s, dict.fromkeys(KINDS, 0))[kind] = int((arr["scan"] == s).sum())
+    return dict(sorted(out.items()))
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """One fabricated run with ground truth, recorded every 5 rows."""
+    path = tmp_path_factory.mktemp("rec") / "run.rrd"
+    gt, bg = gt_for(H, W, S)
+    sink = RerunSink(path, record_every_rows=5, gt_mask=gt, gt_background=bg,
+                     recording_id="test-run")
+    info, result, truth = fabricate_run([sink], H=H, W=W, S=S, n_scans=3)
+    return dict(path=path, info=info, result=result, truth=truth, sink=sink, gt=gt)
+
+
+# -- contents ----------------------------------------------------------------------
+def test_file_written_and_counts_match(run):
+    assert run["path"].stat().st_size > 0
+    assert vi.read_counts(run["path"]) == counts_of(run["truth"])
+    assert len(run["truth"].decisions) > 200  # the fabricated run is not trivial
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_events_round_trip_exactly(run, kind):
+    got = vi.read_events(run["path"], kind)
+    want = getattr(run["truth"], kind)
+    assert got.dtype == want.dtype
+    np.testing.assert_array_equal(got, want)
+
+
+def test_replay_reproduces_final_image(run):
+    info = run["info"]
+    final = vi.read_final_image(run["path"])
+    assert final is not None
+    np.testing.assert_array_equal(final, run["result"].clean)
+    replayed = ev.replay_replacements(info.images[info.ref_index],
+                                      [info.images[i] for i in info.source_indices],
+                                      vi.read_replacements(run["path"]),
+                                      patch_size=3, write="patch")
+    np.testing.assert_array_equal(replayed, final)
+    assert (replayed != info.images[info.ref_index]).any()
+    np.testing.assert_array_equal(vi.read_final_dynamic(run["path"]), run["result"].dynamic)
+
+
+def test_run_info_is_static(run):
+    info = vi.read_run_info(run["path"])
+    assert info["K"] == 2 * S and (info["height"], info["width"]) == (H, W)
+    assert info["names"] == run["info"].names
+    assert info["source_names"] == P.entity_names(run["info"].names[1:])
+    assert info["params"]["t_r"] == pytest.approx(0.3)
+    assert info["record_every_rows"] == 5
+
+
+def test_rrd_verify_accepts_file(run, tmp_path):
+    r = subprocess.run([serve.rerun_binary(), "rrd", "verify", str(run["path"])],
+                       env=cli_env(tmp_path), capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+
+
+def test_snapshot_cadence(tmp_path):
+    every = 6
+    path = tmp_path / "cadence.rrd"
+    sink = RerunSink(path, record_every_rows=every, skip_unchanged_images=False)
+    n_scans = 2
+    fabricate_run([sink], H=H, W=W, S=S, n_scans=n_scans, rows_per_chunk=2)
+    snaps = vi.read_snapshots(path)
+    per_scan = H // every  # one snapshot per `every` rows; the last one is the scan's end
+    # + the initial image at step 0 and the final result
+    assert len(snaps["image"]) == n_scans * per_scan + 2
+    # M: also one at each scan start
+    assert len(snaps["M"]) == n_scans * (per_scan + 1)
+    steps = [s for s, _ in snaps["image"]]
+    assert steps == sorted(steps) and len(set(steps)) == len(steps)
+    # default: unchanged reference images are skipped, M keeps the cadence
+    path2 = tmp_path / "cadence2.rrd"
+    fabricate_run([RerunSink(path2, record_every_rows=every)], H=H, W=W, S=S,
+                  n_scans=n_scans, rows_per_chunk=2)
+    snaps2 = vi.read_snapshots(path2)
+    assert 2 < len(snaps2["image"]) < len(snaps["image"])
+    assert len(snaps2["M"]) == len(snaps["M"])
+
+
+def test_default_cadence_is_about_50_per_scan(tmp_path):
+    path = tmp_path / "c.rrd"
+    sink = RerunSink(path, skip_unchanged_images=False)
+    fabricate_run([sink], H=200, W=24, S=2, n_scans=1, rows_per_chunk=3, sample_every=97)
+    assert sink.every == 4
+    assert 45 <= len(vi.read_snapshots(path)["M"]) <= 55
+
+
+# -- pixel history, failures --------------------------------------------------------
+def test_pixel_history_of_dynamic_pixel(run):
+    d = run["truth"].decisions
+    dyn = d[d["dynamic"]][7]
+    x, y = int(dyn["x"]), int(dyn["y"])
+    h = vi.pixel_history(run["path"], x, y)
+    want = d[(d["x"] == x) & (d["y"] == y)]
+    assert [e["step"] for e in h["decisions"]] == want["step"].tolist()
+    first = h["decisions"][0]
+    assert first["dynamic"] and first["M"] == pytest.approx(float(dyn["M"]))
+    assert len(first["candidates"]) == int((dyn["cand_src"] >= 0).sum())
+    assert h["replacements"] and h["replacements"][0]["step"] == int(dyn["step"])
+    assert len(h["updates"]) == S * len(h["replacements"])
+    assert h["final_dynamic"] is True
+    text = vi.format_pixel_history(h)
+    assert f"step {int(dyn['step'])}" in text and "→ DYNAMIC" in text
+    assert "replaced from source" in text and "winner cluster" in text
+
+
+def test_pixel_history_of_probe(run):
+    h = vi.pixel_history(run["path"], 10, 7)
+    assert len(h["decisions"]) == 3  # one per scan
+    assert all("probe" in e["why"] and not e["dynamic"] for e in h["decisions"])
+    assert "static" in vi.format_pixel_history(h)
+    empty = vi.pixel_history(run["path"], 0, 1)
+    assert "no decision recorded" in vi.format_pixel_history(empty)
+
+
+def test_failures_against_ground_truth(run):
+    items = vi.failures(run["path"], top=5)
+    L, gt = run["result"].dynamic, run["gt"]
+    assert {e["kind"] for e in items} == {"FP", "FN"}
+    assert sum(e["area"] for e in items) == int((L != gt).sum())
+    for e in items:
+        x, y = e["pixel"]
+        assert L[y, x] == (e["kind"] == "FP") and gt[y, x] == (e["kind"] == "FN")
+    assert "FP" in vi.format_failures(items)
+
+
+# -- robustness ----------------------------------------------------------------------
+class _Scribbler:
+    """Forwards to a sink, then overwrites the caller's buffers (aliasing check)."""
+
+    enabled = True
+
+    def __init__(self, inner):
+        self.inner, self.kept = inner, []
+
+    def start(self, info):
+        self.inner.start(info)
+
+    def scan_started(self, scan, direction, state):
+        self.inner.scan_started(scan, direction, state)
+
+    def chunk(self, events, state):
+        self.inner.chunk(events, state)
+        self.kept.append(copy.deepcopy(events))
+        for arr in (events.decisions, events.replacements, events.updates):
+            arr["step"] = -7
+            arr["x"] = 0
+
+    def scan_finished(self, summary, state):
+        self.inner.scan_finished(summary, state)
+
+    def finish(self, result):
+        self.inner.finish(result)
+
+
+def test_buffers_reused_after_chunk_do_not_corrupt_recording(tmp_path):
+    path = tmp_path / "alias.rrd"
+    scribbler = _Scribbler(RerunSink(path, record_every_rows=8))
+    fabricate_run([scribbler], H=H, W=W, S=S, n_scans=2)
+    for kind in KINDS:
+        want = np.concatenate([getattr(b, kind) for b in scribbler.kept])
+        np.testing.assert_array_equal(vi.read_events(path, kind), want)
+
+
+_KILLED_WRITER = """
+import os, sys
+sys.path[:0] = [{tests!r}, {root!r}]
+import test_viewer_fixtures as fx
+from viewer import RerunSink
+sink = RerunSink({path!r}, record_every_rows=5)
+def boom(scan):
+    if scan == 1:
+        os._exit(1)  # killed after two flushed scans, before finish()
+fx.fabricate_run([sink], H={H}, W={W}, S={S}, n_scans=3, on_scan_done=boom)
+"""
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")
+def test_killed_writer_leaves_readable_file(tmp_path):
+    path = tmp_path / "killed.rrd"
+    code = _KILLED_WRITER.format(tests=str(ROOT / "tests"), root=str(ROOT), path=str(path),
+                                 H=H, W=W, S=S)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, env={**os.environ, "HOME": str(tmp_path)})
+    assert r.returncode == 1, r.stderr
+    from rerun.chunk import RrdReader
+    assert RrdReader(str(path)).stream().collect() is not None
+    _, _, truth = fabricate_run([], H=H, W=W, S=S, n_scans=3, stop_after_scans=2)
+    assert vi.read_counts(path) == counts_of(truth)
+    assert vi.read_final_image(path) is None
+
+
+def test_close_is_idempotent(tmp_path):
+    path = tmp_path / "close.rrd"
+    sink = RerunSink(path)
+    sink.close()  # before start: nothing to do
+    fabricate_run([sink], H=H, W=W, S=S, n_scans=1)
+    sink.close()
+    sink.close()
+    assert vi.read_counts(path)
+    from rerun.chunk import RrdReader
+    RrdReader(str(path)).store()  # needs the footer: the stream was disconnected
+
+
+def test_two_runs_side_by_side(tmp_path):
+    path = tmp_path / "compare.rrd"
+    names = [f"src {s:02d}.jpg" for s in range(S)]
+    rec = rr.RecordingStream("dynremove", recording_id="compare")
+    rec.save(path, default_blueprint=make_compare_blueprint(names, ["runs/a", "runs/b"]))
+    a = RerunSink(None, rec=rec, root="runs/a", record_every_rows=8)
+    b = RerunSink(None, rec=rec, root="runs/b", record_every_rows=8)
+    _, _, truth_a = fabricate_run([a], H=H, W=W, S=S, n_scans=2)
+    _, _, truth_b = fabricate_run([b], H=H, W=W, S=S, n_scans=1, seed=3)
+    rec.disconnect()
+    assert vi.read_counts(path, root="runs/a") == counts_of(truth_a)
+    assert vi.read_counts(path, root="runs/b") == counts_of(truth_b)
+    assert vi.read_counts(path) == {}
+
+
+def test_blueprint_serializes(tmp_path):
+    bp = make_blueprint(["a/0001.jpg", "b/0001.jpg", "c 2.png"])
+    bp.save("dynremove", tmp_path / "layout.rbl")
+    assert (tmp_path / "layout.rbl").stat().st_size > 0
+    assert P.Paths("runs/x")(P.source("s", P.IMAGE)) == "/runs/x/sources/s/image"
+
+
+def test_sink_rejects_bad_ground_truth(tmp_path):
+    sink = RerunSink(tmp_path / "bad.rrd", gt_mask=np.zeros((3, 3), bool))
+    with pytest.raises(ValueError, match="gt_mask"):
+        fabricate_run([sink], H=H, W=W, S=S, n_scans=1)
+    sink.close()
+
+
+# -- export, serve -------------------------------------------------------------------
+def test_export_gif_and_mp4(run, tmp_path):
+    import cv2
+
+    gif = export.export_gif(run["path"], tmp_path / "removal.gif", fps=5, max_side=200)
+    data = gif.read_bytes()
+    assert data[:6] == b"GIF89a" and data[-1:] == b";"
+    frames = export.render_frames(run["path"], max_side=200)
+    assert len(frames) >= 3 and max(frames[0].shape[:2]) <= 200
+    if hasattr(cv2, "imreadanimation"):
+        ok, anim = cv2.imreadanimation(str(gif))
+        assert ok and len(anim.frames) == len(frames)
+        err = np.abs(anim.frames[-1][..., :3].astype(int) - frames[-1]).mean()
+        assert err < 12  # palette quantization only
+    mp4 = export.export_gif(run["path"], tmp_path / "removal.mp4", fps=5, max_side=200)
+    cap = cv2.VideoCapture(str(mp4))
+    assert cap.isOpened() and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(frames)
+    cap.release()
+
+
+def test_gif_encoder_is_lossless_on_palette_images(tmp_path):
+    import cv2
+
+    if not hasattr(cv2, "imreadanimation"):
+        pytest.skip("this OpenCV has no GIF decoder")
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 255, (130, 170, 3), dtype=np.uint8) for _ in range(2)]
+    export.write_gif(frames, tmp_path / "noise.gif")  # many LZW table resets
+    pal = export._palette(frames)
+    lut = export._lut(pal)
+    ok, anim = cv2.imreadanimation(str(tmp_path / "noise.gif"))
+    assert ok
+    for f, g in zip(frames, anim.frames):
+        q = f >> 3
+        np.testing.assert_array_equal(g[..., :3], pal[lut[q[..., 0], q[..., 1], q[..., 2]]])
+
+
+def test_web_url_and_command():
+    url = serve.web_url()
+    assert url == ("http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876"
+                   "%2Fproxy")
+    cmd = serve.view_command("x.rrd", web=True, port=9999, web_port=9998)
+    assert cmd[1:5] == ["--web-viewer", "--bind", "127.0.0.1", "--port"]
+    assert not cmd[0].endswith(os.path.join("bin", "rerun"))  # the real binary
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_web_server_on_loopback(run, tmp_path):
+    port, web_port = _free_port(), _free_port()
+    proc = serve.view(run["path"], web=True, port=port, web_port=web_port, wait=False,
+                      env=cli_env(tmp_path), stdout=subprocess.DEVNULL,
+                      stderr=subprocess.DEVNULL)
+    try:
+        deadline, body = time.time() + 30, b""
+        while time.time() < deadline and not body:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=2) as r:
+                    body = r.read()
+            except OSError:
+                time.sleep(0.3)
+        assert b"<html" in body.lower() or b"<!doctype" in body.lower()
+    finally:
+        serve.stop(proc)
+    assert proc.poll() is not None
