@@ -44,7 +44,8 @@ def dis_flow(gray_a: npt.NDArray[np.uint8], gray_b: npt.NDArray[np.uint8], *,
 
 def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[np.uint8],
                          H_rs: npt.NDArray[np.float64], *, method: str = "homography+flow",
-                         flow_preset: str = "medium") -> npt.NDArray[np.int32]:
+                         flow_preset: str = "medium",
+                         gate_px: float = 0.0) -> npt.NDArray[np.float32]:
     """Dense map N_{r→s}: for each reference pixel, its match in the source.
 
     Parameters
@@ -52,12 +53,16 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
     ref_gray, src_gray : (H, W) uint8 ndarray
     H_rs : (3, 3) float64 ndarray
         Homography reference → source (identity when unknown).
-    method : {"homography+flow", "homography", "flow"}
+    method : {"homography+flow", "homography", "flow", "gated"}
+        "gated": homography + flow, but the flow is kept only where it stays
+        within ``gate_px`` of the homography; elsewhere (flow that followed a
+        moving object) the homography's match is used.
 
     Returns
     -------
-    N : (H, W, 2) int32 ndarray
-        Rounded (x, y) in the source; may fall outside the source image.
+    Nf : (H, W, 2) float32 ndarray
+        Sub-pixel (x, y) in the source; may fall outside the source image.
+        ``round_matches`` gives the integer field of the scan.
     """
     Hh, Ww = ref_gray.shape
     xs, ys = pixel_grid(Hh, Ww)
@@ -66,15 +71,21 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
         mx, my = xs + f[..., 0], ys + f[..., 1]
     elif method == "homography":
         mx, my = apply_homography(H_rs, xs, ys)
-    else:
+    else:  # "homography+flow" and "gated"
         # warped(x) = src(H_rs x): the source brought into the reference frame
         warped = cv2.warpPerspective(src_gray, H_rs, (Ww, Hh),
                                      flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                      borderMode=cv2.BORDER_REPLICATE)
         f = dis_flow(ref_gray, warped, preset=flow_preset)
         mx, my = apply_homography(H_rs, xs + f[..., 0], ys + f[..., 1])
-    N = np.empty((Hh, Ww, 2), np.int32)
+        if method == "gated":
+            hx, hy = apply_homography(H_rs, xs, ys)
+            far = np.hypot(mx - hx, my - hy) > gate_px
+            mx, my = np.where(far, hx, mx), np.where(far, hy, my)
+    return np.stack([mx, my], axis=-1).astype(np.float32)
+
+
+def round_matches(Nf: npt.NDArray[np.float32]) -> npt.NDArray[np.int32]:
+    """Sub-pixel matches (..., 2) float → the integer pixel field N used by the scan."""
     big = 1 << 20
-    N[..., 0] = np.clip(np.rint(mx), -big, big).astype(np.int32)
-    N[..., 1] = np.clip(np.rint(my), -big, big).astype(np.int32)
-    return N
+    return np.clip(np.rint(Nf), -big, big).astype(np.int32)

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from dynremove import correspondence, features, geometry, postprocess
+from dynremove import correspondence, features, fusion, geometry, postprocess
 from dynremove.events import EventSink, NullSink, RunInfo
 from dynremove.params import DEFAULT, Params
 from dynremove.scan import _kernels as kn
@@ -29,6 +29,7 @@ class Result:
     """What a run produces. Images are BGR uint8; masks are (H, W) bool."""
 
     clean: npt.NDArray[np.uint8]  # (H, W, 3) the reference with dynamic objects removed
+    clean_scan: npt.NDArray[np.uint8]  # (H, W, 3) as the scans left it (= replayed events)
     dynamic: npt.NDArray[np.bool_]  # (H, W) final dynamic map L (after clean-up, if on)
     dynamic_raw: npt.NDArray[np.bool_]  # (H, W) L as the scans left it
     M: list[np.ndarray]  # (H, W) float32 M map of every scan
@@ -90,10 +91,12 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
     for k, s in enumerate(srcs):
         Ns.append(correspondence.dense_correspondence(
             g8[ref], g8[s], views[k].H, method=params.correspondence,
-            flow_preset=params.flow_preset))
+            flow_preset=params.flow_preset,
+            gate_px=params.flow_gate * max(g8[ref].shape)))
         if progress:
             progress("correspondence", (k + 1) / len(srcs))
-    N = np.ascontiguousarray(np.stack(Ns))
+    Nf = np.ascontiguousarray(np.stack(Ns))
+    N = correspondence.round_matches(Nf)
     timings["correspondence"] = time.perf_counter() - t
 
     S = len(srcs)
@@ -110,7 +113,7 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
         src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
         fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
         fg_s=np.ascontiguousarray(np.stack([fg[s] for s in srcs])),
-        N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF, sift_unit=unit)
+        N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF, sift_unit=unit, Nf=Nf)
     t = time.perf_counter()
     pf, pi = pack_params(params, sift_unit=unit)
     st.C = kn._similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F, st.hasF, pf, pi)
@@ -190,10 +193,13 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     t = time.perf_counter()
     dyn = postprocess.clean_mask(L, params) if params.clean_mask else L.copy()
     cov = _coverage(st, params)
+    clean = st.img
+    if params.fuse:
+        clean, _ = fusion.fuse_background(np.asarray(images[ref]), st.src_img, st.Nf, dyn)
     timings["post"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_all
     result = Result(
-        clean=st.img, dynamic=dyn, dynamic_raw=L, M=M_maps, coverage=cov,
+        clean=clean, clean_scan=st.img, dynamic=dyn, dynamic_raw=L, M=M_maps, coverage=cov,
         scans=np.array(summaries), timings=timings, N=st.N, C=st.C, ref_index=ref,
         params=params.to_dict(),
         geometry=[{"source": names[srcs[k]], "matches": v.n_matches,

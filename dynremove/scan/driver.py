@@ -51,6 +51,7 @@ class ScanInputs:
     F: np.ndarray
     hasF: np.ndarray
     sift_unit: float
+    Nf: np.ndarray | None = None  # (S, H, W, 2) float32 sub-pixel initial matches (not scanned)
 
     @property
     def shape(self) -> tuple[int, int]:
