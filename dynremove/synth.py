@@ -396,9 +396,12 @@ class _Layer:
     p0: np.ndarray  # (3,)
     a: np.ndarray  # (3,) world step per texel column
     b: np.ndarray  # (3,) world step per texel row
-    full_frame: bool = False  # covers every view: warp whole frame, reflect
+    full_frame: bool = False  # covers every view: warp the whole frame
     at_infinity: bool = False
-    alpha_reflect: bool = False  # True: reflect alpha too (else 0 outside)
+    # True: mirror texture and alpha past the edges (only for layers whose
+    # texel coordinates stay bounded: no horizon in view). False: replicate
+    # the texture, alpha 0 outside.
+    reflect: bool = False
 
 
 def _plane_to_image(layer: _Layer, geo: _Geometry, R, C) -> np.ndarray:
@@ -414,13 +417,14 @@ def _rays(geo, R, C, pts_xy):
     return C, dirs
 
 
-def _plane_extent(geo, rotations, centers, p0, a, b, *, at_infinity=False,
-                  pts_xy=None):
-    """Bounding box ``(u0, v0, u1, v1)`` in texels of what the views see."""
-    if pts_xy is None:
-        w, h = geo.W - 1, geo.H - 1
-        pts_xy = np.array([[0, 0], [w, 0], [w, h], [0, h],
-                           [w / 2, 0], [w / 2, h], [0, h / 2], [w, h / 2]])
+def _plane_extent(geo, rotations, centers, p0, a, b, *, at_infinity=False):
+    """Bounding box ``(u0, v0, u1, v1)`` in texels of what the views see.
+
+    Only for planes with no horizon in view (the preimage of the image
+    rectangle is then the quadrilateral of its corners' preimages).
+    """
+    w, h = geo.W - 1, geo.H - 1
+    pts_xy = np.array([[0, 0], [w, 0], [w, h], [0, h]], float)
     uv = []
     for R, C in zip(rotations, centers):
         origin, dirs = _rays(geo, R, C, pts_xy)
@@ -447,7 +451,7 @@ def _build_layers(rng, geo, rotations, centers) -> list[_Layer]:
     sw, sh = int(np.ceil(u1 - u0)) + pad, int(np.ceil(v1 - v0)) + pad
     p0 = kinv @ np.array([u0, v0, 1.0])
     layers.append(_Layer("sky", _tex_sky(rng, sh, sw, geo, v0), None, p0, a_sky,
-                         b_sky, full_frame=True, at_infinity=True))
+                         b_sky, full_frame=True, at_infinity=True, reflect=True))
 
     # backdrop: plane z = d, 1:1 in the reference
     st = d / f
@@ -461,7 +465,7 @@ def _build_layers(rng, geo, rotations, centers) -> list[_Layer]:
     ground_row = (h - p0[1]) / st  # texel row of the ground line
     tex, alpha = _tex_backdrop(rng, bh, bw, s, ground_row)
     layers.append(_Layer("backdrop", tex, alpha, p0, a_bd, b_bd, full_frame=True,
-                         alpha_reflect=True))
+                         reflect=True))
 
     # ground: plane y = h, texel size matched at the geometric mean depth
     z_bottom = geo.depth_of_ground_row(geo.H - 1)
@@ -554,7 +558,6 @@ def _render_static(layers, geo, R, C, *, ids=None) -> Uint8Image:
         G = _plane_to_image(lay, geo, R, C)
         if lay.full_frame:
             x0, y0, x1, y1 = 0, 0, W, H
-            border = cv2.BORDER_REFLECT
         else:
             th, tw = lay.texture.shape[:2]
             q = G @ np.array([[0, tw, tw, 0], [0, 0, th, th], [1, 1, 1, 1.0]])
@@ -565,7 +568,7 @@ def _render_static(layers, geo, R, C, *, ids=None) -> Uint8Image:
             y1 = min(int(np.ceil(q[1].max())) + 2, H)
             if x1 <= x0 or y1 <= y0:
                 continue
-            border = cv2.BORDER_REPLICATE
+        border = cv2.BORDER_REFLECT if lay.reflect else cv2.BORDER_REPLICATE
         M = np.array([[1, 0, -x0], [0, 1, -y0], [0, 0, 1.0]]) @ G
         dsize = (x1 - x0, y1 - y0)
         tex = cv2.warpPerspective(lay.texture, M, dsize, flags=flags,
@@ -576,7 +579,7 @@ def _render_static(layers, geo, R, C, *, ids=None) -> Uint8Image:
             if ids is not None:
                 ids[y0:y1, x0:x1] = lid
             continue
-        a_border = border if lay.alpha_reflect else cv2.BORDER_CONSTANT
+        a_border = border if lay.reflect else cv2.BORDER_CONSTANT
         alpha = cv2.warpPerspective(lay.alpha, M, dsize, flags=flags,
                                     borderMode=a_border, borderValue=0)
         view += (tex - view) * (alpha.astype(np.float32) * (1.0 / 255.0))[..., None]
@@ -658,10 +661,9 @@ def _bricks(rng, h, w, *, row_h, length, jitter=0.15):
     return labels, dist
 
 
-def _per_label(rng, labels, n_values=1):
-    """Random values per label, gathered to ``labels`` shape."""
-    table = rng.random((int(labels.max()) + 1, n_values), dtype=np.float32)
-    return table[labels] if n_values > 1 else table[labels, 0]
+def _per_label(rng, labels):
+    """One random value in ``[0, 1)`` per label, gathered to ``labels`` shape."""
+    return rng.random(int(labels.max()) + 1, dtype=np.float32)[labels]
 
 
 def _tex_sky(rng, h, w, geo, v0) -> Uint8Image:
@@ -702,7 +704,7 @@ def _tex_backdrop(rng, h, w, s, ground_row):
         stops = _palette(rng, 4, hue=rng.uniform(60, 110), hue_spread=25,
                          sat=(0.25, 0.55), val=(0.2, 0.65))
         img = _colorize(0.6 * large + 0.4 * fine, stops)
-        n = int(h * w / (180 * s * s)) + 1
+        n = int(h * w / (np.pi * (8 * s + 1) * (5.5 * s + 1))) + 1  # cover ~1x
         for _ in range(n):  # bushes and rocks
             c = (int(rng.integers(w)), int(rng.integers(h)))
             ax = (int(rng.uniform(2, 14) * s) + 1, int(rng.uniform(2, 9) * s) + 1)
@@ -765,7 +767,7 @@ def _tex_ground(rng, h, w, s, minify) -> Uint8Image:
                      val=(0.3, 0.75))
     if rng.random() < 0.5:  # gravel and pebbles
         img = _colorize(0.5 * large + 0.5 * fine, stops)
-        n = int(h * w / (220 * s * s)) + 1
+        n = int(0.32 * h * w / (np.pi * (4.25 * s + 1) * (3.25 * s + 1))) + 1
         cols = _palette(rng, 6, hue=hue, hue_spread=30, sat=(0.0, 0.3),
                         val=(0.3, 0.95))
         for _ in range(n):
@@ -830,8 +832,10 @@ def _tex_box(rng, h, w, style, light, s) -> Uint8Image:
         for _ in range(int(rng.integers(1, 4))):  # posters
             pw, ph = (max(2, int(rng.uniform(0.25, 0.7) * w)),
                       max(2, int(rng.uniform(0.1, 0.3) * h)))
-            x0, y0 = int(rng.integers(0, max(1, w - pw))), int(rng.integers(0, max(1, h - ph)))
-            col = _hsv(rng.uniform(0, 360), rng.uniform(0.3, 0.8), rng.uniform(0.4, 0.95))
+            x0 = int(rng.integers(0, max(1, w - pw)))
+            y0 = int(rng.integers(0, max(1, h - ph)))
+            col = _hsv(rng.uniform(0, 360), rng.uniform(0.3, 0.8),
+                       rng.uniform(0.4, 0.95))
             pf = _fbm(rng, ph, pw, cell=max(2.0, 8 * s), octaves=2)
             img[y0:y0 + ph, x0:x0 + pw] = _colorize(
                 pf, np.stack([col * 0.5, col, np.minimum(col * 1.4, 255)]))
@@ -927,7 +931,7 @@ def _sample_object(rng, geo, *, step_x, x_center, k_mid, n_views, area_px):
               0.9 * geo.W / unit_width)
     width = unit_width * hgt
     delta = min(rng.uniform(0.8, 1.0) * width,  # image motion per view
-                (geo.W + 0.6 * width) / max(n_views - 1, 1))
+                0.9 * (geo.W - 0.1 * width) / max(n_views - 1, 1))
     facing = rng.choice([-1.0, 1.0])
     z = geo.depth_of_ground_row(y_feet)
     margin = 0.55 * width + 2
