@@ -61,10 +61,25 @@ def parse_xy(s: str) -> tuple[int, int]:
 # --- commands -----------------------------------------------------------------------------
 def cmd_run(args: argparse.Namespace) -> int:
     from dynremove import io
-    from dynremove.pipeline import remove_dynamic
 
     params = params_from_args(args)
+    created = not Path(args.out).exists()
     out = io.prepare_out_dir(args.out)
+    try:
+        return _run(args, params, out)
+    except BaseException:
+        if created:  # bad input or interrupted: leave no empty folder behind
+            try:
+                out.rmdir()  # only if still empty
+            except OSError:
+                pass
+        raise
+
+
+def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
+    from dynremove import io
+    from dynremove.pipeline import remove_dynamic
+
     t0 = time.perf_counter()
     iset = io.load_image_set(args.images, max_side=args.max_side)
     t_load = time.perf_counter() - t0
@@ -285,6 +300,21 @@ def _add_eval_commands(sub: Any) -> None:
     add_commands(sub, add_param_flags=add_param_flags, params_from_args=params_from_args)
 
 
+def _quiet_opencv() -> None:
+    """OpenCV's own warnings (e.g. "PNG input buffer is incomplete") would add lines to
+    stderr next to ours, which already name the file and the problem."""
+    try:
+        import cv2
+
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    except Exception:  # noqa: BLE001 - cosmetic only
+        pass
+
+
+def _one_line(e: BaseException) -> str:
+    return " ".join(str(e).split()) or type(e).__name__
+
+
 def _on_sigterm(signum: int, frame: Any) -> None:
     raise Terminated()
 
@@ -296,6 +326,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from dynremove.geometry import GeometryError
     from dynremove.pipeline import InputError
 
+    _quiet_opencv()
     old = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return int(args.fn(args) or 0)
@@ -308,12 +339,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (InputError, GeometryError, ValueError, FileNotFoundError) as e:
         if debug:
             raise
-        print(f"dynremove: error: {e}", file=sys.stderr)
+        print(f"dynremove: error: {_one_line(e)}", file=sys.stderr)
         return EXIT_INPUT
     except Exception as e:  # noqa: BLE001 - one line, not a traceback
         if debug:
             raise
-        print(f"dynremove: internal error: {type(e).__name__}: {e} "
+        print(f"dynremove: internal error: {type(e).__name__}: {_one_line(e)} "
               "(set DYNREMOVE_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_INTERNAL
     finally:

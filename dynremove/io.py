@@ -22,6 +22,7 @@ from dynremove.pipeline import InputError
 IMAGE_EXTS = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".jp2", ".ppm",
               ".pgm", ".pnm"}
 AUTO_MAX_SIDE = 1280  # larger inputs are downscaled unless --max-side says otherwise
+MIN_MAX_SIDE = 16  # smallest --max-side accepted (dense flow needs a side of >= 12 px)
 
 
 @dataclass
@@ -46,12 +47,19 @@ def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str
     for a in args:
         p = Path(a)
         if p.is_dir():
-            files = sorted(q for q in p.iterdir() if q.is_file() and not q.name.startswith("."))
+            try:
+                entries = list(p.iterdir())
+            except OSError as e:
+                raise InputError(f"{p}: cannot list folder ({e.strerror or e})") from None
+            files = sorted(q for q in entries if q.is_file() and not q.name.startswith("."))
             imgs = [q for q in files if q.suffix.lower() in IMAGE_EXTS]
             skipped = [q.name for q in files if q.suffix.lower() not in IMAGE_EXTS]
             if skipped:
                 notes.append(f"{p}: skipped {len(skipped)} non-image file(s): "
                              + ", ".join(skipped[:5]) + (" …" if len(skipped) > 5 else ""))
+            if not imgs and len(args) > 1:
+                raise InputError(f"{p}: is a folder with no images in it "
+                                 "(pass image files, or one folder of images)")
             paths.extend(imgs)
         elif p.exists():
             paths.append(p)
@@ -59,7 +67,8 @@ def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str
             raise InputError(f"{p}: no such file or folder")
     if len(paths) < 2:
         raise InputError(f"need at least 2 images, found {len(paths)}"
-                         + (f" in {', '.join(str(a) for a in args)}" if args else ""))
+                         + (f" in {', '.join(str(a) for a in args)}" if args else "")
+                         + (f" ({'; '.join(notes)})" if notes else ""))
     return paths, notes
 
 
@@ -87,15 +96,23 @@ def read_image(path: Path) -> tuple[np.ndarray, list[str]]:
         img = (img >> 8).astype(np.uint8)
         notes.append(f"{path.name}: 16-bit image scaled to 8 bits")
     elif img.dtype != np.uint8:
-        img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
         notes.append(f"{path.name}: {img.dtype} image rescaled to 8 bits")
+        img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
     if img.ndim == 2:
         img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
         notes.append(f"{path.name}: grayscale image expanded to 3 channels")
     elif img.shape[2] == 4:
         img = np.ascontiguousarray(img[:, :, :3])
         notes.append(f"{path.name}: alpha channel dropped")
+    elif _png_has_alpha(data):  # IMREAD_ANYCOLOR already dropped it: say so
+        notes.append(f"{path.name}: alpha channel dropped")
     return img, notes
+
+
+def _png_has_alpha(data: np.ndarray) -> bool:
+    """PNG colour type 4 (grey + alpha) or 6 (RGBA), read from the IHDR chunk."""
+    return (data.size > 25 and data[:8].tobytes() == b"\x89PNG\r\n\x1a\n"
+            and data[12:16].tobytes() == b"IHDR" and int(data[25]) in (4, 6))
 
 
 def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = None) -> ImageSet:
@@ -104,6 +121,9 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
     ``max_side=None`` downscales only images larger than AUTO_MAX_SIDE (with a note);
     ``max_side=0`` never downscales.
     """
+    if max_side is not None and max_side != 0 and max_side < MIN_MAX_SIDE:
+        raise InputError(f"--max-side {max_side}: must be 0 (keep the full size) or at "
+                         f"least {MIN_MAX_SIDE} px")
     paths, notes = list_inputs(args)
     images = []
     for p in paths:
@@ -178,6 +198,7 @@ def _atomic_write_bytes(path: Path, data: bytes) -> None:
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs follow the umask
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -185,6 +206,12 @@ def _atomic_write_bytes(path: Path, data: bytes) -> None:
         except OSError:
             pass
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def write_image(path: str | os.PathLike, img: np.ndarray) -> None:

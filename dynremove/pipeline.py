@@ -56,8 +56,8 @@ def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
         if im.shape != shape:
             raise InputError(f"image {i} is {im.shape[1]}x{im.shape[0]}, image 0 is "
                              f"{shape[1]}x{shape[0]}: all images must have the same size")
-    if shape[0] < 8 or shape[1] < 8:
-        raise InputError(f"images are too small ({shape[1]}x{shape[0]}); need at least 8x8")
+    if shape[0] < 16 or shape[1] < 16:
+        raise InputError(f"images are too small ({shape[1]}x{shape[0]}); need at least 16x16")
     if not 0 <= ref < len(images):
         raise InputError(f"reference index {ref} out of range 0..{len(images) - 1}")
 

@@ -15,7 +15,7 @@ from dynremove.metrics import jaccard, psnr_in_mask
 
 @pytest.fixture(scope="module")
 def scene():
-    return synth.make_scene(seed=0, n_views=6, size=(180, 320))
+    return synth.make_scene(seed=0, n_views=6, size=(360, 640))
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +25,7 @@ def result(scene):
 
 def test_default_detects_and_removes(scene, result):
     gt = scene.masks[scene.ref_index]
-    assert jaccard(result.dynamic, gt) >= 0.7
+    assert jaccard(result.dynamic, gt) >= 0.75  # measured 0.83
     before = psnr_in_mask(scene.images[scene.ref_index], scene.background, gt)
     after = psnr_in_mask(result.clean, scene.background, gt)
     assert after > before + 8.0

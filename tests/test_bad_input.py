@@ -1,0 +1,514 @@
+"""Bad input, through the CLI and (where it means something) the Python API.
+
+Every rejected input must give exit code 2, one ``dynremove: error: ...`` line that
+names the input and the problem, no traceback, and nothing half-written in --out.
+Inputs that can be processed (grey, RGBA, palette, 16-bit, EXIF-rotated, huge, ...)
+must run with a note and exit 0.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dynremove import io, preset, remove_dynamic, synth
+from dynremove.cli import main
+from dynremove.params import Params
+from dynremove.pipeline import InputError
+
+H, W = 48, 64
+FAST = ["--max-side", "64", "--max-scans", "2"]  # keep full runs tiny
+
+
+# --- helpers ------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def scene():
+    return synth.make_scene(seed=1, n_views=4, size=(H, W))
+
+
+def write_set(folder: Path, images, ext: str = ".png") -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, im in enumerate(images):
+        p = folder / f"view{i}{ext}"
+        assert cv2.imwrite(str(p), im)
+        paths.append(p)
+    return paths
+
+
+def run_cli(capsys, *argv) -> tuple[int, str, str]:
+    rc = main(["run", *map(str, argv)])
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+def files_under(p: Path) -> list[Path]:
+    return [q for q in p.rglob("*") if q.is_file()] if p.exists() else []
+
+
+def assert_input_error(rc: int, err: str, *words: str, out: Path | None = None) -> str:
+    """Exit 2, one error line (after any notes) containing every word, no traceback."""
+    assert rc == 2, err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ln.startswith("dynremove: error: ")]
+    assert len(errors) == 1, err
+    assert lines[-1] == errors[0], err
+    assert all(ln.startswith("dynremove: note: ") for ln in lines[:-1]), err
+    for w in words:
+        assert w in errors[0], (w, errors[0])
+    if out is not None:
+        assert files_under(out) == [], f"partial outputs left in {out}: {files_under(out)}"
+    return errors[0]
+
+
+def assert_ok_run(rc: int, err: str, out: Path) -> dict:
+    assert rc == 0, err
+    assert "Traceback" not in err
+    for name in ("clean.png", "dynamic_mask.png", "coverage.png", "report.json"):
+        assert (out / name).is_file(), name
+    return json.loads((out / "report.json").read_text())
+
+
+def notes_of(err: str) -> list[str]:
+    return [ln for ln in err.splitlines() if ln.startswith("dynremove: note: ")]
+
+
+def palette_png(path: Path, bgr: np.ndarray) -> np.ndarray:
+    """Write ``bgr`` (at most 256 colours) as an 8-bit palette PNG by hand; return it."""
+    h, w = bgr.shape[:2]
+    colours, idx = np.unique(bgr.reshape(-1, 3), axis=0, return_inverse=True)
+    assert len(colours) <= 256
+    idx = idx.reshape(h, w).astype(np.uint8)
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 8, 3, 0, 0, 0)  # 8-bit, colour type 3 = palette
+    plte = colours[:, ::-1].astype(np.uint8).tobytes()  # RGB triples
+    raw = b"".join(b"\x00" + idx[y].tobytes() for y in range(h))  # filter 0 per row
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"PLTE", plte)
+                     + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+    return bgr
+
+
+def exif_app1(orientation: int) -> bytes:
+    """A minimal APP1 Exif segment holding only the Orientation tag (0x0112)."""
+    ifd = (struct.pack("<H", 1) + struct.pack("<HHIHH", 0x0112, 3, 1, orientation, 0)
+           + struct.pack("<I", 0))
+    payload = b"Exif\x00\x00" + b"II*\x00" + struct.pack("<I", 8) + ifd
+    return b"\xff\xe1" + struct.pack(">H", len(payload) + 2) + payload
+
+
+def jpeg_bytes(img: np.ndarray, orientation: int | None = None) -> bytes:
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+    assert ok
+    b = buf.tobytes()
+    return b if orientation is None else b[:2] + exif_app1(orientation) + b[2:]
+
+
+# --- no images, one image, mixed folders ------------------------------------------
+def test_no_images(tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, empty, "--out", out)
+    assert_input_error(rc, err, str(empty), "need at least 2 images", "found 0", out=out)
+    with pytest.raises(SystemExit) as e:  # no argument at all: argparse's usage error
+        main(["run"])
+    assert e.value.code == 2
+    capsys.readouterr()
+    with pytest.raises(InputError, match="at least 2"):
+        io.load_image_set([empty])
+    with pytest.raises(InputError, match="at least 2"):
+        remove_dynamic([])
+
+
+def test_one_image(tmp_path, capsys, scene):
+    (p,) = write_set(tmp_path / "one", scene.images[:1])
+    out = tmp_path / "out"
+    for arg in (tmp_path / "one", p):
+        rc, _, err = run_cli(capsys, arg, "--out", out)
+        assert_input_error(rc, err, str(arg), "need at least 2 images", "found 1", out=out)
+    with pytest.raises(InputError, match="at least 2"):
+        remove_dynamic([scene.images[0]])
+
+
+def test_missing_path(tmp_path, capsys, scene):
+    (p, _) = write_set(tmp_path / "s", scene.images[:2])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, p, tmp_path / "nope.png", "--out", out)
+    assert_input_error(rc, err, "nope.png", "no such file", out=out)
+
+
+def test_non_image_files_are_skipped_with_a_note(tmp_path, capsys, scene):
+    d = tmp_path / "mixed"
+    write_set(d, scene.images[:3])
+    (d / "notes.txt").write_text("not an image")
+    (d / "Thumbs.db").write_bytes(b"\x00" * 32)
+    (d / ".DS_Store").write_bytes(b"\x00" * 32)
+    (d / "sub").mkdir()
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out, *FAST)
+    report = assert_ok_run(rc, err, out)
+    assert report["inputs"] == [str(d / f"view{i}.png") for i in range(3)]
+    (note,) = [n for n in notes_of(err) if "non-image" in n]
+    assert "notes.txt" in note and "Thumbs.db" in note and "skipped 2" in note
+
+
+def test_too_few_images_left_after_skipping(tmp_path, capsys, scene):
+    d = tmp_path / "mixed"
+    write_set(d, scene.images[:1])
+    (d / "notes.txt").write_text("x")
+    (d / "data.csv").write_text("1,2")
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out)
+    msg = assert_input_error(rc, err, str(d), "need at least 2 images", "found 1", out=out)
+    assert "notes.txt" in msg  # says what was skipped, so the user sees why
+
+
+# --- unreadable files ---------------------------------------------------------------
+@pytest.mark.parametrize("kind", ["truncated", "garbage", "zero-byte", "text-as-jpeg"])
+def test_unreadable_file_in_the_set(tmp_path, capsys, scene, kind):
+    paths = write_set(tmp_path / "s", scene.images[:3])
+    bad = tmp_path / "s" / "bad.jpg"
+    good = jpeg_bytes(scene.images[3])
+    bad.write_bytes({"truncated": good[: len(good) // 2],
+                     "garbage": b"\xff\xd8\xff\xe0" + bytes(range(256)) * 8,
+                     "zero-byte": b"",
+                     "text-as-jpeg": b"<html>not found</html>"}[kind])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, *paths, bad, "--out", out)
+    problem = "empty file" if kind == "zero-byte" else "not a readable image"
+    assert_input_error(rc, err, str(bad), problem, out=out)
+    with pytest.raises(InputError, match=problem):
+        io.read_image(bad)
+    # the same file inside a folder: it has an image extension, so it is read and refused
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--out", out)
+    assert_input_error(rc, err, "bad.jpg", problem, out=out)
+
+
+def test_corrupt_jpeg_body_does_not_crash(tmp_path, capsys, scene):
+    """Damage inside the entropy-coded data decodes (libjpeg fills in); no traceback.
+
+    Questionable but documented: such a file is accepted (exit 0) or refused (exit 2)."""
+    paths = write_set(tmp_path / "s", scene.images[:3])
+    b = bytearray(jpeg_bytes(scene.images[3]))
+    mid = len(b) // 2
+    b[mid:mid + 40] = b"\x00" * 40
+    bad = tmp_path / "s" / "corrupt.jpg"
+    bad.write_bytes(bytes(b))
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, *paths, bad, "--out", out, *FAST)
+    assert "Traceback" not in err
+    if rc == 2:
+        assert_input_error(rc, err, "corrupt.jpg", out=out)
+    else:
+        assert_ok_run(rc, err, out)
+
+
+def test_folder_in_a_list_of_files(tmp_path, capsys, scene):
+    paths = write_set(tmp_path / "s", scene.images[:3])
+    sub = tmp_path / "s" / "fake.png"  # a folder whose name looks like an image
+    sub.mkdir()
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, paths[0], sub, paths[1], "--out", out)
+    assert_input_error(rc, err, str(sub), "folder", out=out)
+    with pytest.raises(InputError, match="folder"):
+        io.read_image(sub)
+
+
+def test_unreadable_permissions(tmp_path, capsys, scene):
+    paths = write_set(tmp_path / "s", scene.images[:3])
+    os.chmod(paths[1], 0)
+    try:
+        if os.access(paths[1], os.R_OK):
+            pytest.skip("chmod 0 does not stop this user from reading (root)")
+        out = tmp_path / "out"
+        rc, _, err = run_cli(capsys, *paths, "--out", out)
+        assert_input_error(rc, err, str(paths[1]), "permission denied", out=out)
+    finally:
+        os.chmod(paths[1], 0o644)
+
+
+def test_permission_error_is_an_input_error(tmp_path, capsys, scene, monkeypatch):
+    """The same path as above, forced (it works when running as root too)."""
+    paths = write_set(tmp_path / "s", scene.images[:3])
+    real = np.fromfile
+
+    def fromfile(f, *a, **k):
+        if str(f) == str(paths[1]):
+            raise PermissionError(13, "Permission denied", str(f))
+        return real(f, *a, **k)
+
+    monkeypatch.setattr(np, "fromfile", fromfile)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, *paths, "--out", out)
+    assert_input_error(rc, err, str(paths[1]), "permission denied", out=out)
+
+
+# --- the reference ------------------------------------------------------------------
+@pytest.mark.parametrize("ref, words", [("3", ["--ref 3", "out of range"]),
+                                        ("-4", ["--ref -4", "out of range"]),
+                                        ("missing.png", ["--ref missing.png", "names no input"])])
+def test_bad_ref(tmp_path, capsys, scene, ref, words):
+    write_set(tmp_path / "s", scene.images[:3])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--ref", ref, "--out", out)
+    assert_input_error(rc, err, *words, out=out)
+
+
+def test_ref_api(scene):
+    with pytest.raises(InputError, match="out of range"):
+        remove_dynamic(scene.images[:3], ref=3)
+    with pytest.raises(InputError, match="out of range"):
+        remove_dynamic(scene.images[:3], ref=-1)
+    assert io.resolve_ref("view1", ["view0.png", "view1.png"]) == 1
+    assert io.resolve_ref("-1", ["a.png", "b.png", "c.png"]) == 2
+
+
+# --- sizes ----------------------------------------------------------------------------
+@pytest.mark.parametrize("other", [(H, W - 4), (W, H)], ids=["size", "aspect"])
+def test_different_sizes(tmp_path, capsys, scene, other):
+    paths = write_set(tmp_path / "s", scene.images[:3])
+    odd = cv2.resize(scene.images[3], (other[1], other[0]), interpolation=cv2.INTER_AREA)
+    bad = tmp_path / "s" / "view3.png"
+    cv2.imwrite(str(bad), odd)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, *paths, bad, "--out", out)
+    assert_input_error(rc, err, str(bad), f"{other[1]}x{other[0]}", f"{W}x{H}", "same size",
+                       out=out)
+    with pytest.raises(InputError, match="same size"):
+        remove_dynamic(list(scene.images[:3]) + [odd], ref=0)
+
+
+def test_tiny_images_api():
+    with pytest.raises(InputError, match="too small"):
+        remove_dynamic([np.zeros((6, 6, 3), np.uint8)] * 3, ref=0)
+    with pytest.raises(InputError, match="uint8"):
+        remove_dynamic([np.zeros((H, W), np.uint8)] * 3, ref=0)
+
+
+@pytest.mark.parametrize("max_side", ["-5", "4"])
+def test_bad_max_side(tmp_path, capsys, scene, max_side):
+    write_set(tmp_path / "s", scene.images[:3])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--max-side", max_side, "--out", out)
+    assert_input_error(rc, err, f"--max-side {max_side}", out=out)
+
+
+# --- formats that are converted, with a note --------------------------------------
+@pytest.mark.parametrize("kind", ["gray", "rgba", "palette", "16bit", "16bit-gray"])
+def test_converted_formats_run_with_a_note(tmp_path, capsys, scene, kind):
+    d = tmp_path / "s"
+    paths = write_set(d, scene.images[:3])
+    p = d / "view1.png"
+    src = scene.images[1]
+    if kind == "gray":
+        g = cv2.cvtColor(src, cv2.COLOR_BGR2GRAY)
+        cv2.imwrite(str(p), g)
+        expect, note = cv2.cvtColor(g, cv2.COLOR_GRAY2BGR), "grayscale"
+    elif kind == "rgba":
+        a = np.dstack([src, np.full((H, W), 77, np.uint8)])
+        cv2.imwrite(str(p), a)
+        expect, note = src, "alpha"
+    elif kind == "palette":
+        expect, note = palette_png(p, (src // 64) * 64 + 32), None  # lossless: no note needed
+    elif kind == "16bit":
+        cv2.imwrite(str(p), src.astype(np.uint16) * 257)
+        expect, note = src, "16-bit"
+    else:
+        g = cv2.cvtColor(src, cv2.COLOR_BGR2GRAY)
+        cv2.imwrite(str(p), g.astype(np.uint16) * 257)
+        expect, note = cv2.cvtColor(g, cv2.COLOR_GRAY2BGR), "16-bit"
+    iset = io.load_image_set(paths)
+    assert all(im.shape == (H, W, 3) and im.dtype == np.uint8 for im in iset.images)
+    np.testing.assert_array_equal(iset.images[1], expect)
+    if note:
+        assert any(note in n and "view1.png" in n for n in iset.notes), iset.notes
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out, *FAST)
+    report = assert_ok_run(rc, err, out)
+    if note:
+        assert any(note in n for n in notes_of(err)), err
+        assert any(note in n for n in report["notes"])
+
+
+def test_exif_rotated_jpegs(tmp_path, capsys, scene):
+    """Orientation 6 (rotate 90° clockwise to display) is applied on load, and a set
+    mixing tagged landscape files with an untagged portrait file loads consistently."""
+    d = tmp_path / "s"
+    d.mkdir()
+    raw = []
+    for i, im in enumerate(scene.images[:3]):
+        if i == 1:  # stored already upright (portrait pixels), no tag
+            (d / f"view{i}.jpg").write_bytes(jpeg_bytes(cv2.rotate(im, cv2.ROTATE_90_CLOCKWISE)))
+        else:  # stored landscape, tagged "rotate 90° CW"
+            (d / f"view{i}.jpg").write_bytes(jpeg_bytes(im, orientation=6))
+        raw.append(cv2.imdecode(np.fromfile(str(d / f"view{i}.jpg"), np.uint8),
+                                cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION))
+    img0, _ = io.read_image(d / "view0.jpg")
+    assert img0.shape == (W, H, 3)
+    np.testing.assert_array_equal(img0, cv2.rotate(raw[0], cv2.ROTATE_90_CLOCKWISE))
+    iset = io.load_image_set([d])
+    assert [im.shape for im in iset.images] == [(W, H, 3)] * 3
+    # all upright: the tagged and the physically rotated views show the same content
+    for im in iset.images:
+        diff = np.abs(im.astype(int) - iset.images[1].astype(int)).mean()
+        assert diff < 40, diff  # same scene, small camera motion (wrong way round: ~60+)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out, *FAST)
+    report = assert_ok_run(rc, err, out)
+    assert (report["size"]["width"], report["size"]["height"]) == (H, W)
+
+
+def test_huge_images_are_downscaled(tmp_path, capsys):
+    big = np.empty((6000, 8000, 3), np.uint8)
+    big[:] = (90, 120, 150)
+    big[1000:2500, 1500:4000] = (30, 200, 60)
+    big[3000:5200, 5000:7000] = (220, 40, 40)
+    ok, buf = cv2.imencode(".png", big, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+    assert ok
+    d = tmp_path / "big"
+    d.mkdir()
+    for i in range(2):
+        (d / f"big{i}.png").write_bytes(buf.tobytes())
+    del big
+    iset = io.load_image_set([d])
+    assert iset.original_size == (8000, 6000)
+    assert max(iset.images[0].shape[:2]) == io.AUTO_MAX_SIDE
+    assert iset.images[0].shape == (960, 1280, 3)
+    assert any("downscaled" in n and "8000x6000" in n for n in iset.notes), iset.notes
+    del iset
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out, "--max-side", "64", "--max-scans", "1")
+    report = assert_ok_run(rc, err, out)
+    assert report["size"]["width"] == 64 and report["size"]["height"] == 48
+    assert report["size"]["original_width"] == 8000
+    assert report["size"]["scale"] == pytest.approx(64 / 8000)
+
+
+# --- degenerate content ---------------------------------------------------------------
+@pytest.mark.parametrize("name", ["paper", "default"])
+def test_identical_images_have_nothing_dynamic(scene, name):
+    ref = scene.images[0]
+    res = remove_dynamic([ref.copy() for _ in range(4)], ref=1, params=preset(name))
+    assert not res.dynamic.any() and not res.dynamic_raw.any()
+    np.testing.assert_array_equal(res.clean, ref)
+
+
+def test_identical_images_cli(tmp_path, capsys):
+    bg = synth.make_scene(seed=5, n_views=3, size=(48, 64)).background
+    d = tmp_path / "same"
+    write_set(d, [bg] * 3)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out)
+    report = assert_ok_run(rc, err, out)
+    np.testing.assert_array_equal(cv2.imread(str(out / "clean.png")), bg)
+    assert not cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE).any()
+    assert report["dynamic_fraction"] == 0.0
+
+
+def test_textureless_scene(tmp_path, capsys):
+    """Flat grey: a clear error (exit 2) or a fallback with a note (exit 0), never a crash."""
+    d = tmp_path / "flat"
+    write_set(d, [np.full((H, W, 3), 128, np.uint8)] * 4)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out)
+    assert "Traceback" not in err
+    if rc == 2:
+        assert_input_error(rc, err, out=out)
+    else:
+        assert_ok_run(rc, err, out)
+        assert notes_of(err), "a texture-less scene must come with a note"
+        assert not cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE).any()
+
+
+# --- output folder and parameters ------------------------------------------------------
+def test_out_is_a_file(tmp_path, capsys, scene):
+    write_set(tmp_path / "s", scene.images[:3])
+    f = tmp_path / "taken"
+    f.write_text("keep me")
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--out", f)
+    assert_input_error(rc, err, str(f), "not a folder")
+    assert f.read_text() == "keep me"
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--out", f / "sub")
+    assert_input_error(rc, err, str(f / "sub"), "cannot create")
+    assert f.read_text() == "keep me"
+
+
+def test_out_not_writable(tmp_path, capsys, scene):
+    write_set(tmp_path / "s", scene.images[:3])
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    os.chmod(ro, 0o500)
+    try:
+        if os.access(ro, os.W_OK):
+            pytest.skip("chmod 0500 does not stop this user from writing (root)")
+        rc, _, err = run_cli(capsys, tmp_path / "s", "--out", ro)
+        assert_input_error(rc, err, str(ro), "not writable", out=ro)
+        rc, _, err = run_cli(capsys, tmp_path / "s", "--out", ro / "sub")
+        assert_input_error(rc, err, str(ro / "sub"), "cannot create")
+    finally:
+        os.chmod(ro, 0o700)
+
+
+@pytest.mark.parametrize("flag, value, words", [
+    ("--patch-size", "4", ["patch_size", "odd", "4"]),
+    ("--dbscan-eps", "-1", ["dbscan_eps", "> 0"]),
+    ("--t-r", "1.5", ["t_r"]),
+    ("--correspondence", "magic", ["correspondence", "magic"]),
+])
+def test_bad_parameters(tmp_path, capsys, scene, flag, value, words):
+    write_set(tmp_path / "s", scene.images[:3])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, tmp_path / "s", flag, value, "--out", out)
+    assert_input_error(rc, err, *words)
+    assert not out.exists()  # refused before anything was created
+
+
+def test_bad_parameters_api():
+    with pytest.raises(ValueError, match="patch_size"):
+        Params(patch_size=4)
+    with pytest.raises(ValueError, match="dbscan_eps"):
+        preset("paper").replace(dbscan_eps=-1)
+    with pytest.raises(ValueError, match="unknown preset"):
+        preset("fastest")
+
+
+# --- a few through a real process (exit status, C-level stderr) --------------------------
+@pytest.mark.parametrize("case", ["empty", "truncated-png", "out-is-file"])
+def test_subprocess_exit_codes(tmp_path, scene, case):
+    d = tmp_path / "s"
+    d.mkdir()
+    out = tmp_path / "out"
+    if case == "empty":
+        args = [d]
+    elif case == "truncated-png":
+        paths = write_set(d, scene.images[:2])
+        data = paths[1].read_bytes()
+        paths[1].write_bytes(data[: len(data) // 2])
+        args = [d]
+    else:
+        write_set(d, scene.images[:2])
+        out.write_text("x")
+        args = [d]
+    r = subprocess.run([sys.executable, "-m", "dynremove.cli", "run", *map(str, args),
+                        "--out", str(out)], capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "DYNREMOVE_DEBUG": ""})
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("dynremove: error: "), r.stderr
+    if case != "out-is-file":
+        assert files_under(out) == []
