@@ -101,3 +101,13 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
     have = ok.any(0)
     out[ys[have], xs[have]] = np.clip(fill[have] + 0.5, 0, 255).astype(np.uint8)
     return out, n_valid
+
+
+def lab_difference(a: npt.NDArray[np.uint8], b: npt.NDArray[np.uint8], *,
+                   blur_sigma: float = 1.0) -> npt.NDArray[np.float32]:
+    """Per-pixel CIE Lab distance of two (H, W, 3) uint8 BGR images, lightly blurred."""
+    la = cv2.cvtColor(cv2.GaussianBlur(a, (0, 0), blur_sigma).astype(np.float32) / 255.0,
+                      cv2.COLOR_BGR2Lab)
+    lb = cv2.cvtColor(cv2.GaussianBlur(b, (0, 0), blur_sigma).astype(np.float32) / 255.0,
+                      cv2.COLOR_BGR2Lab)
+    return np.sqrt(((la - lb) ** 2).sum(-1))

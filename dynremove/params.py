@@ -68,6 +68,7 @@ class Params:
     clean_mask: bool = False  # morphological clean-up of L (open/close, holes)
     min_region_px: int = 0  # drop dynamic components smaller than this
     fuse: bool = False  # refill L from all sources (interpolated sub-pixel matches, medoid)
+    verify_lab: float = 0.0  # with fuse: drop L pixels whose fill differs < this (Lab); 0 = off
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
 
@@ -117,8 +118,8 @@ PAPER = Params()
 # Chosen on the even-indexed DAVIS sets, checked on the odd ones (README "Results"):
 # flow gated by the homography (flow follows slow objects), one scan (more scans
 # re-flag thousands of written pixels and lower J), t_r 0.3, and a cleaned L.
-DEFAULT = Params(t_r=0.3, correspondence="gated", max_scans=1, clean_mask=True,
-                 min_region_px=64, fuse=True)
+DEFAULT = Params(patch_size=13, t_r=0.3, correspondence="gated", max_scans=1,
+                 clean_mask=True, min_region_px=64, fuse=True)
 
 PRESETS: dict[str, Params] = {"default": DEFAULT, "paper": PAPER}
 

@@ -195,7 +195,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     cov = _coverage(st, params)
     clean = st.img
     if params.fuse:
-        clean, _ = fusion.fuse_background(np.asarray(images[ref]), st.src_img, st.Nf, dyn)
+        ref_img = np.asarray(images[ref])
+        clean, _ = fusion.fuse_background(ref_img, st.src_img, st.Nf, dyn)
+        if params.verify_lab > 0:
+            # a pixel whose fused background looks like what is there is not dynamic
+            dyn = dyn & (fusion.lab_difference(ref_img, clean) > params.verify_lab)
+            if params.clean_mask:
+                dyn = postprocess.clean_mask(dyn, params)
+            clean, _ = fusion.fuse_background(ref_img, st.src_img, st.Nf, dyn)
     timings["post"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_all
     result = Result(
