@@ -46,7 +46,8 @@ def interpolate_field(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_
 
 def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
                     Nf: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_], *,
-                    margin_px: int = 2) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8]]:
+                    margin_px: int = 2, fill: npt.NDArray[np.bool_] | None = None
+                    ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8]]:
     """Replace ``mask`` (dilated by ``margin_px``) with the fused background.
 
     Parameters
@@ -58,6 +59,9 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
         Sub-pixel matches reference → source (x, y).
     mask : (H, W) bool ndarray
         Final dynamic map.
+    fill : (H, W) bool ndarray, optional
+        Pixels to write (default: ``mask`` dilated by ``margin_px``); the
+        correspondences are still re-interpolated inside ``mask`` only.
 
     Returns
     -------
@@ -68,7 +72,7 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
     H, W = mask.shape
     out = reference.copy()
     n_valid = np.zeros((H, W), np.uint8)
-    if not mask.any():
+    if not mask.any() and fill is None:
         return out, n_valid
     r = max(0, int(margin_px))
     region = mask
@@ -77,6 +81,8 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
         region = cv2.dilate(mask.astype(np.uint8), k).astype(bool)
     # the field is interpolated over a slightly larger hole: flow at object edges bleeds
     hole = cv2.dilate(region.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+    if fill is not None:
+        region = fill
     ys, xs = np.nonzero(region)
     gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
     grid = np.stack([gx, gy], axis=-1)

@@ -68,6 +68,7 @@ class Params:
     clean_mask: bool = False  # morphological clean-up of L (open/close, holes)
     min_region_px: int = 0  # drop dynamic components smaller than this
     fuse: bool = False  # refill L from all sources (interpolated sub-pixel matches, medoid)
+    add_lab: float = 0.0  # with fuse: add pixels differing > this (Lab) from the fused bg
     verify_lab: float = 0.0  # with fuse: drop L pixels whose fill differs < this (Lab); 0 = off
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible

@@ -196,6 +196,13 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     clean = st.img
     if params.fuse:
         ref_img = np.asarray(images[ref])
+        if params.add_lab > 0:
+            # pixels far from the whole-image fused background are dynamic too
+            bg, _ = fusion.fuse_background(ref_img, st.src_img, st.Nf, dyn,
+                                           fill=np.ones_like(dyn))
+            dyn = dyn | (fusion.lab_difference(ref_img, bg) > params.add_lab)
+            if params.clean_mask:
+                dyn = postprocess.clean_mask(dyn, params)
         clean, _ = fusion.fuse_background(ref_img, st.src_img, st.Nf, dyn)
         if params.verify_lab > 0:
             # a pixel whose fused background looks like what is there is not dynamic
