@@ -1,0 +1,83 @@
+"""The recording layer on real runs of the method (not fabricated events)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rerun")
+
+from test_viewer import cli_env, counts_of  # noqa: E402
+
+from dynremove import MemorySink, NullSink, preset, remove_dynamic, synth  # noqa: E402
+from dynremove.cli import main  # noqa: E402
+from dynremove.events import replay_replacements  # noqa: E402
+from viewer import RerunSink, serve  # noqa: E402
+from viewer import inspect as vi  # noqa: E402
+
+
+class Tee:
+    """Forward every event to several sinks (one run, two observers)."""
+
+    enabled = True
+
+    def __init__(self, *sinks):
+        self.sinks = sinks
+
+    def __getattr__(self, name):
+        return lambda *a: [getattr(s, name)(*a) for s in self.sinks]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return synth.make_scene(seed=2, n_views=5, size=(96, 128), n_objects=1)
+
+
+@pytest.mark.parametrize("name", ["paper", "default"])
+def test_recording_replays_and_counts(scene, tmp_path, name):
+    params = preset(name).replace(max_scans=2)
+    path = tmp_path / "run.rrd"
+    mem = MemorySink()
+    rsink = RerunSink(path, record_every_rows=8, gt_mask=scene.masks[scene.ref_index])
+    res = remove_dynamic(scene.images, ref=scene.ref_index, params=params,
+                         sink=Tee(mem, rsink), probes=[(20, 30)], sample_static=0.01)
+    assert len(mem.replacements) > 0
+    # counts read back from the file equal what the core emitted
+    assert vi.read_counts(path) == counts_of(mem)
+    # the recorded Replacement events alone rebuild the scans' image, read from the file
+    srcs = [scene.images[i] for i in range(len(scene.images)) if i != scene.ref_index]
+    rebuilt = replay_replacements(scene.images[scene.ref_index], srcs, vi.read_replacements(path),
+                                  patch_size=params.patch_size, write=params.write)
+    np.testing.assert_array_equal(rebuilt, vi.read_final_image(path, scan=True))
+    np.testing.assert_array_equal(rebuilt, res.clean_scan)
+    np.testing.assert_array_equal(vi.read_final_image(path), res.clean)
+    # results do not depend on the sink
+    null = remove_dynamic(scene.images, ref=scene.ref_index, params=params, sink=NullSink())
+    np.testing.assert_array_equal(null.clean, res.clean)
+    np.testing.assert_array_equal(null.dynamic, res.dynamic)
+    # the probe pixel's history is there in every scan
+    hist = vi.pixel_history(path, 20, 30)
+    assert len(hist["decisions"]) == len(res.scans)
+
+
+def test_cli_recordings_verify_and_inspect(scene, tmp_path, capsys):
+    synth.write_scene(scene, tmp_path / "set")
+    rec = tmp_path / "r.rrd"
+    mask = tmp_path / "set" / "masks" / scene.names[scene.ref_index]
+    code = main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o"),
+                 "--record", str(rec), "--probe", "10,12", "--gt", str(mask), "--quiet"])
+    assert code == 0 and rec.stat().st_size > 0
+    r = subprocess.run([serve.rerun_binary(), "rrd", "verify", str(rec)],
+                       env=cli_env(tmp_path), capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    capsys.readouterr()
+    assert main(["inspect", str(rec), "--pixel", "10,12"]) == 0
+    out = capsys.readouterr().out
+    assert "pixel (10, 12)" in out and "scan 0" in out
+    assert main(["inspect", str(rec), "--failures", "--top", "3"]) == 0
+    assert main(["export", str(rec), "--gif", str(tmp_path / "a.gif")]) == 0
+    assert (tmp_path / "a.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")
+    assert main(["inspect", str(tmp_path / "missing.rrd"), "--pixel", "1,1"]) == 2

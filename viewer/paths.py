@@ -1,0 +1,143 @@
+"""Entity paths of a dynremove recording (DESIGN.md §4), in one place.
+
+Every path is relative to an optional *root*, so that two runs can be logged
+side by side in one recording (``--compare``: roots ``runs/a`` and ``runs/b``)::
+
+    >>> p = Paths()
+    >>> p(REFERENCE_IMAGE)
+    '/reference/image'
+    >>> Paths("runs/paper")(source("cam_2", CANDIDATES))
+    '/runs/paper/sources/cam_2/candidates'
+
+Layout::
+
+    reference/input          static JPEG: the reference as loaded
+    reference/image          JPEG snapshot of the rewritten reference (every N rows)
+    reference/dynamic        SegmentationImage: L (1 = dynamic)
+    reference/M              colour-mapped M of the current scan, fixed range [0, 1]
+    reference/scanline       the row being visited
+    reference/decisions      Points2D of the chunk's recorded decisions (+ AnyValues)
+    reference/current        the decision at this step (cleared on the next step)
+    reference/chosen_patch   Boxes2D of the written patch at this step
+    sources/<name>/image     static JPEG
+    sources/<name>/candidates  candidates of the current decision, coloured by cluster
+    sources/<name>/chosen_patch  Boxes2D of q* in that source
+    sources/<name>/matches   correspondences updated in this chunk
+    similarity/<name>        colour-mapped C_s (start and after each scan)
+    coverage                 colour-mapped coverage (in how many sources seen)
+    stats/*                  scalars (per scan, per snapshot)
+    ground_truth/mask, ground_truth/background
+    errors/labels            TP/FP/FN SegmentationImage of L vs ground truth
+    errors/background        |clean - ground truth| (at the end)
+    result/clean             lossless (PNG) final image, result/dynamic: final L
+    events/decisions|replacements|updates   raw event records, lossless columns
+    run/info, run/params, run/coverage      static run description
+    log                      TextLog
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+# -- reference ---------------------------------------------------------------
+REFERENCE = "reference"
+REFERENCE_INPUT = "reference/input"
+REFERENCE_IMAGE = "reference/image"
+REFERENCE_DYNAMIC = "reference/dynamic"
+REFERENCE_M = "reference/M"
+REFERENCE_SCANLINE = "reference/scanline"
+REFERENCE_DECISIONS = "reference/decisions"
+REFERENCE_CURRENT = "reference/current"
+REFERENCE_CHOSEN_PATCH = "reference/chosen_patch"
+
+# -- per source (leaf names under sources/<name>/) -----------------------------
+SOURCES = "sources"
+IMAGE = "image"
+CANDIDATES = "candidates"
+CHOSEN_PATCH = "chosen_patch"
+MATCHES = "matches"
+SIMILARITY = "similarity"
+
+# -- the rest ------------------------------------------------------------------
+COVERAGE = "coverage"
+STATS = "stats"
+GROUND_TRUTH = "ground_truth"
+GT_MASK = "ground_truth/mask"
+GT_BACKGROUND = "ground_truth/background"
+ERRORS = "errors"
+ERRORS_LABELS = "errors/labels"
+ERRORS_BACKGROUND = "errors/background"
+RESULT_CLEAN = "result/clean"
+RESULT_CLEAN_SCAN = "result/clean_scan"  # as the scans left it (before fusion)
+RESULT_DYNAMIC = "result/dynamic"
+EVENTS_DECISIONS = "events/decisions"
+EVENTS_REPLACEMENTS = "events/replacements"
+EVENTS_UPDATES = "events/updates"
+RUN_INFO = "run/info"
+RUN_PARAMS = "run/params"
+RUN_COVERAGE = "run/coverage"
+LOG = "log"
+
+# Class ids of the AnnotationContext logged at the root (segmentation + points).
+CLASS_BACKGROUND = 0
+CLASS_DYNAMIC = 1
+CLASS_FP = 2
+CLASS_FN = 3
+CLASS_TP = 4
+CLASS_STATIC = 5  # a recorded decision that came out static
+CLASS_PROBE = 6  # a probe pixel's decision
+
+# Names of the stats/* scalar series.
+STAT_NAMES = ("n_dynamic", "n_replaced", "n_undecided", "seconds", "dynamic_px",
+              "jaccard")
+
+
+def stat(name: str) -> str:
+    """Path of the ``stats/<name>`` scalar series."""
+    return f"{STATS}/{name}"
+
+
+def source(name: str, leaf: str) -> str:
+    """Path ``sources/<name>/<leaf>`` (``name`` as returned by :func:`entity_names`)."""
+    return f"{SOURCES}/{name}/{leaf}"
+
+
+def similarity(name: str) -> str:
+    """Path of the colour-mapped C_s of source ``name``."""
+    return f"{SIMILARITY}/{name}"
+
+
+@dataclass(frozen=True)
+class Paths:
+    """Map a relative path to an absolute entity path under ``root``."""
+
+    root: str = ""
+
+    def __call__(self, rel: str = "") -> str:
+        parts = [p for p in (self.root.strip("/"), rel.strip("/")) if p]
+        return "/" + "/".join(parts)
+
+
+def entity_names(names: list[str]) -> list[str]:
+    """Turn image names into unique, safe entity-path parts.
+
+    The extension is dropped and anything but ``[A-Za-z0-9_-]`` becomes ``_``;
+    duplicates get a ``_<i>`` suffix.
+
+    >>> entity_names(["a/00010.jpg", "b/00010.jpg", "my img.png", ""])
+    ['00010', '00010_1', 'my_img', 'img_3']
+    """
+    out: list[str] = []
+    for i, name in enumerate(names):
+        base = name.replace("\\", "/").rsplit("/", 1)[-1]
+        if "." in base[1:]:
+            base = base[: base.rindex(".")]
+        base = re.sub(r"[^A-Za-z0-9_-]", "_", base) or f"img_{i}"
+        cand = base
+        k = 1
+        while cand in out:
+            cand = f"{base}_{k}"
+            k += 1
+        out.append(cand)
+    return out
