@@ -90,7 +90,16 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     if args.gt:
         H, W = iset.images[0].shape[:2]
         gt = io.read_mask(args.gt, (W, H))
-    sink = _make_sink(args, iset, gt)
+    compare = parse_compare(args.compare, params) if args.compare else None
+    if compare is not None and not args.record:
+        raise ValueError("--compare needs --record FILE.rrd (the two runs go into one recording)")
+    rec = None
+    if compare is not None:
+        from viewer.sink import open_compare_stream
+
+        rec = open_compare_stream(args.record, [n for i, n in enumerate(iset.names) if i != ref],
+                                  roots=["runs/main", "runs/compare"])
+    sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
     bar = _bar(args)
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -98,12 +107,23 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             res = remove_dynamic(iset.images, ref=ref, params=params, sink=sink,
                                  probes=args.probe or (), sample_static=args.sample_static,
                                  names=iset.names, preset_name=args.preset, progress=bar)
+            if compare is not None:
+                sink_b = _make_sink(args, iset, gt, rec=rec, root="runs/compare")
+                res_b = remove_dynamic(iset.images, ref=ref, params=compare, sink=sink_b,
+                                       probes=args.probe or (),
+                                       sample_static=args.sample_static, names=iset.names,
+                                       preset_name="compare", progress=bar)
+                _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic "
+                     f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
         for w in caught:
             _note(args, str(w.message))
     finally:
         bar.close()
         if hasattr(sink, "close"):
             sink.close()
+        if rec is not None:
+            rec.flush()
+            rec.disconnect()
     res.timings["load"] = t_load
     write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
                   record=args.record)
@@ -197,8 +217,26 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 
 # --- sinks and messages -------------------------------------------------------------------
+def parse_compare(spec: str, base: Params) -> Params:
+    """``--compare``: a preset name, or ``field=value,...`` changes to the run's params."""
+    if spec in PRESETS:
+        return preset(spec)
+    changes: dict[str, Any] = {}
+    types = {f.name: f.type for f in dataclasses.fields(Params)}
+    for item in spec.split(","):
+        key, _, val = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if key not in types or not _:
+            raise ValueError(f"--compare {spec!r}: expected a preset ({', '.join(PRESETS)}) "
+                             f"or field=value pairs of Params, got {item!r}")
+        t = str(types[key])
+        changes[key] = (val.lower() in ("1", "true", "yes", "on") if t == "bool" else
+                        int(val) if t == "int" else float(val) if t == "float" else val)
+    return dataclasses.replace(base, **changes)
+
+
 def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
-               gt_background: np.ndarray | None = None):
+               gt_background: np.ndarray | None = None, rec: Any = None, root: str = ""):
     if not getattr(args, "record", None):
         return None
     try:
@@ -206,8 +244,9 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
     except ImportError as e:  # pragma: no cover - rerun is a dependency
         raise RuntimeError(f"recording needs the viewer package and rerun-sdk ({e})") from None
     Path(args.record).parent.mkdir(parents=True, exist_ok=True)
-    return RerunSink(args.record, record_every_rows=getattr(args, "record_every_rows", None),
-                     gt_mask=gt, gt_background=gt_background)
+    return RerunSink(None if rec is not None else args.record,
+                     record_every_rows=getattr(args, "record_every_rows", None),
+                     gt_mask=gt, gt_background=gt_background, rec=rec, root=root)
 
 
 def _bar(args: argparse.Namespace):
@@ -254,6 +293,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fraction of static decisions recorded (default 0.002)")
     r.add_argument("--gt", default=None, metavar="MASK",
                    help="ground-truth mask of the reference (0/255) for error overlays")
+    r.add_argument("--compare", default=None, metavar="PARAMS",
+                   help="also run with other parameters (a preset name or field=value,...) "
+                        "and log both side by side in the --record file")
     r.add_argument("--quiet", action="store_true", help="no progress bars or notes")
     add_param_flags(r)
     r.set_defaults(fn=cmd_run)
@@ -266,7 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--no-record", action="store_true", help="do not write a recording")
     d.add_argument("--quiet", action="store_true")
     add_param_flags(d)
-    d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002)
+    d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002, compare=None)
 
     b = sub.add_parser("bench", help="stage timings, throughput and peak memory")
     b.add_argument("--size", default="854x480", help="image size WxH (default 854x480)")

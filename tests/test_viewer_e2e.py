@@ -81,3 +81,17 @@ def test_cli_recordings_verify_and_inspect(scene, tmp_path, capsys):
     assert main(["export", str(rec), "--gif", str(tmp_path / "a.gif")]) == 0
     assert (tmp_path / "a.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")
     assert main(["inspect", str(tmp_path / "missing.rrd"), "--pixel", "1,1"]) == 2
+
+
+def test_compare_logs_two_runs_side_by_side(scene, tmp_path):
+    synth.write_scene(scene, tmp_path / "set")
+    rec = tmp_path / "cmp.rrd"
+    code = main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o"),
+                 "--record", str(rec), "--compare", "paper", "--quiet"])
+    assert code == 0
+    main_counts = vi.read_counts(rec, root="runs/main")
+    cmp_counts = vi.read_counts(rec, root="runs/compare")
+    assert main_counts and cmp_counts and main_counts != cmp_counts
+    assert vi.read_run_info(rec, root="runs/compare")["params"]["t_r"] == preset("paper").t_r
+    assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o2"),
+                 "--compare", "no_such_field=1", "--record", str(tmp_path / "x.rrd")]) == 2

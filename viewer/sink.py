@@ -515,3 +515,17 @@ class RerunSink:
         entry = self.timing.setdefault(name, [0, 0.0])
         entry[0] += 1
         entry[1] += time.perf_counter() - t0
+
+
+def open_compare_stream(path: str | Path, source_names: list[str], *, roots: list[str],
+                        application_id: str = "dynremove") -> rr.RecordingStream:
+    """One recording for several runs logged under ``roots`` (``run --compare``).
+
+    The caller passes it as ``rec`` to one RerunSink per run and disconnects it.
+    """
+    from viewer.blueprint import make_compare_blueprint
+
+    rec = rr.RecordingStream(application_id, recording_id=f"dynremove-{uuid.uuid4().hex[:12]}")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    rec.save(Path(path), default_blueprint=make_compare_blueprint(source_names, roots))
+    return rec
