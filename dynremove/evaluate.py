@@ -1,0 +1,659 @@
+"""Evaluation on sets with ground truth: ``dynremove eval`` and ``dynremove composite``.
+
+Layout of an evaluation set (DESIGN.md sec. 6)::
+
+    <set>/frames/*            the views, sorted by name (any image format)
+    <set>/masks/<stem>.png    optional: true dynamic mask of a frame (0 / 255)
+    <set>/background.png      optional: the reference view without moving objects
+
+Every folder below ``DATA_DIR`` that has a ``frames/`` sub-folder is a set; its
+name is its path relative to ``DATA_DIR`` (``davis/camel``). The reference is
+the middle frame unless ``--ref`` says otherwise.
+
+Methods, run on each set with the same inputs (see :data:`METHODS`):
+
+``dynremove``    the chosen preset (``--preset``, default ``default``) and flags
+``paper``        the ``paper`` preset (the method as written)
+``single-scan``  ``paper`` with ``max_scans=1, update=False`` (no N/C update)
+``median``       median stack, homography alignment, global Lab threshold
+``median-flow``  median stack, homography + DIS flow alignment
+``telea``        OpenCV Telea inpainting of the reference given the TRUE mask
+                 (no detection: its Jaccard is null)
+
+Figures: Jaccard of the reference's detected mask with its true mask (after
+the method's own clean-up); PSNR and SSIM of the cleaned reference against
+``background.png`` inside the true mask (only where both exist; PSNR is capped
+at :data:`PSNR_CAP_DB` so that JSON stays finite); seconds of the method on
+that set (alignment and everything, not the loading). ``null`` where a figure
+does not apply.
+
+Parallelism and clusters
+------------------------
+Sets run in parallel with :mod:`joblib` (``--jobs N``, default 1; each worker
+runs OpenCV single-threaded). The work goes through :func:`joblib.Parallel`
+under the ambient backend, so a cluster can be used without code changes by
+wrapping :func:`run_eval` in a ``joblib.parallel_config`` block (neither Dask nor
+Ray is a dependency of dynremove; install them yourself)::
+
+    # Dask
+    from dask.distributed import Client
+    import joblib
+    from dynremove.evaluate import run_eval
+    client = Client("tcp://scheduler:8786")          # or Client() for a local one
+    with joblib.parallel_config(backend="dask"):
+        report = run_eval("data/", jobs=-1)
+
+    # Ray
+    import ray, joblib
+    from ray.util.joblib import register_ray
+    ray.init(address="auto")
+    register_ray()
+    with joblib.parallel_config(backend="ray"):
+        report = run_eval("data/", jobs=-1)
+
+The data folder must be readable by the workers at the same path. Results are
+identical to a local run (every method is seeded).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import fnmatch
+import math
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
+PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
+
+# Variants of the base preset for ``--ablation`` (field -> value). A variant whose
+# fields are not all Params fields, or whose values Params rejects, is skipped with
+# a note; one identical to the base is skipped too (it would repeat "full").
+ABLATIONS: dict[str, dict[str, Any]] = {
+    "no-update": {"update": False},
+    "single-scan": {"max_scans": 1},
+    "no-update-single-scan": {"update": False, "max_scans": 1},
+    "no-epipolar": {"use_epipolar": False},
+    "no-hog": {"use_hog": False},
+    "pixel-write": {"write": "pixel"},
+    "corr-homography": {"correspondence": "homography"},
+    "corr-flow": {"correspondence": "flow"},
+    "no-clean": {"clean_mask": False, "min_region_px": 0},
+}
+
+
+# --------------------------------------------------------------------------- sets
+@dataclass(frozen=True)
+class EvalSet:
+    """One set on disk (nothing is read until :func:`load_set`)."""
+
+    name: str
+    path: Path
+    frames: tuple[Path, ...]
+
+    @property
+    def masks_dir(self) -> Path:
+        return self.path / "masks"
+
+    @property
+    def background(self) -> Path | None:
+        p = self.path / "background.png"
+        return p if p.is_file() else None
+
+    def mask_path(self, frame: Path) -> Path | None:
+        p = self.masks_dir / (frame.stem + ".png")
+        return p if p.is_file() else None
+
+
+def _image_files(folder: Path) -> list[Path]:
+    from dynremove.io import IMAGE_EXTS
+
+    return sorted(q for q in folder.iterdir()
+                  if q.is_file() and not q.name.startswith(".")
+                  and q.suffix.lower() in IMAGE_EXTS)
+
+
+def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) -> list[EvalSet]:
+    """Every ``<set>/frames/`` folder below ``data_dir`` (itself included), sorted by name.
+
+    ``pattern``: shell glob(s) (comma-separated or a list) matched against the set
+    name (``davis/camel``) or its last part (``camel``). Sets with fewer than 2
+    frames are ignored.
+    """
+    from dynremove.pipeline import InputError
+
+    root = Path(data_dir)
+    if not root.is_dir():
+        raise InputError(f"{root}: no such folder")
+    pats: list[str] = []
+    if pattern:
+        for p in ([pattern] if isinstance(pattern, str) else pattern):
+            pats.extend(s.strip() for s in p.split(",") if s.strip())
+    found = []
+    cands = [root / "frames"] if (root / "frames").is_dir() else []
+    cands += sorted(p for p in root.rglob("frames") if p.is_dir() and p != root / "frames")
+    for fr in cands:
+        set_dir = fr.parent
+        name = set_dir.relative_to(root).as_posix() if set_dir != root else root.name
+        if pats and not any(fnmatch.fnmatch(name, p) or fnmatch.fnmatch(set_dir.name, p)
+                            for p in pats):
+            continue
+        frames = _image_files(fr)
+        if len(frames) >= 2:
+            found.append(EvalSet(name=name, path=set_dir, frames=tuple(frames)))
+    return sorted(found, key=lambda s: s.name)
+
+
+@dataclass
+class LoadedSet:
+    name: str
+    images: list[np.ndarray]
+    names: list[str]
+    ref: int
+    gt: np.ndarray | None  # (H, W) bool, true mask of the reference
+    background: np.ndarray | None  # (H, W, 3) uint8, true clean reference
+    scale: float
+    notes: list[str]
+
+
+def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None = None
+             ) -> LoadedSet:
+    """Read the frames (downscaled as ``io.load_image_set``), the ref mask and background."""
+    import cv2
+
+    from dynremove import io
+
+    iset = io.load_image_set(list(es.frames), max_side=max_side)
+    r = io.resolve_ref(ref, iset.names)
+    H, W = iset.images[0].shape[:2]
+    mp = es.mask_path(es.frames[r])
+    gt = io.read_mask(mp, (W, H)) if mp is not None else None
+    bg = None
+    if es.background is not None:
+        bg, _ = io.read_image(es.background)
+        if bg.shape[:2] != (H, W):
+            interp = cv2.INTER_AREA if bg.shape[1] > W else cv2.INTER_LINEAR
+            bg = cv2.resize(bg, (W, H), interpolation=interp)
+    return LoadedSet(name=es.name, images=iset.images, names=iset.names, ref=r, gt=gt,
+                     background=bg, scale=iset.scale, notes=list(iset.notes))
+
+
+# --------------------------------------------------------------------------- methods
+def _finite(x: float | None, cap: float = PSNR_CAP_DB) -> float | None:
+    if x is None:
+        return None
+    if math.isnan(x):
+        return None
+    return float(min(x, cap))
+
+
+def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None
+          ) -> dict[str, float | None]:
+    """Jaccard (if a detection and a true mask exist), PSNR/SSIM in the true mask."""
+    from dynremove.metrics import jaccard, psnr_in_mask, ssim_in_mask
+
+    out: dict[str, float | None] = {"jaccard": None, "psnr": None, "ssim": None}
+    if dynamic is not None and ls.gt is not None:
+        out["jaccard"] = float(jaccard(dynamic, ls.gt))
+    if clean is not None and ls.gt is not None and ls.background is not None and ls.gt.any():
+        out["psnr"] = _finite(psnr_in_mask(clean, ls.background, ls.gt))
+        out["ssim"] = float(ssim_in_mask(clean, ls.background, ls.gt))
+    return out
+
+
+def run_method(method: str, ls: LoadedSet, params: Any | None = None
+               ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
+    """Run one method on a loaded set: (clean, dynamic, notes); None = not applicable."""
+    from dynremove import baselines
+
+    notes: list[str] = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if method in ("median", "median-flow"):
+            align = "homography" if method == "median" else "homography+flow"
+            clean, dyn = baselines.median_baseline(ls.images, ls.ref, align=align)
+        elif method == "telea":
+            if ls.gt is None:
+                clean, dyn = None, None
+                notes.append("telea: no true mask of the reference")
+            else:
+                clean, dyn = baselines.telea_inpaint(ls.images[ls.ref], ls.gt), None
+        else:
+            from dynremove.pipeline import remove_dynamic
+
+            if params is None:
+                raise ValueError(f"method {method!r} needs params")
+            res = remove_dynamic(ls.images, ref=ls.ref, params=params, names=ls.names)
+            clean, dyn = res.clean, res.dynamic
+    seen = set()
+    for w in caught:
+        msg = f"{method}: {w.message}"
+        if msg not in seen:
+            seen.add(msg)
+            notes.append(msg)
+    return clean, dyn, notes
+
+
+def _params_dict(p: Any) -> dict:
+    return dataclasses.asdict(p)
+
+
+def _make_params(d: dict) -> Any:
+    from dynremove.params import Params
+
+    return Params(**d)
+
+
+def method_params(method: str, chosen: Any) -> Any | None:
+    """Params of a pipeline method (``dynremove`` = ``chosen``); None for baselines."""
+    from dynremove.params import preset
+
+    if method == "dynremove":
+        return chosen
+    if method == "paper":
+        return preset("paper")
+    if method == "single-scan":
+        return preset("paper").replace(max_scans=1, update=False)
+    return None
+
+
+def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
+             max_side: int | None = None, ref: str | int | None = None,
+             single_thread: bool = False) -> dict:
+    """Run every (method, params-dict) on one set; the unit of parallel work.
+
+    Returns ``{"set", "rows": [...], "info": {...}, "seconds": wall}``. A method
+    that raises is recorded with null figures and an ``error`` string, so one
+    failing set does not lose the others.
+    """
+    import cv2
+
+    if single_thread:
+        cv2.setNumThreads(1)  # in a worker: parallelism comes from joblib
+    t_set = time.perf_counter()
+    ls = load_set(es, max_side=max_side, ref=ref)
+    rows, notes = [], list(ls.notes)
+    done: dict[Any, tuple] = {}  # identical params run once
+    for method, pd in variants:
+        base = "pipeline" if pd is not None else method
+        key = (base, tuple(sorted(pd.items())) if pd else None)
+        row: dict[str, Any] = {"set": es.name, "method": method}
+        try:
+            if key in done:
+                clean, dyn, secs = done[key]
+            else:
+                t = time.perf_counter()
+                params = _make_params(pd) if pd is not None else None
+                clean, dyn, n = run_method(method if pd is None else "pipeline", ls, params)
+                secs = time.perf_counter() - t
+                notes.extend(n)
+                done[key] = (clean, dyn, secs)
+            row.update(score(ls, clean, dyn))
+            row["seconds"] = round(secs, 3) if (clean is not None or dyn is not None) else None
+        except Exception as e:  # noqa: BLE001 - recorded, the run goes on
+            row.update({"jaccard": None, "psnr": None, "ssim": None, "seconds": None,
+                        "error": f"{type(e).__name__}: {e}"})
+        rows.append(row)
+    H, W = ls.images[0].shape[:2]
+    info = {"set": es.name, "n_images": len(ls.images), "ref": ls.names[ls.ref],
+            "size": [W, H], "scale": round(ls.scale, 4), "has_mask": ls.gt is not None,
+            "has_background": ls.background is not None,
+            "mask_fraction": float(ls.gt.mean()) if ls.gt is not None else None,
+            "notes": notes}
+    return {"set": es.name, "rows": rows, "info": info,
+            "seconds": time.perf_counter() - t_set}
+
+
+def _run_parallel(sets: Sequence[EvalSet], variants: Sequence[tuple[str, dict | None]], *,
+                  jobs: int, max_side: int | None, ref: str | int | None,
+                  on_done: Callable[[int, int, dict], None] | None = None) -> list[dict]:
+    from joblib import Parallel, delayed
+
+    results: dict[str, dict] = {}
+    tasks = (delayed(eval_set)(es, variants, max_side=max_side, ref=ref, single_thread=True)
+             for es in sets)
+    if jobs == 1:
+        gen: Iterable[dict] = (eval_set(es, variants, max_side=max_side, ref=ref)
+                               for es in sets)
+    else:
+        gen = Parallel(n_jobs=jobs, return_as="generator_unordered")(tasks)
+    for k, res in enumerate(gen, 1):
+        results[res["set"]] = res
+        if on_done:
+            on_done(k, len(sets), res)
+    return [results[es.name] for es in sets]
+
+
+def _stderr_progress(k: int, n: int, res: dict) -> None:
+    js = [f"{r['method']} {r['jaccard']:.3f}" for r in res["rows"]
+          if r.get("jaccard") is not None][:2]
+    err = sum(1 for r in res["rows"] if "error" in r)
+    print(f"[{k}/{n}] {res['set']}: {res['seconds']:.1f} s"
+          + (f"  (J {', '.join(js)})" if js else "")
+          + (f"  {err} method(s) failed" if err else ""), file=sys.stderr, flush=True)
+
+
+def _mean(vals: Iterable[float | None]) -> float | None:
+    v = [x for x in vals if x is not None]
+    return float(np.mean(v)) if v else None
+
+
+def summarize(rows: Sequence[dict], methods: Sequence[str]) -> dict[str, dict]:
+    """Per method: mean jaccard / psnr / ssim / seconds over the sets where defined."""
+    out = {}
+    for m in methods:
+        rs = [r for r in rows if r["method"] == m]
+        out[m] = {k: _mean(r.get(k) for r in rs) for k in ("jaccard", "psnr", "ssim", "seconds")}
+        out[m]["n_jaccard"] = sum(r.get("jaccard") is not None for r in rs)
+        out[m]["n_psnr"] = sum(r.get("psnr") is not None for r in rs)
+    return out
+
+
+def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | None = None,
+             preset_name: str = "default", methods: Sequence[str] = METHODS,
+             jobs: int = 1, max_side: int | None = None, ref: str | int | None = None,
+             progress: bool = True) -> dict:
+    """Evaluate ``methods`` on every set below ``data_dir``; returns the JSON report."""
+    from dynremove.params import preset
+    from dynremove.pipeline import InputError
+
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise InputError(f"unknown method(s) {', '.join(bad)}; choose from {', '.join(METHODS)}")
+    chosen = preset(preset_name) if params is None else params
+    found = find_sets(data_dir, sets)
+    if not found:
+        raise InputError(f"{data_dir}: no set with a frames/ folder"
+                         + (f" matching {sets!r}" if sets else ""))
+    variants = []
+    for m in methods:
+        p = method_params(m, chosen)
+        variants.append((m, _params_dict(p) if p is not None else None))
+    t0 = time.perf_counter()
+    results = _run_parallel(found, variants, jobs=jobs, max_side=max_side, ref=ref,
+                            on_done=_stderr_progress if progress else None)
+    rows = [r for res in results for r in res["rows"]]
+    return {
+        "sets": rows,
+        "summary": summarize(rows, list(methods)),
+        "set_info": [res["info"] for res in results],
+        "methods": list(methods),
+        "wall_s": round(time.perf_counter() - t0, 2),
+        "jobs": jobs,
+        "max_side": max_side,
+        "preset": preset_name,
+        "params": _params_dict(chosen),
+        "method_params": {m: pd for m, pd in variants if pd is not None},
+    }
+
+
+# --------------------------------------------------------------------------- ablation
+def ablation_variants(base: Any, names: Sequence[str] | None = None
+                      ) -> tuple[list[tuple[str, dict, dict]], list[str]]:
+    """``[("full", {}, params), (name, changes, params), ...]`` and skip notes.
+
+    Variants are ``dataclasses.replace(base, **changes)``; robust to Params
+    changing: unknown fields or rejected values skip the variant.
+    """
+    from dynremove.params import Params
+    from dynremove.pipeline import InputError
+
+    fields = {f.name for f in dataclasses.fields(Params)}
+    if names:
+        unknown = [n for n in names if n not in ABLATIONS]
+        if unknown:
+            raise InputError(f"unknown ablation(s) {', '.join(unknown)}; "
+                             f"choose from {', '.join(ABLATIONS)}")
+    chosen = list(names) if names else list(ABLATIONS)
+    base_d = _params_dict(base)
+    out = [("full", {}, base_d)]
+    notes = []
+    for n in chosen:
+        ch = ABLATIONS[n]
+        missing = sorted(set(ch) - fields)
+        if missing:
+            notes.append(f"{n}: skipped (no Params field {', '.join(missing)})")
+            continue
+        try:
+            p = dataclasses.replace(base, **ch)
+        except (TypeError, ValueError) as e:
+            notes.append(f"{n}: skipped ({e})")
+            continue
+        d = _params_dict(p)
+        if d == base_d:
+            notes.append(f"{n}: skipped (same as the base preset)")
+            continue
+        out.append((n, dict(ch), d))
+    return out, notes
+
+
+def run_ablation(data_dir: str | Path, *, base: Any, names: Sequence[str] | None = None,
+                 sets: str | None = None, jobs: int = 1, max_side: int | None = None,
+                 ref: str | int | None = None, progress: bool = True,
+                 preset_name: str = "default") -> dict:
+    """Every ablation variant of ``base`` on every set: rows and per-variant means."""
+    from dynremove.pipeline import InputError
+
+    variants, notes = ablation_variants(base, names)
+    found = find_sets(data_dir, sets)
+    if not found:
+        raise InputError(f"{data_dir}: no set with a frames/ folder"
+                         + (f" matching {sets!r}" if sets else ""))
+    t0 = time.perf_counter()
+    results = _run_parallel(found, [(n, d) for n, _, d in variants], jobs=jobs,
+                            max_side=max_side, ref=ref,
+                            on_done=_stderr_progress if progress else None)
+    rows = [r for res in results for r in res["rows"]]
+    summ = summarize(rows, [n for n, _, _ in variants])
+    table = [{"variant": n, "changes": ch, "mean_jaccard": summ[n]["jaccard"],
+              "mean_psnr": summ[n]["psnr"], "mean_ssim": summ[n]["ssim"],
+              "mean_seconds": summ[n]["seconds"], "n_sets": summ[n]["n_jaccard"]}
+             for n, ch, _ in variants]
+    return {"ablation": table, "sets": rows, "set_info": [res["info"] for res in results],
+            "skipped": notes, "wall_s": round(time.perf_counter() - t0, 2), "jobs": jobs,
+            "max_side": max_side, "preset": preset_name, "params": _params_dict(base)}
+
+
+# --------------------------------------------------------------------------- tables
+def _fmt(x: float | None, spec: str) -> str:
+    return "-" if x is None else format(x, spec)
+
+
+def format_table(report: dict) -> str:
+    """Sets as rows, methods as columns: ``J`` (and ``J/PSNR/SSIM`` where a
+    background exists), then the means per method."""
+    methods = report["methods"]
+    rows = report["sets"]
+    info = {i["set"]: i for i in report.get("set_info", [])}
+    by = {(r["set"], r["method"]): r for r in rows}
+    set_names = list(dict.fromkeys(r["set"] for r in rows))
+    any_bg = any(i.get("has_background") for i in info.values())
+
+    def cell(r: dict | None, bg: bool) -> str:
+        if r is None:
+            return "-"
+        if "error" in r:
+            return "error"
+        s = _fmt(r.get("jaccard"), ".3f")
+        if bg:
+            s += f" {_fmt(r.get('psnr'), '.1f')} {_fmt(r.get('ssim'), '.3f')}"
+        return s
+
+    table = [["set"] + list(methods)]
+    for s in set_names:
+        bg = bool(info.get(s, {}).get("has_background"))
+        table.append([s] + [cell(by.get((s, m)), bg) for m in methods])
+    summ = report.get("summary") or summarize(rows, methods)
+    n_sets = len(set_names)
+    table.append([f"mean J ({n_sets} sets)"]
+                 + [_fmt(summ[m]["jaccard"], ".3f") for m in methods])
+    if any_bg:
+        table.append(["mean PSNR dB (in mask)"] + [_fmt(summ[m]["psnr"], ".2f") for m in methods])
+        table.append(["mean SSIM (in mask)"] + [_fmt(summ[m]["ssim"], ".3f") for m in methods])
+    table.append(["mean seconds"] + [_fmt(summ[m]["seconds"], ".1f") for m in methods])
+    widths = [max(len(r[i]) for r in table) for i in range(len(table[0]))]
+    lines = []
+    for k, r in enumerate(table):
+        if k == 1 or k == len(set_names) + 1:
+            lines.append("  ".join("-" * w for w in widths))
+        lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
+                               for i, (c, w) in enumerate(zip(r, widths))))
+    head = "cells: Jaccard" + (" | sets with a background: Jaccard PSNR(dB) SSIM" if any_bg else "")
+    return head + "\n" + "\n".join(lines)
+
+
+def format_ablation(report: dict) -> str:
+    table = [["variant", "changes", "mean J", "mean PSNR", "mean s", "sets"]]
+    for a in report["ablation"]:
+        ch = ", ".join(f"{k}={v}" for k, v in a["changes"].items()) or "(base)"
+        table.append([a["variant"], ch, _fmt(a["mean_jaccard"], ".3f"),
+                      _fmt(a["mean_psnr"], ".2f"), _fmt(a["mean_seconds"], ".1f"),
+                      str(a["n_sets"])])
+    widths = [max(len(r[i]) for r in table) for i in range(len(table[0]))]
+    lines = ["  ".join(c.ljust(w) if i < 2 else c.rjust(w)
+                       for i, (c, w) in enumerate(zip(r, widths))) for r in table]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    return "\n".join(lines + [f"note: {n}" for n in report.get("skipped", [])])
+
+
+# --------------------------------------------------------------------------- CLI
+def parse_max_side(s: str) -> int | None:
+    """``none``/``0`` = full size; ``auto`` = io's default; else pixels."""
+    t = s.strip().lower()
+    if t in ("none", "0", "full"):
+        return 0
+    if t == "auto":
+        return None
+    try:
+        v = int(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected pixels, 'none' or 'auto', got {s!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"--max-side must be >= 0, got {v}")
+    return v
+
+
+def _parse_jobs(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+    if v == 0:
+        raise argparse.ArgumentTypeError("--jobs must not be 0 (use -1 for all cores)")
+    return v
+
+
+def cmd_eval(args: argparse.Namespace, params_from_args: Callable) -> int:
+    from dynremove import io
+    from dynremove.pipeline import InputError
+
+    params = params_from_args(args)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if not methods:
+        raise InputError("--methods: empty list")
+    if args.json:
+        out = Path(args.json)
+        if out.is_dir():
+            raise InputError(f"--json {out}: is a folder")
+    progress = not args.quiet
+    if args.ablation:
+        names = [n.strip() for n in (args.variants or "").split(",") if n.strip()] or None
+        report = run_ablation(args.data_dir, base=params, names=names, sets=args.sets,
+                              jobs=args.jobs, max_side=args.max_side, ref=args.ref,
+                              progress=progress, preset_name=args.preset)
+        print(format_ablation(report))
+    else:
+        report = run_eval(args.data_dir, sets=args.sets, params=params,
+                          preset_name=args.preset, methods=methods, jobs=args.jobs,
+                          max_side=args.max_side, ref=args.ref, progress=progress)
+        print(format_table(report))
+    n_sets = len({r["set"] for r in report["sets"]})
+    print(f"{n_sets} sets, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
+          + (f" -> {args.json}" if args.json else ""))
+    if args.json:
+        io.write_json(args.json, report)
+    return 0
+
+
+def cmd_composite(args: argparse.Namespace) -> int:
+    from dynremove import composite
+
+    if args.n_sets:
+        outs = composite.make_composites(args.static_dir, args.objects_dir, args.out,
+                                         n_sets=args.n_sets, seed=args.seed,
+                                         n_views=args.n_views, n_objects=args.objects)
+        for o in outs:
+            print(o)
+        print(f"wrote {len(outs)} composite sets under {args.out}")
+    else:
+        info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
+                                        seed=args.seed, n_views=args.n_views,
+                                        n_objects=args.objects)
+        print(f"wrote {args.out}: {info['n_views']} views {info['size'][0]}x"
+              f"{info['size'][1]}, objects "
+              + ", ".join(o["set"] for o in info["objects"])
+              + f", reference mask {100 * info['ref_mask_fraction']:.1f} %")
+    return 0
+
+
+def add_commands(sub: Any, *, add_param_flags: Callable, params_from_args: Callable) -> None:
+    """Register ``eval`` and ``composite`` on the CLI's sub-parsers."""
+    e = sub.add_parser(
+        "eval", help="Jaccard / PSNR / SSIM of the method and baselines on sets with truth",
+        description="Evaluate on every <set>/frames/ below DATA_DIR (masks/<stem>.png and "
+                    "background.png optional): the method, the paper preset, the median "
+                    "baselines, Telea inpainting with the true mask and the single-scan "
+                    "ablation. Prints a table; --json writes every figure.")
+    e.add_argument("data_dir", metavar="DATA_DIR")
+    e.add_argument("--sets", default=None, metavar="GLOB",
+                   help="only sets whose name matches (comma-separated globs)")
+    e.add_argument("--jobs", type=_parse_jobs, default=1, metavar="N",
+                   help="sets in parallel (joblib; -1 = all cores; default 1)")
+    e.add_argument("--json", default=None, metavar="FILE", help="write the report here")
+    e.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
+                   help="downscale to at most PX ('none' = full size; default: only "
+                        "above 1280 px)")
+    e.add_argument("--ref", default=None,
+                   help="reference: index or file name (default: the middle frame)")
+    e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
+                   help=f"comma-separated subset of {','.join(METHODS)}")
+    e.add_argument("--ablation", action="store_true",
+                   help="instead of the methods: variants of the preset (dataclasses.replace "
+                        "of it, see ABLATIONS); prints mean J / PSNR per variant")
+    e.add_argument("--variants", default=None, metavar="LIST",
+                   help=f"with --ablation: comma-separated subset of {','.join(ABLATIONS)}")
+    e.add_argument("--quiet", action="store_true", help="no per-set progress on stderr")
+    add_param_flags(e)
+    e.set_defaults(fn=lambda a: cmd_eval(a, params_from_args))
+
+    c = sub.add_parser(
+        "composite", help="paste real moving objects into a static multi-view set",
+        description="Cut objects out of a DAVIS-style folder (<set>/frames, <set>/masks) "
+                    "and paste them, moving, into consecutive views of a static set. "
+                    "Writes DIR/frames/, DIR/masks/ (0/255), DIR/background.png and "
+                    "DIR/composite.json: the layout 'dynremove eval' reads.")
+    c.add_argument("static_dir", metavar="STATIC_DIR",
+                   help="folder of static images (with --n-sets: a folder of such folders)")
+    c.add_argument("objects_dir", metavar="OBJECTS_DIR",
+                   help="DAVIS-style sets with masks (e.g. shared/data/davis)")
+    c.add_argument("--out", required=True, metavar="DIR")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--n-views", type=int, default=6, metavar="N")
+    c.add_argument("--objects", type=int, default=1, metavar="K", help="objects per set")
+    c.add_argument("--n-sets", type=int, default=0, metavar="N",
+                   help="write N sets under DIR (one per static set x objects), "
+                        "STATIC_DIR being a folder of static sets")
+    c.set_defaults(fn=cmd_composite)
+
+
+__all__ = ["METHODS", "ABLATIONS", "EvalSet", "LoadedSet", "find_sets", "load_set",
+           "score", "run_method", "eval_set", "run_eval", "run_ablation",
+           "ablation_variants", "summarize", "format_table", "format_ablation",
+           "add_commands"]
