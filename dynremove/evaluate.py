@@ -77,15 +77,21 @@ PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
 # fields are not all Params fields, or whose values Params rejects, is skipped with
 # a note; one identical to the base is skipped too (it would repeat "full").
 ABLATIONS: dict[str, dict[str, Any]] = {
+    # each removes (or swaps) one step of the default preset
+    "ungated-flow": {"correspondence": "homography+flow"},  # the paper's N
+    "corr-homography": {"correspondence": "homography"},
+    "corr-flow": {"correspondence": "flow"},
+    "four-scans": {"max_scans": 4},  # the paper's alternating scans
     "no-update": {"update": False},
-    "single-scan": {"max_scans": 1},
-    "no-update-single-scan": {"update": False, "max_scans": 1},
     "no-epipolar": {"use_epipolar": False},
     "no-hog": {"use_hog": False},
     "pixel-write": {"write": "pixel"},
-    "corr-homography": {"correspondence": "homography"},
-    "corr-flow": {"correspondence": "flow"},
+    "p9": {"patch_size": 9},
+    "t_r-0.4": {"t_r": 0.4},
     "no-clean": {"clean_mask": False, "min_region_px": 0},
+    "no-fuse": {"fuse": False},
+    "add-lab-30": {"add_lab": 30.0},  # tried and rejected
+    "verify-lab-10": {"verify_lab": 10.0},  # tried and rejected
 }
 
 

@@ -3,13 +3,9 @@
 from __future__ import annotations
 
 import doctest
-import importlib
-import importlib.util
 import os
-import sys
 import warnings
 from pathlib import Path
-from types import ModuleType
 
 import cv2
 import numpy as np
@@ -17,28 +13,9 @@ import numpy.testing as npt
 import pytest
 
 
-def _load(name: str) -> ModuleType:
-    """``dynremove.<name>``, or the file itself if the package does not import.
 
-    The package ``__init__`` may be mid-edit by other engineers; baselines and
-    metrics are standalone, so they are loaded from their paths in that case.
-    """
-    try:
-        return importlib.import_module(f"dynremove.{name}")
-    except Exception:  # noqa: BLE001 - any failure of the package __init__
-        key = f"_dynremove_{name}"
-        if key in sys.modules:
-            return sys.modules[key]
-        path = Path(__file__).resolve().parents[1] / "dynremove" / f"{name}.py"
-        spec = importlib.util.spec_from_file_location(key, path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[key] = mod
-        spec.loader.exec_module(mod)
-        return mod
-
-
-baselines = _load("baselines")
-metrics = _load("metrics")
+from dynremove import baselines  # noqa: E402
+from dynremove import metrics  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 

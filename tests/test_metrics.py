@@ -3,12 +3,7 @@
 from __future__ import annotations
 
 import doctest
-import importlib
-import importlib.util
 import math
-import sys
-from pathlib import Path
-from types import ModuleType
 
 import cv2
 import numpy as np
@@ -18,27 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 
-def _load(name: str) -> ModuleType:
-    """``dynremove.<name>``, or the file itself if the package does not import.
 
-    The package ``__init__`` may be mid-edit by other engineers; the metrics
-    module is standalone, so it is loaded from its path in that case.
-    """
-    try:
-        return importlib.import_module(f"dynremove.{name}")
-    except Exception:  # noqa: BLE001 - any failure of the package __init__
-        key = f"_dynremove_{name}"
-        if key in sys.modules:
-            return sys.modules[key]
-        path = Path(__file__).resolve().parents[1] / "dynremove" / f"{name}.py"
-        spec = importlib.util.spec_from_file_location(key, path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[key] = mod
-        spec.loader.exec_module(mod)
-        return mod
-
-
-metrics = _load("metrics")
+from dynremove import metrics  # noqa: E402
 
 
 @pytest.fixture
