@@ -20,7 +20,9 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def run_bench(args: argparse.Namespace) -> int:
+def run_bench(args: argparse.Namespace, *, recording_sink=None) -> int:
+    """``recording_sink(path, gt_mask)`` makes the sink whose cost is measured
+    (the CLI passes viewer.RerunSink; the core never imports the viewer)."""
     from dynremove.cli import params_from_args
 
     params = params_from_args(args)
@@ -54,12 +56,14 @@ def run_bench(args: argparse.Namespace) -> int:
     t = time.perf_counter()
     remove_dynamic(scene.images, ref=ref, params=params, sink=MemorySink(), sample_static=0.002)
     wall_mem = time.perf_counter() - t
+    rec = _recording_cost(scene, params, recording_sink) if recording_sink else {}
     out = {
         "size": [W, H], "views": args.views, "preset": args.preset,
         "warmup_s": warm, "end_to_end_s": wall, "end_to_end_all_s": [r[0] for r in runs],
         "stages_s": {k: float(v) for k, v in res.timings.items()},
         "scans": per_scan, "peak_rss_mb": _peak_rss_mb(),
         "memory_sink_end_to_end_s": wall_mem,
+        **rec,
     }
     if not args.no_reference:
         out["kernel_vs_reference"] = _kernel_ratio(scene, params)
@@ -68,6 +72,21 @@ def run_bench(args: argparse.Namespace) -> int:
         io.write_json(args.json, out)
         print(f"wrote {args.json}")
     return 0
+
+
+def _recording_cost(scene, params, make_sink) -> dict:
+    """End-to-end seconds and .rrd size with a recording at the default cadence."""
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "bench.rrd"
+        t = time.perf_counter()
+        remove_dynamic(scene.images, ref=scene.ref_index, params=params,
+                       sink=make_sink(path, scene.masks[scene.ref_index]),
+                       sample_static=0.002)
+        return {"rerun_end_to_end_s": time.perf_counter() - t,
+                "rrd_mb": path.stat().st_size / 2 ** 20}
 
 
 def _kernel_ratio(scene, params) -> dict:
@@ -97,6 +116,10 @@ def _print_table(out: dict) -> None:
         print(f"{s['scan']:<6}{s['seconds']:>9.2f}{s['px_per_s'] / 1e6:>9.2f}{s['dynamic_px']:>12}")
     print(f"\npeak RSS {out['peak_rss_mb']:.0f} MB; JIT warm-up {out['warmup_s']:.1f} s; "
           f"with MemorySink {out['memory_sink_end_to_end_s']:.2f} s")
+    if "rerun_end_to_end_s" in out:
+        print(f"with a Rerun recording {out['rerun_end_to_end_s']:.2f} s "
+              f"(x{out['rerun_end_to_end_s'] / out['end_to_end_s']:.2f}), "
+              f".rrd {out['rrd_mb']:.1f} MB")
     if "kernel_vs_reference" in out:
         k = out["kernel_vs_reference"]
         print(f"scan on a {k['crop_px']} px crop: numba {k['numba_s'] * 1e3:.1f} ms, "

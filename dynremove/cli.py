@@ -213,7 +213,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_bench(args: argparse.Namespace) -> int:
     from dynremove.bench import run_bench
 
-    return run_bench(args)
+    try:
+        from viewer.sink import RerunSink
+    except ImportError:  # pragma: no cover - rerun is a dependency
+        return run_bench(args)
+    return run_bench(args, recording_sink=lambda path, gt: RerunSink(path, gt_mask=gt))
 
 
 # --- sinks and messages -------------------------------------------------------------------
