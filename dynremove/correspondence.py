@@ -45,7 +45,8 @@ def dis_flow(gray_a: npt.NDArray[np.uint8], gray_b: npt.NDArray[np.uint8], *,
 def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[np.uint8],
                          H_rs: npt.NDArray[np.float64], *, method: str = "homography+flow",
                          flow_preset: str = "medium",
-                         gate_px: float = 0.0) -> npt.NDArray[np.float32]:
+                         gate_px: float = 0.0, F: npt.NDArray[np.float64] | None = None,
+                         epipolar_px: float = 0.0) -> npt.NDArray[np.float32]:
     """Dense map N_{r→s}: for each reference pixel, its match in the source.
 
     Parameters
@@ -56,7 +57,9 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
     method : {"homography+flow", "homography", "flow", "gated"}
         "gated": homography + flow, but the flow is kept only where it stays
         within ``gate_px`` of the homography; elsewhere (flow that followed a
-        moving object) the homography's match is used.
+        moving object) the homography's match is used. With ``F`` and
+        ``epipolar_px`` > 0, flow within ``epipolar_px`` of its epipolar line is
+        kept as well (parallax of a 3-D scene).
 
     Returns
     -------
@@ -81,6 +84,13 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
         if method == "gated":
             hx, hy = apply_homography(H_rs, xs, ys)
             far = np.hypot(mx - hx, my - hy) > gate_px
+            if F is not None and epipolar_px > 0:
+                # parallax moves matches along epipolar lines: keep those flows too
+                from dynremove.geometry import sampson_sq
+
+                on_line = sampson_sq(F, np.stack([xs, ys], -1),
+                                     np.stack([mx, my], -1)) <= epipolar_px ** 2
+                far &= ~on_line
             mx, my = np.where(far, hx, mx), np.where(far, hy, my)
     return np.stack([mx, my], axis=-1).astype(np.float32)
 

@@ -63,6 +63,7 @@ class Params:
     correspondence: str = "homography+flow"  # N_{r→s}: pre-warp + DIS flow
     flow_preset: str = "medium"  # DIS preset: "fast", "medium", "ultrafast"
     flow_gate: float = 0.02  # "gated": flow kept within this × max side of H
+    flow_gate_epipolar_px: float = 0.0  # "gated": also keep flow this close to its epipolar line
 
     # --- engineered steps (default preset only; all off in "paper") ---------
     clean_mask: bool = False  # morphological clean-up of L (open/close, holes)

@@ -92,7 +92,8 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
         Ns.append(correspondence.dense_correspondence(
             g8[ref], g8[s], views[k].H, method=params.correspondence,
             flow_preset=params.flow_preset,
-            gate_px=params.flow_gate * max(g8[ref].shape)))
+            gate_px=params.flow_gate * max(g8[ref].shape),
+            F=views[k].F, epipolar_px=params.flow_gate_epipolar_px))
         if progress:
             progress("correspondence", (k + 1) / len(srcs))
     Nf = np.ascontiguousarray(np.stack(Ns))
