@@ -96,6 +96,15 @@ def test_run_info_is_static(run):
     assert info["record_every_rows"] == 5
 
 
+def test_buffered_columns_round_trip_with_one_row_chunks(tmp_path):
+    path = tmp_path / "rows.rrd"
+    sink = RerunSink(path, record_every_rows=7)
+    sink.MAX_PENDING_EVENTS = 10  # also exercise the early flush
+    _, _, truth = fabricate_run([sink], H=H, W=W, S=S, n_scans=2, rows_per_chunk=1)
+    for kind in KINDS:
+        np.testing.assert_array_equal(vi.read_events(path, kind), getattr(truth, kind))
+
+
 def test_rrd_verify_accepts_file(run, tmp_path):
     r = subprocess.run([serve.rerun_binary(), "rrd", "verify", str(run["path"])],
                        env=cli_env(tmp_path), capture_output=True, text=True, timeout=60)

@@ -161,7 +161,7 @@ def _lzw(indices, min_code_size, out):
         k = indices[i]
         c = table[prefix, k]
         if c >= 0:
-            prefix = c
+            prefix = np.int64(c)
             continue
         acc |= prefix << nbits
         nbits += code_size
