@@ -6,8 +6,10 @@ hands them to an :class:`EventSink` together with a read-only view of the state.
 Events carry data, not drawing: colours and entity paths belong to the viewer.
 
 ``K = 2·(V−1)`` candidate slots per decision (two per source). Points are
-``(x, y)``; arrays are indexed ``[y, x]``. ``step`` is a global, unique visit
-counter: ``scan·H·W + index of the pixel in that scan's visiting order``.
+``(x, y)``; arrays are indexed ``[y, x]``. ``step`` is a global visit counter:
+``scan·H·W + index of the pixel in that scan's visiting order``. It is unique
+per Decision and per Replacement; the CorrespondenceUpdates of one visit (one
+per source) share their pixel's step.
 """
 
 from __future__ import annotations
