@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -92,3 +94,61 @@ def test_composite_layout_and_determinism(tmp_path):
     for a, b in zip(sorted((outs[0] / "frames").iterdir()), sorted((outs[1] / "frames").iterdir())):
         assert a.read_bytes() == b.read_bytes()
     assert composite is not None
+
+
+def test_composite_masks_are_the_pasted_alpha(tmp_path):
+    from dynremove.evaluate import find_sets
+
+    _static_set(tmp_path / "static")
+    synth.write_scene(synth.make_scene(seed=4, n_views=5, size=(120, 160), n_objects=1),
+                      tmp_path / "objects" / "walker")
+    statics = [cv2.imread(str(p)) for p in sorted((tmp_path / "static").iterdir())]
+    objs = find_sets(tmp_path / "objects")
+    comp = composite.compose(statics, [f"{i:04d}" for i in range(5)], objs, seed=3)
+    assert comp.ref_index == 2 and comp.info["placement_ok"]
+    for img, st, a, m in zip(comp.images, comp.statics, comp.alphas, comp.masks):
+        np.testing.assert_array_equal(m, a >= 0.5)
+        np.testing.assert_array_equal(img[a == 0], st[a == 0])  # untouched outside alpha
+        feather = (a > 0.02) & (a < 0.98)
+        if m.any():  # feathered: a soft ramp on the mask's rim, not a hard cut
+            assert feather.any() and feather.sum() < m.sum()
+    np.testing.assert_array_equal(comp.background, statics[2])
+    out = composite.write_composite(comp, tmp_path / "out")
+    for name, m in zip(comp.names, comp.masks):
+        disk = cv2.imread(str(out / "masks" / name), cv2.IMREAD_GRAYSCALE)
+        np.testing.assert_array_equal(disk > 127, m)
+    other = composite.compose(statics, [f"{i:04d}" for i in range(5)], objs, seed=4)
+    assert any(not np.array_equal(a, b) for a, b in zip(comp.images, other.images))
+
+
+def test_eval_full_size_and_ablation_skips_unknown_fields(data, tmp_path, monkeypatch, capsys):
+    from dynremove import evaluate
+
+    out = tmp_path / "a.json"
+    monkeypatch.setitem(evaluate.ABLATIONS, "bogus", {"no_such_field": 1})
+    code = main(["eval", str(data), "--sets", "syn1", "--max-side", "none", "--ablation",
+                 "--variants", "no-update,bogus", "--json", str(out), "--quiet"])
+    assert code == 0
+    rep = json.loads(out.read_text())
+    assert [a["variant"] for a in rep["ablation"]] == ["full", "no-update"]
+    assert any("bogus" in n for n in rep["skipped"])
+    assert rep["set_info"][0]["size"] == [128, 96] and rep["max_side"] == 0
+    assert all(0 <= a["mean_jaccard"] <= 1 for a in rep["ablation"])
+    assert "no-update" in capsys.readouterr().out
+
+
+DATA = Path(os.environ.get("DYNREMOVE_DATA", Path(__file__).resolve().parents[2] / "shared/data"))
+
+
+@pytest.mark.skipif(not (DATA / "static/fountain-P11").is_dir() or not (DATA / "davis/camel").is_dir(),
+                    reason="needs shared/data (static/fountain-P11 and davis/camel)")
+def test_composite_on_real_data(tmp_path):
+    from dynremove.evaluate import find_sets
+
+    objs = find_sets(DATA / "davis", "camel")
+    info = composite.make_composite(DATA / "static/fountain-P11", DATA / "davis",
+                                    tmp_path / "c", seed=0, n_views=6, object_sets=objs)
+    assert info["size"] == [854, 569] and info["objects"][0]["set"] == "camel"
+    assert 0.03 < info["ref_mask_fraction"] < 0.2
+    covered = [c for c in info["ref_region_covered"] if c is not None]
+    assert sum(c <= 0.5 for c in covered) > len(covered) / 2  # uncovered in most views
