@@ -51,8 +51,12 @@ def lab_mean(bgr: npt.NDArray[np.uint8], *, patch_size: int) -> npt.NDArray[np.f
     >>> bool(np.allclose(lab_mean(img, patch_size=3), to_lab(img), atol=1e-4))
     True
     """
-    lab = to_lab(bgr)
-    return cv2.blur(lab, (patch_size, patch_size), borderType=cv2.BORDER_REFLECT_101)
+    return patch_mean(to_lab(bgr), patch_size=patch_size)
+
+
+def patch_mean(img: npt.NDArray[np.float32], *, patch_size: int) -> npt.NDArray[np.float32]:
+    """Mean over the p×p patch at every pixel (mirror-reflected borders)."""
+    return cv2.blur(img, (patch_size, patch_size), borderType=cv2.BORDER_REFLECT_101)
 
 
 def sift_bin_px(patch_size: int) -> int:

@@ -72,7 +72,7 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
     t = time.perf_counter()
     grays = [features.to_gray(im) for im in images]
     labs = [features.to_lab(im) for im in images]
-    fc = [cv2.blur(lab, (p, p), borderType=cv2.BORDER_REFLECT_101) for lab in labs]
+    fc = [features.patch_mean(lab, patch_size=p) for lab in labs]  # f_c from the Lab once computed
     fg = []
     for i, g in enumerate(grays):
         fg.append(features.dense_sift(g, patch_size=p))
