@@ -89,9 +89,11 @@ ABLATIONS: dict[str, dict[str, Any]] = {
     "p9": {"patch_size": 9},
     "t_r-0.4": {"t_r": 0.4},
     "no-clean": {"clean_mask": False, "min_region_px": 0},
+    "no-refine": {"refine_tau": 0.0},
+    "refine-unanimous": {"refine_shrink_frac": 1.0},
+    "no-realign": {"fuse_realign": 0},
+    "fuse-medoid": {"fuse_combine": "medoid", "fuse_realign": 0},
     "no-fuse": {"fuse": False},
-    "add-lab-30": {"add_lab": 30.0},  # tried and rejected
-    "verify-lab-10": {"verify_lab": 10.0},  # tried and rejected
 }
 
 

@@ -68,9 +68,20 @@ class Params:
     # --- engineered steps (default preset only; all off in "paper") ---------
     clean_mask: bool = False  # morphological clean-up of L (open/close, holes)
     min_region_px: int = 0  # drop dynamic components smaller than this
-    fuse: bool = False  # refill L from all sources (interpolated sub-pixel matches, medoid)
-    add_lab: float = 0.0  # with fuse: add pixels differing > this (Lab) from the fused bg
-    verify_lab: float = 0.0  # with fuse: drop L pixels whose fill differs < this (Lab); 0 = off
+    refine_tau: float = 0.0  # pixel votes at L's border (postprocess.refine_mask): Lab; 0 = off
+    refine_shrink_frac: float = 0.8  # drop a rim pixel when this share of sources agree
+    refine_rim_px: int = 3  # width of the inner rim that may be dropped
+    refine_ring_px: int = 6  # width of the outer ring that may be added (no source agrees)
+    refine_iters: int = 2  # refinement passes
+    snap: bool = False  # GrabCut the map's border onto colour edges (postprocess.snap_to_edges)
+    snap_inner_px: int = 6  # deeper than this inside the map: sure object
+    snap_outer_px: int = 12  # ring of probable background around the map
+    snap_iters: int = 3  # GrabCut iterations
+    fuse: bool = False  # refill L from all sources (fusion.fuse_background)
+    fuse_margin_px: int = 2  # the fused region is L dilated by this
+    fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
+    fuse_realign: int = 0  # passes re-measuring the matches from the cleaned reference
+    fuse_realign_max_px: float = 8.0  # a re-measured match may move at most this far
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
 
@@ -97,6 +108,16 @@ class Params:
             raise ValueError(f"write must be one of {WRITE_MODES}, got {self.write!r}")
         if self.flow_preset not in ("fast", "medium", "ultrafast"):
             raise ValueError(f"flow_preset must be fast/medium/ultrafast, got {self.flow_preset!r}")
+        if self.fuse_combine not in ("median", "medoid"):
+            raise ValueError(f"fuse_combine must be median/medoid, got {self.fuse_combine!r}")
+        if not self.fuse_realign_max_px > 0:
+            raise ValueError(f"fuse_realign_max_px must be > 0, got {self.fuse_realign_max_px}")
+        if self.refine_tau < 0 or not 0.0 < self.refine_shrink_frac <= 1.0:
+            raise ValueError("refine_tau must be >= 0 and refine_shrink_frac in (0, 1]")
+        for name in ("refine_rim_px", "refine_ring_px", "refine_iters", "fuse_realign",
+                     "fuse_margin_px", "snap_inner_px", "snap_outer_px", "snap_iters"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.hog_bins < 2:
             raise ValueError(f"hog_bins must be >= 2, got {self.hog_bins}")
 
@@ -121,7 +142,8 @@ PAPER = Params()
 # flow gated by the homography (flow follows slow objects), one scan (more scans
 # re-flag thousands of written pixels and lower J), t_r 0.3, and a cleaned L.
 DEFAULT = Params(patch_size=13, t_r=0.3, correspondence="gated", max_scans=1,
-                 clean_mask=True, min_region_px=64, fuse=True)
+                 clean_mask=True, min_region_px=64, refine_tau=16.0, snap=True,
+                 fuse=True, fuse_realign=2)
 
 PRESETS: dict[str, Params] = {"default": DEFAULT, "paper": PAPER}
 

@@ -195,22 +195,17 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     dyn = postprocess.clean_mask(L, params) if params.clean_mask else L.copy()
     cov = _coverage(st, params)
     clean = st.img
+    ref_img = np.asarray(images[ref])
+    if params.refine_tau > 0:
+        dyn = postprocess.refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
+    if params.snap:
+        dyn = postprocess.snap_to_edges(ref_img, dyn, params)
     if params.fuse:
-        ref_img = np.asarray(images[ref])
-        if params.add_lab > 0:
-            # pixels far from the whole-image fused background are dynamic too
-            bg, _ = fusion.fuse_background(ref_img, st.src_img, st.Nf, dyn,
-                                           fill=np.ones_like(dyn))
-            dyn = dyn | (fusion.lab_difference(ref_img, bg) > params.add_lab)
-            if params.clean_mask:
-                dyn = postprocess.clean_mask(dyn, params)
-        clean, _ = fusion.fuse_background(ref_img, st.src_img, st.Nf, dyn)
-        if params.verify_lab > 0:
-            # a pixel whose fused background looks like what is there is not dynamic
-            dyn = dyn & (fusion.lab_difference(ref_img, clean) > params.verify_lab)
-            if params.clean_mask:
-                dyn = postprocess.clean_mask(dyn, params)
-            clean, _ = fusion.fuse_background(ref_img, st.src_img, st.Nf, dyn)
+        clean, _ = fusion.fuse_background(
+            ref_img, st.src_img, st.Nf, dyn, margin_px=params.fuse_margin_px,
+            combine=params.fuse_combine,
+            realign=params.fuse_realign, homographies=[v.H for v in views],
+            flow_preset=params.flow_preset, realign_max_px=params.fuse_realign_max_px)
     timings["post"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_all
     result = Result(

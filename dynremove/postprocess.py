@@ -1,4 +1,4 @@
-"""Clean-up of the dynamic map L (engineered step of the default preset).
+"""Clean-up and border refinement of the dynamic map L (default preset only).
 
 The scans label pixels one at a time, so L has isolated false positives and
 pin holes. Morphological opening then closing (a disc of ~p/2), dropping
@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from dynremove import fusion
 from dynremove.params import Params
 
 
@@ -44,3 +45,91 @@ def fill_holes(m: np.ndarray) -> np.ndarray:
     out = m.copy()
     out[hole] = 1
     return out
+
+
+def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
+                mask: npt.NDArray[np.bool_], params: Params) -> npt.NDArray[np.bool_]:
+    """Pixel-level correction of the borders of a dynamic map (default preset).
+
+    The scan decides on p×p patches, so L overshoots every object by up to
+    p/2 pixels and can stop short of a part whose patches looked static. Near
+    the border of the map, the pixel itself is put to the sources' vote
+    (``fusion.source_votes``: Lab distance to each source through the
+    background field): a pixel of the inner rim (``refine_rim_px`` wide) is
+    dropped when at least ``refine_shrink_frac`` of the sources agree with it
+    (distance < ``refine_tau``), and a pixel of the outer ring
+    (``refine_ring_px`` wide) is added when *no* source agrees with it. Deep
+    inside the map nothing changes: a slow object still covers its own
+    background in some sources, and a pixel vote there would erase it.
+    Repeated ``refine_iters`` times (the ring moves with the map).
+    """
+    m = mask.copy()
+    for _ in range(params.refine_iters):
+        mu = m.astype(np.uint8)
+        ring = _dilate_disc(mu, params.refine_ring_px) & ~m
+        rim = m & ~cv2.erode(mu, _disc(params.refine_rim_px)).astype(bool)
+        hole = cv2.dilate((m | ring).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+        D = fusion.source_votes(reference, sources, Nf, hole)
+        valid = np.isfinite(D).sum(0)
+        agree = (D < params.refine_tau).sum(0)
+        need = np.maximum(1, np.ceil(params.refine_shrink_frac * valid - 1e-6))
+        new = m.copy()
+        new[rim & (agree >= need)] = False
+        new[ring & (agree == 0) & (valid > 0)] = True
+        if params.clean_mask:
+            new = clean_mask(new, params)
+        if np.array_equal(new, m):
+            break
+        m = new
+    return m
+
+
+def _disc(r: int) -> np.ndarray:
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def _dilate_disc(m: np.ndarray, r: int) -> np.ndarray:
+    return cv2.dilate(m.astype(np.uint8), _disc(r)).astype(bool)
+
+
+
+def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
+                  ) -> npt.NDArray[np.bool_]:
+    """Move the border of a dynamic map onto the object's edges (graph cut).
+
+    Every region of the map, with a margin, goes to OpenCV's GrabCut (colour
+    mixture models and a min-cut, Rother et al. 2004): pixels deeper than
+    ``snap_inner_px`` inside the map are sure object, the rest of the map is
+    probable object, a ring ``snap_outer_px`` wide around it is probable
+    background and everything farther is sure background. The cut then follows
+    the colour edge, which the scan's p×p patches and the pixel votes can only
+    approximate. Regions without a sure-object core are left as they are.
+    """
+    if not mask.any():
+        return mask.copy()
+    H, W = mask.shape
+    outer = _dilate_disc(mask, params.snap_outer_px)
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(outer.astype(np.uint8), connectivity=8)
+    out = mask.copy()
+    margin = params.snap_outer_px + 8
+    for i in range(1, n):
+        x, y, w, h = stats[i, :4]
+        x0, y0 = max(x - margin, 0), max(y - margin, 0)
+        x1, y1 = min(x + w + margin, W), min(y + h + margin, H)
+        sub = mask[y0:y1, x0:x1]
+        comp = lab[y0:y1, x0:x1] == i
+        gc = np.full(sub.shape, cv2.GC_BGD, np.uint8)
+        gc[_dilate_disc(sub, params.snap_outer_px)] = cv2.GC_PR_BGD
+        gc[sub] = cv2.GC_PR_FGD
+        core = sub & ~_dilate_disc(~sub, params.snap_inner_px)
+        gc[core] = cv2.GC_FGD
+        if not core.any() or not (gc == cv2.GC_BGD).any():
+            continue
+        bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+        cv2.grabCut(np.ascontiguousarray(image[y0:y1, x0:x1]), gc, None, bgd, fgd,
+                    params.snap_iters, cv2.GC_INIT_WITH_MASK)
+        res = (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
+        out[y0:y1, x0:x1][comp] = res[comp]
+    if params.min_region_px > 0:
+        out = drop_small(out, params.min_region_px).astype(bool)
+    return fill_holes(out.astype(np.uint8)).astype(bool)

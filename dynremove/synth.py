@@ -65,6 +65,8 @@ _FOCAL_FACTOR = 0.85  # f = _FOCAL_FACTOR * max(H, W) pixels (about 60 deg FOV)
 _STEP_FACTOR = 0.009  # sideways camera step per view, as a fraction of d
 _SHAKE_REF_PX = 640.0  # camera_shake_px is given for this image size
 _MAX_ATTEMPTS = 200  # object placements tried before giving up
+_SUPERSAMPLE = 2  # static layers are rendered at this many samples per pixel side
+_PSF_SIGMA = 0.5  # lens blur (Gaussian sigma, pixels) of the static render
 
 Uint8Image = npt.NDArray[np.uint8]
 
@@ -550,7 +552,33 @@ def _opaque(h, w):
 
 
 def _render_static(layers, geo, R, C, *, ids=None) -> Uint8Image:
-    """Composite the static layers for one view (far to near)."""
+    """One view of the static layers, as a camera records it.
+
+    A sensor pixel integrates the light over its area and the lens blurs a
+    little: the layers are composited at ``_SUPERSAMPLE``× resolution,
+    area-averaged down and blurred by a ``_PSF_SIGMA`` px Gaussian. Without
+    this, each view point-samples the textures at different sub-pixel phases
+    and the views disagree by aliasing alone (measured: the background copied
+    through the exact correspondences reaches 27-29 dB PSNR instead of 31-35).
+    """
+    s = _SUPERSAMPLE
+    if s == 1:
+        return np.clip(_composite(layers, geo, R, C, ids=ids) + 0.5, 0, 255).astype(np.uint8)
+    # pixel x of the view covers samples s x .. s x + s - 1, centred at s x + (s - 1) / 2
+    A = np.array([[s, 0.0, (s - 1) / 2.0], [0.0, s, (s - 1) / 2.0], [0.0, 0.0, 1.0]])
+    fine = _Geometry(geo.H * s, geo.W * s, geo.f * s, A @ geo.K, geo.d_far, geo.scale)
+    fine_ids = None if ids is None else np.zeros((fine.H, fine.W), np.uint8)
+    acc = _composite(layers, fine, R, C, ids=fine_ids)
+    acc = cv2.resize(acc, (geo.W, geo.H), interpolation=cv2.INTER_AREA)
+    if _PSF_SIGMA > 0:
+        acc = cv2.GaussianBlur(acc, (0, 0), _PSF_SIGMA, borderType=cv2.BORDER_REFLECT)
+    if ids is not None:
+        ids[...] = fine_ids[s // 2::s, s // 2::s]
+    return np.clip(acc + 0.5, 0, 255).astype(np.uint8)
+
+
+def _composite(layers, geo, R, C, *, ids=None) -> npt.NDArray[np.float32]:
+    """Composite the static layers far to near at ``geo``'s resolution, float32."""
     H, W = geo.H, geo.W
     acc = np.zeros((H, W, 3), np.float32)
     flags = cv2.INTER_LINEAR
@@ -588,7 +616,7 @@ def _render_static(layers, geo, R, C, *, ids=None) -> Uint8Image:
         view += (tex - view) * (alpha.astype(np.float32) * (1.0 / 255.0))[..., None]
         if ids is not None:
             ids[y0:y1, x0:x1][alpha >= 128] = lid
-    return np.clip(acc + 0.5, 0, 255).astype(np.uint8)
+    return acc
 
 
 # --------------------------------------------------------------------------- #

@@ -1,0 +1,101 @@
+"""Field interpolation, fusion and the border refinement, on known ground truth."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynremove import fusion, postprocess, preset, synth
+from dynremove.metrics import jaccard, psnr_in_mask
+
+
+def _disc_hole(H, W, cx, cy, r):
+    ys, xs = np.mgrid[0:H, 0:W]
+    return (xs - cx) ** 2 + (ys - cy) ** 2 <= r * r
+
+
+def test_harmonic_fill_reproduces_a_linear_field():
+    H, W = 120, 160
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    field = np.stack([0.03 * xs - 0.02 * ys + 4.0, 0.01 * xs + 0.05 * ys - 1.0], -1)
+    hole = _disc_hole(H, W, 70, 60, 30) | _disc_hole(H, W, 130, 30, 12)
+    broken = field.copy()
+    broken[hole] = 1e3  # garbage under the hole must not leak out
+    out = fusion.harmonic_fill(broken, hole)
+    np.testing.assert_array_equal(out[~hole], field[~hole])  # valid pixels untouched
+    assert np.abs(out[hole] - field[hole]).max() < 0.1  # a plane is a membrane
+    # the quick Gaussian interpolation is biased on the same field
+    gauss = fusion.interpolate_field(broken, hole)
+    assert np.abs(gauss[hole] - field[hole]).max() > 5 * np.abs(out[hole] - field[hole]).max()
+
+
+def test_harmonic_fill_edge_cases():
+    f = np.ones((30, 40, 2), np.float32)
+    np.testing.assert_array_equal(fusion.harmonic_fill(f, np.zeros((30, 40), bool)), f)
+    np.testing.assert_array_equal(fusion.harmonic_fill(f, np.ones((30, 40), bool)), f)
+    tiny = np.zeros((8, 8), bool)
+    tiny[3:5, 3:5] = True
+    np.testing.assert_allclose(fusion.harmonic_fill(np.ones((8, 8, 1), np.float32), tiny), 1.0)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return synth.make_scene(seed=1, n_views=5, size=(180, 320))
+
+
+def _true_fields(scene):
+    srcs = [v for v in range(len(scene.images)) if v != scene.ref_index]
+    Nf = np.stack([synth.reference_flow(scene, v) for v in srcs]).astype(np.float32)
+    return np.stack([scene.images[v] for v in srcs]), Nf
+
+
+def test_fuse_with_true_matches_restores_the_background(scene):
+    sources, Nf = _true_fields(scene)
+    ref = scene.images[scene.ref_index]
+    gt = scene.masks[scene.ref_index]
+    clean, n_valid = fusion.fuse_background(ref, sources, Nf, gt)
+    assert psnr_in_mask(clean, scene.background, gt) > 26.0  # input: ~10 dB
+    assert psnr_in_mask(ref, scene.background, gt) < 15.0
+    outside = ~fusion._dilate(gt, 2)
+    np.testing.assert_array_equal(clean[outside], ref[outside])  # only the region is written
+    assert (n_valid[gt] == len(sources)).mean() > 0.9
+
+
+def test_fuse_rejects_bad_arguments(scene):
+    sources, Nf = _true_fields(scene)
+    ref = scene.images[scene.ref_index]
+    gt = scene.masks[scene.ref_index]
+    with pytest.raises(ValueError, match="combine"):
+        fusion.fuse_background(ref, sources, Nf, gt, combine="mean")
+    with pytest.raises(ValueError, match="homographies"):
+        fusion.fuse_background(ref, sources, Nf, gt, realign=1)
+    empty = np.zeros_like(gt)
+    np.testing.assert_array_equal(fusion.fuse_background(ref, sources, Nf, empty)[0], ref)
+
+
+def test_source_votes_separate_object_from_background(scene):
+    sources, Nf = _true_fields(scene)
+    ref = scene.images[scene.ref_index]
+    gt = scene.masks[scene.ref_index]
+    D = fusion.source_votes(ref, sources, Nf, np.zeros_like(gt))
+    agree = (D < 16.0).sum(0)
+    # background pixels: nearly every source agrees; object pixels: nearly none
+    assert np.median(agree[~gt]) == len(sources)
+    assert np.median(agree[gt]) <= 1
+
+
+def test_refine_mask_fixes_a_too_wide_and_a_too_narrow_map(scene):
+    sources, Nf = _true_fields(scene)
+    ref = scene.images[scene.ref_index]
+    gt = scene.masks[scene.ref_index]
+    params = preset("default")
+    wide = postprocess._dilate_disc(gt, 3)  # the p/2 halo of the scan
+    refined = postprocess.refine_mask(ref, sources, Nf, wide, params)
+    assert jaccard(refined, gt) > jaccard(wide, gt) + 0.05
+    # a map that stops short of the object's outline grows back
+    cut = gt & ~postprocess._dilate_disc(~gt, 4)
+    regrown = postprocess.refine_mask(ref, sources, Nf, cut, params)
+    assert jaccard(regrown, gt) > jaccard(cut, gt) + 0.03
+    # nothing far from the map changes
+    far = ~postprocess._dilate_disc(wide, params.refine_ring_px * params.refine_iters + 2)
+    assert not refined[far].any()
