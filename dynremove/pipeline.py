@@ -41,6 +41,9 @@ class Result:
     ref_index: int
     params: dict
     geometry: list[dict] = field(default_factory=list)  # matches/inliers per source
+    # L after each step that changes it, in order: "scan", then (default preset)
+    # "clean", "votes", "snap"; the last one equals ``dynamic``
+    stages: dict[str, np.ndarray] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
 
@@ -192,21 +195,26 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
                                      kernel=kernel, progress=scan_progress)
     timings["scans"] = time.perf_counter() - t
     t = time.perf_counter()
-    dyn = postprocess.clean_mask(L, params) if params.clean_mask else L.copy()
+    stages = {"scan": L.copy()}
+    dyn = L.copy()
+    if params.clean_mask:
+        dyn = stages["clean"] = postprocess.clean_mask(L, params)
     cov = _coverage(st, params)
     clean = st.img
     ref_img = np.asarray(images[ref])
     if params.refine_tau > 0:
-        dyn = postprocess.refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
+        dyn = stages["votes"] = postprocess.refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
     if params.snap:
-        dyn = postprocess.snap_to_edges(ref_img, dyn, params)
+        dyn = stages["snap"] = postprocess.snap_to_edges(ref_img, dyn, params)
+    timings["refine"] = time.perf_counter() - t
+    t = time.perf_counter()
     if params.fuse:
         clean, _ = fusion.fuse_background(
             ref_img, st.src_img, st.Nf, dyn, margin_px=params.fuse_margin_px,
             combine=params.fuse_combine,
             realign=params.fuse_realign, homographies=[v.H for v in views],
             flow_preset=params.flow_preset, realign_max_px=params.fuse_realign_max_px)
-    timings["post"] = time.perf_counter() - t
+    timings["fusion"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_all
     result = Result(
         clean=clean, clean_scan=st.img, dynamic=dyn, dynamic_raw=L, M=M_maps, coverage=cov,
@@ -215,7 +223,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         geometry=[{"source": names[srcs[k]], "matches": v.n_matches,
                    "inliers_F": v.n_inliers_F, "inliers_H": v.n_inliers_H}
                   for k, v in enumerate(views)],
-        warnings=msgs)
+        warnings=msgs, stages=stages)
     sink.finish(result)
     return result
 

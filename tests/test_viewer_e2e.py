@@ -54,6 +54,18 @@ def test_recording_replays_and_counts(scene, tmp_path, name):
     np.testing.assert_array_equal(rebuilt, vi.read_final_image(path, scan=True))
     np.testing.assert_array_equal(rebuilt, res.clean_scan)
     np.testing.assert_array_equal(vi.read_final_image(path), res.clean)
+    # the map after each post-scan step: what the run had, in order, ending at L
+    stages = vi.read_stages(path)
+    assert list(stages) == list(res.stages)
+    assert list(stages) == (["scan"] if name == "paper" else ["scan", "clean", "votes", "snap"])
+    for k in stages:
+        np.testing.assert_array_equal(stages[k], res.stages[k])
+    np.testing.assert_array_equal(stages[list(stages)[-1]], res.dynamic)
+    np.testing.assert_array_equal(stages["scan"], res.dynamic_raw)
+    x, y = map(int, np.argwhere(res.dynamic)[0][::-1]) if res.dynamic.any() else (0, 0)
+    hist = vi.pixel_history(path, x, y)
+    assert hist["stages"] == {k: bool(v[y, x]) for k, v in res.stages.items()}
+    assert "L after each step: scan" in vi.format_pixel_history(hist)
     # results do not depend on the sink
     null = remove_dynamic(scene.images, ref=scene.ref_index, params=params, sink=NullSink())
     np.testing.assert_array_equal(null.clean, res.clean)

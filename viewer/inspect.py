@@ -192,6 +192,21 @@ def read_final_dynamic(path: str | Path, *, root: str = "") -> np.ndarray | None
     return rows[0][1].astype(bool) if rows else None
 
 
+STAGE_ORDER = ("scan", "clean", "votes", "snap")  # pipeline.remove_dynamic's order
+
+
+def read_stages(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]:
+    """L after each post-scan step ({"scan": ..., "clean": ..., ...}), in run order."""
+    store, p = load_store(path), P.Paths(root)
+    out = {}
+    for name in STAGE_ORDER:
+        rows = _image_rows(store, p(f"{P.RESULT_STAGES}/{name}"), "SegmentationImage",
+                           index=None)
+        if rows:
+            out[name] = rows[0][1].astype(bool)
+    return out
+
+
 def read_gt_mask(path: str | Path, *, root: str = "") -> np.ndarray | None:
     """Ground-truth mask logged with the run, or None."""
     rows = _image_rows(load_store(path), P.Paths(root)(P.GT_MASK), "SegmentationImage",
@@ -265,6 +280,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     L = read_final_dynamic(path, root=root)
     gt = read_gt_mask(path, root=root)
     inside = L is not None and 0 <= y < L.shape[0] and 0 <= x < L.shape[1]
+    stages = {k: bool(v[y, x]) for k, v in read_stages(path, root=root).items()} \
+        if inside else {}
 
     def rep_dict(r: np.void) -> dict[str, Any]:
         s = int(r["src"])
@@ -282,6 +299,7 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
                       case=int(u["case"]), new_x=int(u["new_x"]), new_y=int(u["new_y"]),
                       new_C=float(u["new_C"])) for u in upd[(upd["x"] == x) & (upd["y"] == y)]],
         final_dynamic=bool(L[y, x]) if inside else None,
+        stages=stages,
         gt=bool(gt[y, x]) if gt is not None and inside else None,
     )
 
@@ -296,6 +314,9 @@ def format_pixel_history(h: dict[str, Any]) -> str:
              f"patch writes, {len(h['updates'])} correspondence updates; final L = "
              f"{label(h['final_dynamic'])}" +
              (f", ground truth = {label(h['gt'])}" if h.get("gt") is not None else "")]
+    if h.get("stages"):
+        lines.append("  L after each step: " + " → ".join(
+            f"{k} {label(v)}" for k, v in h["stages"].items()))
     if not h["decisions"]:
         lines.append("  (no decision recorded here: static pixels are only recorded when "
                      "probed (--probe x,y) or sampled)")

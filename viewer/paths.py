@@ -71,6 +71,7 @@ ERRORS_BACKGROUND = "errors/background"
 RESULT_CLEAN = "result/clean"
 RESULT_CLEAN_SCAN = "result/clean_scan"  # as the scans left it (before fusion)
 RESULT_DYNAMIC = "result/dynamic"
+RESULT_STAGES = "result/stages"  # L after each post-scan step: result/stages/<name>
 EVENTS_DECISIONS = "events/decisions"
 EVENTS_REPLACEMENTS = "events/replacements"
 EVENTS_UPDATES = "events/updates"

@@ -231,6 +231,9 @@ class RerunSink:
             contents=encode_png(clean), media_type="image/png"), static=True)
         self.rec.log(self.p(P.RESULT_DYNAMIC), rr.SegmentationImage(L.astype(np.uint8)),
                      static=True)
+        for name, stage in (getattr(result, "stages", None) or {}).items():
+            self.rec.log(self.p(f"{P.RESULT_STAGES}/{name}"),
+                         rr.SegmentationImage(np.asarray(stage, np.uint8)), static=True)
         clean_scan = getattr(result, "clean_scan", None)
         if clean_scan is not None:  # what the Replacement events rebuild
             self.rec.log(self.p(P.RESULT_CLEAN_SCAN), rr.EncodedImage(
