@@ -91,6 +91,7 @@ ABLATIONS: dict[str, dict[str, Any]] = {
     "no-clean": {"clean_mask": False, "min_region_px": 0},
     "no-refine": {"refine_tau": 0.0},
     "refine-unanimous": {"refine_shrink_frac": 1.0},
+    "no-snap": {"snap": False},
     "no-realign": {"fuse_realign": 0},
     "fuse-medoid": {"fuse_combine": "medoid", "fuse_realign": 0},
     "no-fuse": {"fuse": False},
