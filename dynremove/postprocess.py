@@ -126,8 +126,11 @@ def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
         if not core.any() or not (gc == cv2.GC_BGD).any():
             continue
         bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
-        cv2.grabCut(np.ascontiguousarray(image[y0:y1, x0:x1]), gc, None, bgd, fgd,
-                    params.snap_iters, cv2.GC_INIT_WITH_MASK)
+        try:
+            cv2.grabCut(np.ascontiguousarray(image[y0:y1, x0:x1]), gc, None, bgd, fgd,
+                        params.snap_iters, cv2.GC_INIT_WITH_MASK)
+        except cv2.error:  # too few pixels of a class for its colour model: keep the region
+            continue
         res = (gc == cv2.GC_FGD) | (gc == cv2.GC_PR_FGD)
         out[y0:y1, x0:x1][comp] = res[comp]
     if params.min_region_px > 0:

@@ -99,3 +99,18 @@ def test_refine_mask_fixes_a_too_wide_and_a_too_narrow_map(scene):
     # nothing far from the map changes
     far = ~postprocess._dilate_disc(wide, params.refine_ring_px * params.refine_iters + 2)
     assert not refined[far].any()
+
+
+def test_snap_to_edges_moves_the_border_onto_the_object():
+    rng = np.random.default_rng(0)
+    H, W = 120, 160
+    img = np.clip(rng.normal(90, 12, (H, W, 3)), 0, 255).astype(np.uint8)  # grey grain
+    obj = _disc_hole(H, W, 60, 60, 25) | _disc_hole(H, W, 115, 70, 15)
+    img[obj] = np.clip(rng.normal((40, 60, 200), 12, (int(obj.sum()), 3)), 0, 255)
+    params = preset("default")
+    for start in (postprocess._dilate_disc(obj, 5), obj & ~postprocess._dilate_disc(~obj, 4)):
+        snapped = postprocess.snap_to_edges(img, start, params)
+        assert jaccard(start, obj) < 0.85
+        assert jaccard(snapped, obj) > 0.95
+    empty = np.zeros((H, W), bool)
+    assert not postprocess.snap_to_edges(img, empty, params).any()
