@@ -36,6 +36,11 @@ The camera walks sideways with hand-held jitter: the backdrop moves by about
 rotation shake; the ground near the image bottom moves about three times as
 much. ``parallax`` scales the translation (``0`` gives a pure rotation).
 
+Each view of the static layers is rendered as a camera records it: at 2×
+resolution, area-averaged to the pixel grid (a sensor pixel integrates light
+over its area) and blurred by a σ 0.5 px lens, so that the views sample one
+continuous, band-limited scene instead of aliasing differently.
+
 Moving objects are drawn last, hard-edged (no antialiasing), so the
 ground-truth mask of a view is exactly the set of pixels they cover. Each
 walks along the ground at a constant image speed of 0.8 to 1 of its own width
