@@ -202,18 +202,28 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     cov = _coverage(st, params)
     clean = st.img
     ref_img = np.asarray(images[ref])
+    if progress and (params.refine_tau > 0 or params.snap):
+        progress("refine", 0.0)
     if params.refine_tau > 0:
         dyn = stages["votes"] = postprocess.refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
+        if progress:
+            progress("refine", 0.5 if params.snap else 1.0)
     if params.snap:
         dyn = stages["snap"] = postprocess.snap_to_edges(ref_img, dyn, params)
+        if progress:
+            progress("refine", 1.0)
     timings["refine"] = time.perf_counter() - t
     t = time.perf_counter()
     if params.fuse:
+        if progress:
+            progress("fusion", 0.0)
         clean, _ = fusion.fuse_background(
             ref_img, st.src_img, st.Nf, dyn, margin_px=params.fuse_margin_px,
             combine=params.fuse_combine,
             realign=params.fuse_realign, homographies=[v.H for v in views],
             flow_preset=params.flow_preset, realign_max_px=params.fuse_realign_max_px)
+        if progress:
+            progress("fusion", 1.0)
     timings["fusion"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_all
     result = Result(
