@@ -32,6 +32,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove import correspondence
+from dynremove.postprocess import dilate_disc
 
 
 def interpolate_field(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_]
@@ -75,9 +76,7 @@ def harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *
     Valid pixels are never changed.
     """
     H, W = hole.shape
-    if not hole.any():
-        return field.copy()
-    if hole.all():
+    if not hole.any() or hole.all():
         return field.copy()
     if min(H, W) < 24:
         return interpolate_field(field, hole)
@@ -158,13 +157,6 @@ def source_votes(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8
     return D
 
 
-def _dilate(mask: npt.NDArray[np.bool_], r: int) -> npt.NDArray[np.bool_]:
-    if r <= 0:
-        return mask.copy()
-    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-    return cv2.dilate(mask.astype(np.uint8), k).astype(bool)
-
-
 def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
                     Nf: npt.NDArray[np.float32], mask: npt.NDArray[np.bool_], *,
                     margin_px: int = 2, combine: str = "median", realign: int = 0,
@@ -202,15 +194,16 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
     n_valid = np.zeros((H, W), np.uint8)
     if not mask.any():
         return reference.copy(), n_valid
-    region = _dilate(mask, max(0, int(margin_px)))
+    region = dilate_disc(mask, int(margin_px))
     # the field is interpolated over a slightly larger hole: flow at object edges bleeds
     hole = cv2.dilate(region.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
     fields = [background_field(Nf[s], hole) for s in range(len(sources))]
     clean = _fuse(reference, sources, fields, region, combine, n_valid)
+    if realign > 0 and homographies is None:
+        raise ValueError("realign needs the homographies")
+    grays = [cv2.cvtColor(src, cv2.COLOR_BGR2GRAY) for src in sources] if realign > 0 else []
     for _ in range(max(0, int(realign))):
-        if homographies is None:
-            raise ValueError("realign needs the homographies")
-        fields = _realign(clean, sources, fields, hole, homographies, flow_preset,
+        fields = _realign(clean, grays, fields, hole, homographies, flow_preset,
                           realign_max_px)
         clean = _fuse(reference, sources, fields, region, combine, n_valid)
     return clean, n_valid
@@ -239,7 +232,7 @@ def _fuse(reference, sources, fields, region, combine, n_valid):
     return out
 
 
-def _realign(clean, sources, fields, hole, homographies, flow_preset, max_px):
+def _realign(clean, src_grays, fields, hole, homographies, flow_preset, max_px):
     """Matches inside ``hole`` re-measured by flow from the cleaned reference.
 
     Only the bounding box of the hole (plus a margin for the flow's context)
@@ -255,8 +248,7 @@ def _realign(clean, sources, fields, hole, homographies, flow_preset, max_px):
     g_clean = cv2.cvtColor(np.ascontiguousarray(clean[y0:y1, x0:x1]), cv2.COLOR_BGR2GRAY)
     sub_hole = hole[y0:y1, x0:x1]
     out = []
-    for s in range(len(sources)):
-        g_src = cv2.cvtColor(sources[s], cv2.COLOR_BGR2GRAY)
+    for s, g_src in enumerate(src_grays):
         n2 = correspondence.dense_correspondence(g_clean, g_src, homographies[s] @ shift,
                                                  method="homography+flow",
                                                  flow_preset=flow_preset)

@@ -195,7 +195,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
                                      kernel=kernel, progress=scan_progress)
     timings["scans"] = time.perf_counter() - t
     t = time.perf_counter()
-    stages = {"scan": L.copy()}
+    stages = {"scan": L}  # the same array as Result.dynamic_raw
     dyn = L.copy()
     if params.clean_mask:
         dyn = stages["clean"] = postprocess.clean_mask(L, params)

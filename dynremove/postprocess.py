@@ -12,15 +12,25 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from dynremove import fusion
 from dynremove.params import Params
+
+
+def disc(r: int) -> np.ndarray:
+    """Disc structuring element of radius ``r`` ((2r+1)², uint8)."""
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def dilate_disc(m: np.ndarray, r: int) -> npt.NDArray[np.bool_]:
+    """``m`` (bool) dilated by a disc of radius ``r``; a copy when ``r`` <= 0."""
+    if r <= 0:
+        return np.asarray(m, bool).copy()
+    return cv2.dilate(np.asarray(m, np.uint8), disc(r)).astype(bool)
 
 
 def clean_mask(L: npt.NDArray[np.bool_], params: Params) -> npt.NDArray[np.bool_]:
     """Open, close, drop small components and fill holes of a (H, W) bool map."""
     m = L.astype(np.uint8)
-    r = max(1, params.patch_size // 4)
-    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+    k = disc(max(1, params.patch_size // 4))
     m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
     m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, k)
     if params.min_region_px > 0:
@@ -63,11 +73,13 @@ def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
     background in some sources, and a pixel vote there would erase it.
     Repeated ``refine_iters`` times (the ring moves with the map).
     """
+    from dynremove import fusion  # fusion builds on this module's morphology
+
     m = mask.copy()
     for _ in range(params.refine_iters):
         mu = m.astype(np.uint8)
-        ring = _dilate_disc(mu, params.refine_ring_px) & ~m
-        rim = m & ~cv2.erode(mu, _disc(params.refine_rim_px)).astype(bool)
+        ring = dilate_disc(m, params.refine_ring_px) & ~m
+        rim = m & ~cv2.erode(mu, disc(params.refine_rim_px)).astype(bool)
         hole = cv2.dilate((m | ring).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
         D = fusion.source_votes(reference, sources, Nf, hole)
         valid = np.isfinite(D).sum(0)
@@ -82,15 +94,6 @@ def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
             break
         m = new
     return m
-
-
-def _disc(r: int) -> np.ndarray:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-
-
-def _dilate_disc(m: np.ndarray, r: int) -> np.ndarray:
-    return cv2.dilate(m.astype(np.uint8), _disc(r)).astype(bool)
-
 
 
 def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
@@ -108,7 +111,7 @@ def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
     if not mask.any():
         return mask.copy()
     H, W = mask.shape
-    outer = _dilate_disc(mask, params.snap_outer_px)
+    outer = dilate_disc(mask, params.snap_outer_px)
     n, lab, stats, _ = cv2.connectedComponentsWithStats(outer.astype(np.uint8), connectivity=8)
     out = mask.copy()
     margin = params.snap_outer_px + 8
@@ -119,9 +122,9 @@ def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
         sub = mask[y0:y1, x0:x1]
         comp = lab[y0:y1, x0:x1] == i
         gc = np.full(sub.shape, cv2.GC_BGD, np.uint8)
-        gc[_dilate_disc(sub, params.snap_outer_px)] = cv2.GC_PR_BGD
+        gc[dilate_disc(sub, params.snap_outer_px)] = cv2.GC_PR_BGD
         gc[sub] = cv2.GC_PR_FGD
-        core = sub & ~_dilate_disc(~sub, params.snap_inner_px)
+        core = sub & ~dilate_disc(~sub, params.snap_inner_px)
         gc[core] = cv2.GC_FGD
         if not core.any() or not (gc == cv2.GC_BGD).any():
             continue

@@ -56,7 +56,7 @@ def test_fuse_with_true_matches_restores_the_background(scene):
     clean, n_valid = fusion.fuse_background(ref, sources, Nf, gt)
     assert psnr_in_mask(clean, scene.background, gt) > 26.0  # input: ~10 dB
     assert psnr_in_mask(ref, scene.background, gt) < 15.0
-    outside = ~fusion._dilate(gt, 2)
+    outside = ~postprocess.dilate_disc(gt, 2)
     np.testing.assert_array_equal(clean[outside], ref[outside])  # only the region is written
     assert (n_valid[gt] == len(sources)).mean() > 0.9
 
@@ -89,15 +89,15 @@ def test_refine_mask_fixes_a_too_wide_and_a_too_narrow_map(scene):
     ref = scene.images[scene.ref_index]
     gt = scene.masks[scene.ref_index]
     params = preset("default")
-    wide = postprocess._dilate_disc(gt, 3)  # the p/2 halo of the scan
+    wide = postprocess.dilate_disc(gt, 3)  # the p/2 halo of the scan
     refined = postprocess.refine_mask(ref, sources, Nf, wide, params)
     assert jaccard(refined, gt) > jaccard(wide, gt) + 0.05
     # a map that stops short of the object's outline grows back
-    cut = gt & ~postprocess._dilate_disc(~gt, 4)
+    cut = gt & ~postprocess.dilate_disc(~gt, 4)
     regrown = postprocess.refine_mask(ref, sources, Nf, cut, params)
     assert jaccard(regrown, gt) > jaccard(cut, gt) + 0.03
     # nothing far from the map changes
-    far = ~postprocess._dilate_disc(wide, params.refine_ring_px * params.refine_iters + 2)
+    far = ~postprocess.dilate_disc(wide, params.refine_ring_px * params.refine_iters + 2)
     assert not refined[far].any()
 
 
@@ -108,7 +108,7 @@ def test_snap_to_edges_moves_the_border_onto_the_object():
     obj = _disc_hole(H, W, 60, 60, 25) | _disc_hole(H, W, 115, 70, 15)
     img[obj] = np.clip(rng.normal((40, 60, 200), 12, (int(obj.sum()), 3)), 0, 255)
     params = preset("default")
-    for start in (postprocess._dilate_disc(obj, 5), obj & ~postprocess._dilate_disc(~obj, 4)):
+    for start in (postprocess.dilate_disc(obj, 5), obj & ~postprocess.dilate_disc(~obj, 4)):
         snapped = postprocess.snap_to_edges(img, start, params)
         assert jaccard(start, obj) < 0.85
         assert jaccard(snapped, obj) > 0.95
