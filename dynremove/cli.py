@@ -1,8 +1,11 @@
-"""Command line: ``dynremove run | demo | bench | view | inspect | export | eval``.
+"""Command line: ``dynremove run | demo | bench | eval | composite | view | inspect | export``.
 
-Exit codes: 0 ok, 2 bad input, 1 internal error, 130 interrupted (SIGINT),
-143 terminated (SIGTERM). Errors are one line on stderr; set DYNREMOVE_DEBUG=1
-for a traceback. ``viewer`` (Rerun) is imported lazily, only when asked for.
+Every sub-command is defined here. Exit codes: 0 ok, 2 bad input (``InputError``,
+including flags that ``Params`` rejects), 1 internal error (any other exception),
+130 interrupted (SIGINT), 143 terminated (SIGTERM). Errors are one line on
+stderr; set DYNREMOVE_DEBUG=1 for a traceback. ``viewer`` (Rerun) is imported
+lazily, only by the commands and options that need it; an import error there
+is an internal error like any other, never a missing sub-command.
 """
 
 from __future__ import annotations
@@ -17,9 +20,19 @@ import warnings
 from pathlib import Path
 from typing import Any, Sequence
 
+import cv2
 import numpy as np
 
-from dynremove.params import PRESETS, Params, preset
+from dynremove import io
+from dynremove.errors import InputError
+from dynremove.evaluation import composite, synth
+from dynremove.evaluation.bench import run_bench
+from dynremove.evaluation.evaluate import (ABLATIONS, METHODS, format_ablation, format_table,
+                                           run_ablation, run_eval)
+from dynremove.evaluation.metrics import jaccard, psnr_in_mask
+from dynremove.params import DEFAULT, PAPER, PRESETS, Params, preset
+from dynremove.pipeline import remove_dynamic
+from dynremove.progress import ProgressBar
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
 
@@ -35,19 +48,25 @@ def add_param_flags(ap: argparse.ArgumentParser) -> None:
                    help="'default' (best measured) or 'paper' (the method as written)")
     for f in dataclasses.fields(Params):
         flag = "--" + f.name.replace("_", "-")
+        d, pp = getattr(DEFAULT, f.name), getattr(PAPER, f.name)
+        help_ = f"(default {d})" if d == pp else f"(default {d}; paper {pp})"
         if f.type in ("bool", bool):
             g.add_argument(flag, dest=f"p_{f.name}", action=argparse.BooleanOptionalAction,
-                           default=None, help=f"(default {f.default})")
+                           default=None, help=help_)
         else:
             typ = {"int": int, "float": float, "str": str}.get(str(f.type), str)
             g.add_argument(flag, dest=f"p_{f.name}", type=typ, default=None, metavar="V",
-                           help=f"(default {f.default})")
+                           help=help_)
 
 
 def params_from_args(args: argparse.Namespace) -> Params:
+    """The preset named by ``--preset`` with the flags' changes; InputError if rejected."""
     base = preset(args.preset)
     changes = {k[2:]: v for k, v in vars(args).items() if k.startswith("p_") and v is not None}
-    return dataclasses.replace(base, **changes) if changes else base
+    try:
+        return dataclasses.replace(base, **changes) if changes else base
+    except (TypeError, ValueError) as e:  # Params.__post_init__ validates the values
+        raise InputError(str(e)) from None
 
 
 def parse_xy(s: str) -> tuple[int, int]:
@@ -60,8 +79,6 @@ def parse_xy(s: str) -> tuple[int, int]:
 
 # --- commands -----------------------------------------------------------------------------
 def cmd_run(args: argparse.Namespace) -> int:
-    from dynremove import io
-
     params = params_from_args(args)
     created = not Path(args.out).exists()
     out = io.prepare_out_dir(args.out)
@@ -77,9 +94,6 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
-    from dynremove import io
-    from dynremove.pipeline import remove_dynamic
-
     t0 = time.perf_counter()
     iset = io.load_image_set(args.images, max_side=args.max_side)
     t_load = time.perf_counter() - t0
@@ -92,7 +106,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         gt = io.read_mask(args.gt, (W, H))
     compare = parse_compare(args.compare, params) if args.compare else None
     if compare is not None and not args.record:
-        raise ValueError("--compare needs --record FILE.rrd (the two runs go into one recording)")
+        raise InputError("--compare needs --record FILE.rrd (the two runs go into one recording)")
     rec = None
     if compare is not None:
         from viewer.sink import open_compare_stream
@@ -137,9 +151,6 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
 def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
                   gt: np.ndarray | None = None, record: str | None = None) -> dict:
     """clean.png, dynamic_mask.png (0/255), coverage.png and report.json, atomically."""
-    from dynremove import io
-    from dynremove.metrics import jaccard
-
     io.write_image(out / "clean.png", res.clean)
     io.write_image(out / "dynamic_mask.png", res.dynamic.astype(np.uint8) * 255)
     n_src = max(1, len(iset.images) - 1)
@@ -171,10 +182,6 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from dynremove import io, synth
-    from dynremove.metrics import jaccard, psnr_in_mask
-    from dynremove.pipeline import remove_dynamic
-
     params = params_from_args(args)
     out = io.prepare_out_dir(args.out)
     scene = synth.make_scene(seed=args.scene_seed, n_views=6, size=(360, 640))
@@ -211,13 +218,103 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    from dynremove.bench import run_bench
-
     try:
-        from viewer.sink import RerunSink
-    except ImportError:  # pragma: no cover - rerun is a dependency
-        return run_bench(args)
-    return run_bench(args, recording_sink=lambda path, gt: RerunSink(path, gt_mask=gt))
+        W, H = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise InputError(f"--size must be WxH, got {args.size!r}") from None
+    from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
+
+    run_bench(params=params_from_args(args), preset_name=args.preset, size=(W, H),
+              views=args.views, repeat=args.repeat, reference=not args.no_reference,
+              json_path=args.json or None, quiet=args.quiet,
+              recording_sink=lambda path, gt: RerunSink(path, gt_mask=gt))
+    return EXIT_OK
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    params = params_from_args(args)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if not methods:
+        raise InputError("--methods: empty list")
+    if args.json:
+        out = Path(args.json)
+        if out.is_dir():
+            raise InputError(f"--json {out}: is a folder")
+    progress = not args.quiet
+    if args.ablation:
+        names = [n.strip() for n in (args.variants or "").split(",") if n.strip()] or None
+        report = run_ablation(args.data_dir, base=params, names=names, sets=args.sets,
+                              jobs=args.jobs, max_side=args.max_side, ref=args.ref,
+                              progress=progress, preset_name=args.preset)
+        print(format_ablation(report))
+    else:
+        report = run_eval(args.data_dir, sets=args.sets, params=params,
+                          preset_name=args.preset, methods=methods, jobs=args.jobs,
+                          max_side=args.max_side, ref=args.ref, progress=progress)
+        print(format_table(report))
+    n_sets = len({r["set"] for r in report["sets"]})
+    print(f"{n_sets} sets, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
+          + (f" -> {args.json}" if args.json else ""))
+    if args.json:
+        io.write_json(args.json, report)
+    return EXIT_OK
+
+
+def cmd_composite(args: argparse.Namespace) -> int:
+    if args.n_sets:
+        outs = composite.make_composites(args.static_dir, args.objects_dir, args.out,
+                                         n_sets=args.n_sets, seed=args.seed,
+                                         n_views=args.n_views, n_objects=args.objects)
+        for o in outs:
+            print(o)
+        print(f"wrote {len(outs)} composite sets under {args.out}")
+    else:
+        info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
+                                        seed=args.seed, n_views=args.n_views,
+                                        n_objects=args.objects)
+        print(f"wrote {args.out}: {info['n_views']} views {info['size'][0]}x"
+              f"{info['size'][1]}, objects "
+              + ", ".join(o["set"] for o in info["objects"])
+              + f", reference mask {100 * info['ref_mask_fraction']:.1f} %")
+    return EXIT_OK
+
+
+# --- commands that read recordings (viewer, imported lazily: it needs Rerun) -------------
+def _recording(path: str) -> Path:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such recording")
+    return p
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from viewer.serve import view
+
+    view(_recording(args.recording), web=args.web, port=args.port, web_port=args.web_port)
+    return EXIT_OK
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from viewer import inspect as ins
+
+    path = _recording(args.recording)
+    if args.pixel is None and not args.failures:
+        raise InputError("inspect: give --pixel X,Y or --failures")
+    if args.pixel is not None:
+        x, y = args.pixel
+        print(ins.format_pixel_history(ins.pixel_history(path, x, y, root=args.root)))
+    if args.failures:
+        print(ins.format_failures(ins.failures(path, top=args.top, root=args.root)))
+    return EXIT_OK
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from viewer.export import export_gif
+
+    out = export_gif(_recording(args.recording), args.out, fps=args.fps,
+                     max_side=args.max_side, root=args.root)
+    print(f"wrote {out}")
+    return EXIT_OK
 
 
 # --- sinks and messages -------------------------------------------------------------------
@@ -231,22 +328,26 @@ def parse_compare(spec: str, base: Params) -> Params:
         key, _, val = item.partition("=")
         key = key.strip().replace("-", "_")
         if key not in types or not _:
-            raise ValueError(f"--compare {spec!r}: expected a preset ({', '.join(PRESETS)}) "
+            raise InputError(f"--compare {spec!r}: expected a preset ({', '.join(PRESETS)}) "
                              f"or field=value pairs of Params, got {item!r}")
         t = str(types[key])
-        changes[key] = (val.lower() in ("1", "true", "yes", "on") if t == "bool" else
-                        int(val) if t == "int" else float(val) if t == "float" else val)
-    return dataclasses.replace(base, **changes)
+        try:
+            changes[key] = (val.lower() in ("1", "true", "yes", "on") if t == "bool" else
+                            int(val) if t == "int" else float(val) if t == "float" else val)
+        except ValueError:
+            raise InputError(f"--compare {spec!r}: {key} takes a {t}, got {val!r}") from None
+    try:
+        return dataclasses.replace(base, **changes)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"--compare {spec!r}: {e}") from None
 
 
 def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
                gt_background: np.ndarray | None = None, rec: Any = None, root: str = ""):
     if not getattr(args, "record", None):
         return None
-    try:
-        from viewer.sink import RerunSink
-    except ImportError as e:  # pragma: no cover - rerun is a dependency
-        raise RuntimeError(f"recording needs the viewer package and rerun-sdk ({e})") from None
+    from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
+
     Path(args.record).parent.mkdir(parents=True, exist_ok=True)
     return RerunSink(None if rec is not None else args.record,
                      record_every_rows=getattr(args, "record_every_rows", None),
@@ -254,8 +355,6 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
 
 
 def _bar(args: argparse.Namespace):
-    from dynremove.progress import ProgressBar
-
     return ProgressBar(enabled=not getattr(args, "quiet", False))
 
 
@@ -267,6 +366,32 @@ def _note(args: argparse.Namespace, msg: str) -> None:
 def _say(args: argparse.Namespace, msg: str) -> None:
     if not getattr(args, "quiet", False):
         print(msg)
+
+
+def parse_max_side(s: str) -> int | None:
+    """``none``/``0`` = full size; ``auto`` = io's default; else pixels."""
+    t = s.strip().lower()
+    if t in ("none", "0", "full"):
+        return 0
+    if t == "auto":
+        return None
+    try:
+        v = int(t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected pixels, 'none' or 'auto', got {s!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"--max-side must be >= 0, got {v}")
+    return v
+
+
+def parse_jobs(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+    if v == 0:
+        raise argparse.ArgumentTypeError("--jobs must not be 0 (use -1 for all cores)")
+    return v
 
 
 # --- parser --------------------------------------------------------------------------------
@@ -285,8 +410,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--ref", default=None, help="reference: index or file name (default: middle)")
     r.add_argument("--out", default="out/run", help="output folder (default: out/run)")
     r.add_argument("--max-side", type=int, default=None, metavar="PX",
-                   help=f"downscale so the longer side is at most PX (default: only above "
-                        f"1280 px; 0 = never)")
+                   help="downscale so the longer side is at most PX (default: only above "
+                        "1280 px; 0 = never)")
     r.add_argument("--record", default=None, metavar="FILE.rrd",
                    help="write a Rerun recording of the scans")
     r.add_argument("--record-every-rows", type=int, default=None, metavar="N",
@@ -325,36 +450,88 @@ def build_parser() -> argparse.ArgumentParser:
     add_param_flags(b)
     b.set_defaults(fn=cmd_bench)
 
-    _add_viewer_commands(sub)
-    _add_eval_commands(sub)
+    e = sub.add_parser(
+        "eval", help="Jaccard / PSNR / SSIM of the method and baselines on sets with truth",
+        description="Evaluate on every <set>/frames/ below DATA_DIR (masks/<stem>.png and "
+                    "background.png optional): the method, the paper preset, the median "
+                    "baselines, Telea inpainting with the true mask and the single-scan "
+                    "ablation. Prints a table; --json writes every figure.")
+    e.add_argument("data_dir", metavar="DATA_DIR")
+    e.add_argument("--sets", default=None, metavar="GLOB",
+                   help="only sets whose name matches (comma-separated globs)")
+    e.add_argument("--jobs", type=parse_jobs, default=1, metavar="N",
+                   help="sets in parallel (joblib; -1 = all cores; default 1)")
+    e.add_argument("--json", default=None, metavar="FILE", help="write the report here")
+    e.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
+                   help="downscale to at most PX ('none' = full size; default: only "
+                        "above 1280 px)")
+    e.add_argument("--ref", default=None,
+                   help="reference: index or file name (default: the middle frame)")
+    e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
+                   help=f"comma-separated subset of {','.join(METHODS)}")
+    e.add_argument("--ablation", action="store_true",
+                   help="instead of the methods: variants of the preset (dataclasses.replace "
+                        "of it, see ABLATIONS); prints mean J / PSNR per variant")
+    e.add_argument("--variants", default=None, metavar="LIST",
+                   help=f"with --ablation: comma-separated subset of {','.join(ABLATIONS)}")
+    e.add_argument("--quiet", action="store_true", help="no per-set progress on stderr")
+    add_param_flags(e)
+    e.set_defaults(fn=cmd_eval)
+
+    c = sub.add_parser(
+        "composite", help="paste real moving objects into a static multi-view set",
+        description="Cut objects out of a DAVIS-style folder (<set>/frames, <set>/masks) "
+                    "and paste them, moving, into consecutive views of a static set. "
+                    "Writes DIR/frames/, DIR/masks/ (0/255), DIR/background.png and "
+                    "DIR/composite.json: the layout 'dynremove eval' reads.")
+    c.add_argument("static_dir", metavar="STATIC_DIR",
+                   help="folder of static images (with --n-sets: a folder of such folders)")
+    c.add_argument("objects_dir", metavar="OBJECTS_DIR",
+                   help="DAVIS-style sets with masks (e.g. shared/data/davis)")
+    c.add_argument("--out", required=True, metavar="DIR")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--n-views", type=int, default=6, metavar="N")
+    c.add_argument("--objects", type=int, default=1, metavar="K", help="objects per set")
+    c.add_argument("--n-sets", type=int, default=0, metavar="N",
+                   help="write N sets under DIR (one per static set x objects), "
+                        "STATIC_DIR being a folder of static sets")
+    c.set_defaults(fn=cmd_composite)
+
+    v = sub.add_parser("view", help="open a recording in the Rerun viewer (with its layout)")
+    v.add_argument("recording", help="a .rrd file")
+    v.add_argument("--web", action="store_true",
+                   help="serve the web viewer on 127.0.0.1 only and print the URL")
+    v.add_argument("--port", type=int, default=9876, help="gRPC port (default 9876)")
+    v.add_argument("--web-port", type=int, default=9090, help="web viewer port (default 9090)")
+    v.set_defaults(fn=cmd_view)
+
+    i = sub.add_parser("inspect", help="explain a pixel or list failures from a recording",
+                       description="Read a recording back: every decision, candidate "
+                                   "cluster, replacement and correspondence update at a "
+                                   "pixel, or the worst false positives/negatives when "
+                                   "ground truth was recorded (run --gt).")
+    i.add_argument("recording", help="a .rrd file")
+    i.add_argument("--pixel", type=parse_xy, metavar="X,Y", help="pixel to explain")
+    i.add_argument("--failures", action="store_true", help="list the worst FP/FN regions")
+    i.add_argument("--top", type=int, default=10, help="how many failures (default 10)")
+    i.add_argument("--root", default="", help="entity root of the run (--compare recordings)")
+    i.set_defaults(fn=cmd_inspect)
+
+    x = sub.add_parser("export", help="render the progressive removal to a GIF or MP4")
+    x.add_argument("recording", help="a .rrd file")
+    x.add_argument("--gif", "--out", dest="out", required=True, metavar="OUT",
+                   help="output .gif or .mp4")
+    x.add_argument("--fps", type=float, default=10.0, help="frames per second (default 10)")
+    x.add_argument("--max-side", type=int, default=480, help="longest side in px (default 480)")
+    x.add_argument("--root", default="", help="entity root of the run")
+    x.set_defaults(fn=cmd_export)
     return ap
-
-
-def _add_viewer_commands(sub: Any) -> None:
-    try:
-        from viewer.commands import add_commands
-    except ImportError:
-        return
-    add_commands(sub)
-
-
-def _add_eval_commands(sub: Any) -> None:
-    try:
-        from dynremove.evaluate import add_commands
-    except ImportError:
-        return
-    add_commands(sub, add_param_flags=add_param_flags, params_from_args=params_from_args)
 
 
 def _quiet_opencv() -> None:
     """OpenCV's own warnings (e.g. "PNG input buffer is incomplete") would add lines to
     stderr next to ours, which already name the file and the problem."""
-    try:
-        import cv2
-
-        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
-    except Exception:  # noqa: BLE001 - cosmetic only
-        pass
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
 
 
 def _one_line(e: BaseException) -> str:
@@ -369,8 +546,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
     debug = bool(os.environ.get("DYNREMOVE_DEBUG"))
-    from dynremove.geometry import GeometryError
-    from dynremove.pipeline import InputError
 
     _quiet_opencv()
     old = signal.signal(signal.SIGTERM, _on_sigterm)
@@ -382,7 +557,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Terminated:
         print("dynremove: terminated", file=sys.stderr)
         return 143
-    except (InputError, GeometryError, ValueError, FileNotFoundError) as e:
+    except InputError as e:
         if debug:
             raise
         print(f"dynremove: error: {_one_line(e)}", file=sys.stderr)

@@ -6,10 +6,17 @@ meaningful) the value was chosen by measurement: see README "Design choices".
 
 Two presets:
 
-* ``paper``: the method as written; only the scalings the paper leaves open
-  (SIFT, HoG and coordinate units, p, ε, minPts, t_r) are filled in.
-* ``default``: the best variant the evidence supports (same core, plus the
-  engineered steps named in the fields below).
+* ``default`` (``DEFAULT``, and what ``Params()`` gives): the best variant the
+  evidence supports (the paper's core, plus the engineered steps of
+  ``dynremove.refine`` named in the fields below).
+* ``paper`` (``PAPER``): the method as written; only the scalings the paper
+  leaves open (SIFT, HoG and coordinate units, p, ε, minPts, t_r) are filled
+  in, and every engineered step is off.
+
+The field defaults *are* the default preset, so ``Params()``,
+``preset("default")`` and ``remove_dynamic``'s default agree; the paper's
+method is always asked for by name (``PAPER`` / ``preset("paper")``). Where
+the two presets differ, the comment gives the paper preset's value.
 """
 
 from __future__ import annotations
@@ -23,10 +30,14 @@ WRITE_MODES = ("patch", "pixel")
 
 @dataclass(frozen=True, kw_only=True, slots=True)
 class Params:
-    """Parameters of the method (paper Sec. 3). Make variants with ``replace``."""
+    """Parameters of the method (paper Sec. 3). Make variants with ``replace``.
+
+    ``Params()`` is the *default* preset (the best measured variant), not the
+    paper's method: use ``PAPER`` or ``preset("paper")`` for that.
+    """
 
     # --- features (Sec. 3.1) -------------------------------------------------
-    patch_size: int = 9  # p      : patch side for f_c, f_g and removal (not given)
+    patch_size: int = 13  # p      : patch side for f_c, f_g and removal (not given; paper preset 9)
     sift_scale: float = 0.2  # SIFT / set-max is multiplied by this (unit of σ_g; measured)
     hog_bins: int = 8  # bins of the rotation-invariant HoG g_h
     hog_scale: float = 10.0  # unit-L2 HoG is multiplied by this (unit of σ_h)
@@ -43,7 +54,7 @@ class Params:
     # --- decision, Eq. (DB_cost) and M --------------------------------------
     dbscan_eps: float = 0.5  # ε of DBSCAN on the distance B
     dbscan_min_pts: int = 2  # minPts of DBSCAN (the point itself counts)
-    t_r: float = 0.4  # t_r : static if M(x) > t_r (paper: 0.15–0.8; measured)
+    t_r: float = 0.3  # t_r : static if M(x) > t_r (paper: 0.15–0.8; measured; paper preset 0.4)
 
     # --- removal, patch choice q* -------------------------------------------
     lambda6: float = 0.12  # λ6 : Lab term of q*
@@ -54,33 +65,33 @@ class Params:
     write: str = "patch"  # "patch": write p×p; "pixel": centre only
 
     # --- scans ---------------------------------------------------------------
-    max_scans: int = 4  # stop earlier when a scan finds no dynamic pixel
+    max_scans: int = 1  # stop earlier when a scan finds no dynamic pixel (paper preset 4)
     update: bool = True  # update f, N and C after a write (Sec. 3.2.3)
     use_epipolar: bool = True  # λ3/λ8 terms on (off: weights renormalised)
     use_hog: bool = True  # λ7 term on
 
     # --- correspondences ----------------------------------------------------
-    correspondence: str = "homography+flow"  # N_{r→s}: pre-warp + DIS flow
+    correspondence: str = "gated"  # N_{r→s}: pre-warp + DIS flow gated by H (paper preset "homography+flow")
     flow_preset: str = "medium"  # DIS preset: "fast", "medium", "ultrafast"
     flow_gate: float = 0.02  # "gated": flow kept within this × max side of H
     flow_gate_epipolar_px: float = 0.0  # "gated": also keep flow this close to its epipolar line
 
-    # --- engineered steps (default preset only; all off in "paper") ---------
-    clean_mask: bool = False  # morphological clean-up of L (open/close, holes)
-    min_region_px: int = 0  # drop dynamic components smaller than this
-    refine_tau: float = 0.0  # pixel votes at L's border (postprocess.refine_mask): Lab; 0 = off
+    # --- engineered steps (dynremove.refine; all off in the paper preset) ---
+    clean_mask: bool = True  # morphological clean-up of L (open/close, holes)
+    min_region_px: int = 64  # drop dynamic components smaller than this (paper preset 0)
+    refine_tau: float = 16.0  # pixel votes at L's border (refine.mask.refine_mask): Lab; 0 = off
     refine_shrink_frac: float = 0.8  # drop a rim pixel when this share of sources agree
     refine_rim_px: int = 3  # width of the inner rim that may be dropped
     refine_ring_px: int = 6  # width of the outer ring that may be added (no source agrees)
     refine_iters: int = 2  # refinement passes
-    snap: bool = False  # GrabCut the map's border onto colour edges (postprocess.snap_to_edges)
+    snap: bool = True  # GrabCut the map's border onto colour edges (refine.mask.snap_to_edges)
     snap_inner_px: int = 6  # deeper than this inside the map: sure object
     snap_outer_px: int = 12  # ring of probable background around the map
     snap_iters: int = 3  # GrabCut iterations
-    fuse: bool = False  # refill L from all sources (fusion.fuse_background)
+    fuse: bool = True  # refill L from all sources (refine.fill.fuse_background)
     fuse_margin_px: int = 2  # the fused region is L dilated by this
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
-    fuse_realign: int = 0  # passes re-measuring the matches from the cleaned reference
+    fuse_realign: int = 2  # passes re-measuring the matches from the cleaned reference (paper preset 0)
     fuse_realign_max_px: float = 8.0  # a re-measured match may move at most this far
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
@@ -137,13 +148,16 @@ class Params:
         return dataclasses.asdict(self)
 
 
-PAPER = Params()
 # Chosen on the even-indexed DAVIS sets, checked on the odd ones (README "Results"):
 # flow gated by the homography (flow follows slow objects), one scan (more scans
-# re-flag thousands of written pixels and lower J), t_r 0.3, and a cleaned L.
-DEFAULT = Params(patch_size=13, t_r=0.3, correspondence="gated", max_scans=1,
-                 clean_mask=True, min_region_px=64, refine_tau=16.0, snap=True,
-                 fuse=True, fuse_realign=2)
+# re-flag thousands of written pixels and lower J), t_r 0.3, a cleaned L, border
+# votes, GrabCut snapping and the fused fill. These are the field defaults.
+DEFAULT = Params()
+# The method as written: the paper's ungated flow and four alternating scans, p 9,
+# t_r 0.4, and none of the engineered steps of dynremove.refine.
+PAPER = Params(patch_size=9, t_r=0.4, correspondence="homography+flow", max_scans=4,
+               clean_mask=False, min_region_px=0, refine_tau=0.0, snap=False,
+               fuse=False, fuse_realign=0)
 
 PRESETS: dict[str, Params] = {"default": DEFAULT, "paper": PAPER}
 

@@ -1,27 +1,34 @@
-"""The whole method: features → geometry → correspondences → scans → result."""
+"""The whole run: features → geometry → correspondences → scans → refine → result.
+
+``dynremove.method`` (the paper) then ``dynremove.refine`` (the default preset's
+engineered steps, each switched by ``Params``).
+"""
 
 from __future__ import annotations
 
+import platform
 import time
 import warnings
+from importlib.metadata import PackageNotFoundError, version
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import cv2
+import numba
 import numpy as np
 import numpy.typing as npt
 
-from dynremove import correspondence, features, fusion, geometry, postprocess
+from dynremove.errors import InputError
 from dynremove.events import EventSink, NullSink, RunInfo
+from dynremove.method import correspondence, features, geometry
+from dynremove.method.scan import _kernels as kn
+from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
 from dynremove.params import DEFAULT, Params
-from dynremove.scan import _kernels as kn
-from dynremove.scan.driver import ScanInputs, pack_params, run_scans
+from dynremove.refine.fill import fuse_background
+from dynremove.refine.mask import refine_mask, snap_to_edges
+from dynremove.refine.morphology import clean_mask
 
 Progress = Callable[[str, float], None]
-
-
-class InputError(ValueError):
-    """The inputs cannot be processed (the CLI exits with code 2)."""
 
 
 @dataclass
@@ -198,18 +205,18 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     stages = {"scan": L}  # the same array as Result.dynamic_raw
     dyn = L.copy()
     if params.clean_mask:
-        dyn = stages["clean"] = postprocess.clean_mask(L, params)
+        dyn = stages["clean"] = clean_mask(L, params)
     cov = _coverage(st, params)
     clean = st.img
     ref_img = np.asarray(images[ref])
     if progress and (params.refine_tau > 0 or params.snap):
         progress("refine", 0.0)
     if params.refine_tau > 0:
-        dyn = stages["votes"] = postprocess.refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
+        dyn = stages["votes"] = refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
         if progress:
             progress("refine", 0.5 if params.snap else 1.0)
     if params.snap:
-        dyn = stages["snap"] = postprocess.snap_to_edges(ref_img, dyn, params)
+        dyn = stages["snap"] = snap_to_edges(ref_img, dyn, params)
         if progress:
             progress("refine", 1.0)
     timings["refine"] = time.perf_counter() - t
@@ -217,7 +224,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     if params.fuse:
         if progress:
             progress("fusion", 0.0)
-        clean, _ = fusion.fuse_background(
+        clean, _ = fuse_background(
             ref_img, st.src_img, st.Nf, dyn, margin_px=params.fuse_margin_px,
             combine=params.fuse_combine,
             realign=params.fuse_realign, homographies=[v.H for v in views],
@@ -244,13 +251,16 @@ def _coverage(st: ScanInputs, params: Params) -> np.ndarray:
     return kn._appearance_support(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, pf)
 
 
+def _dist_version(name: str) -> str:
+    """Installed version of a distribution, without importing it (sklearn: ~1.5 s)."""
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return "unknown"
+
+
 def _versions() -> dict[str, str]:
-    import platform
-
-    import numba
-    import sklearn
-
-    import dynremove
-    return {"dynremove": dynremove.__version__, "numpy": np.__version__,
+    return {"dynremove": _dist_version("dynremove"), "numpy": np.__version__,
             "opencv": cv2.__version__, "numba": numba.__version__,
-            "scikit-learn": sklearn.__version__, "python": platform.python_version()}
+            "scikit-learn": _dist_version("scikit-learn"),
+            "python": platform.python_version()}

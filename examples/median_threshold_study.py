@@ -2,7 +2,7 @@
 
 For each alignment mode ("homography", "homography+flow") and each DAVIS set
 (reference = middle image of the sorted frames), the median background is
-computed once, then :func:`dynremove.baselines.median_detect` is run for every
+computed once, then :func:`dynremove.evaluation.baselines.median_detect` is run for every
 candidate threshold and scored by Jaccard against the reference's GT mask. The
 threshold with the best MEAN Jaccard over all sets is reported per mode, with the
 per-set Jaccard at that value and the run time of the baseline per set.
@@ -18,8 +18,6 @@ is written to disk.
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
 import os
 import sys
 import time
@@ -29,26 +27,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from dynremove.evaluation import baselines, metrics
+
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_THRESHOLDS = (6, 8, 10, 12, 15, 18, 22, 26, 30)
-
-
-def _load(name: str):
-    """``dynremove.<name>``; falls back to the file if the package is mid-edit."""
-    try:
-        return importlib.import_module(f"dynremove.{name}")
-    except ImportError:
-        if f"_dynremove_{name}" in sys.modules:
-            return sys.modules[f"_dynremove_{name}"]
-        path = REPO / "dynremove" / f"{name}.py"
-        spec = importlib.util.spec_from_file_location(f"_dynremove_{name}", path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = mod
-        spec.loader.exec_module(mod)
-        return mod
-
-
-baselines = _load("baselines")  # workers re-load by name (see study_set)
 
 
 def default_data() -> Path:
@@ -58,7 +40,6 @@ def default_data() -> Path:
 
 def load_set(set_dir: Path) -> tuple[list[np.ndarray], int, np.ndarray]:
     """Frames (BGR), reference index (middle) and the reference GT mask."""
-    metrics = _load("metrics")
     frames = sorted((set_dir / "frames").glob("*.jpg"))
     if not frames:
         raise FileNotFoundError(f"no frames in {set_dir / 'frames'}")
@@ -72,7 +53,6 @@ def load_set(set_dir: Path) -> tuple[list[np.ndarray], int, np.ndarray]:
 def study_set(set_dir: Path, align: str, thresholds, seed: int) -> dict:
     """Jaccard per threshold for one set and one alignment mode."""
     cv2.setNumThreads(1)  # parallelism comes from joblib
-    baselines, metrics = _load("baselines"), _load("metrics")
     images, ref, gt = load_set(set_dir)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", baselines.AlignmentFallbackWarning)

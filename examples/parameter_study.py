@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 from joblib import Parallel, delayed
 
-from dynremove.evaluate import find_sets, load_set
-from dynremove.metrics import jaccard
+from dynremove.evaluation.evaluate import find_sets, load_set
+from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params, preset
 from dynremove.pipeline import remove_dynamic
 

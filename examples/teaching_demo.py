@@ -13,8 +13,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from dynremove import preset, remove_dynamic, synth
-from dynremove.metrics import jaccard
+from dynremove import preset, remove_dynamic
+from dynremove.evaluation import synth
+from dynremove.evaluation.metrics import jaccard
 from viewer import RerunSink
 
 REPO = Path(__file__).resolve().parents[1]

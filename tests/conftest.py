@@ -22,7 +22,7 @@ def rng():
 
 @pytest.fixture(scope="session")
 def small_scene():
-    from dynremove import synth
+    from dynremove.evaluation import synth
 
     return synth.make_scene(seed=3, n_views=5, size=(72, 96), n_objects=1)
 

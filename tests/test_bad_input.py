@@ -20,10 +20,11 @@ import cv2
 import numpy as np
 import pytest
 
-from dynremove import io, preset, remove_dynamic, synth
+from dynremove import io, preset, remove_dynamic
+from dynremove.evaluation import synth
 from dynremove.cli import main
 from dynremove.params import Params
-from dynremove.pipeline import InputError
+from dynremove.errors import InputError
 
 H, W = 48, 64
 FAST = ["--max-side", "64", "--max-scans", "2"]  # keep full runs tiny

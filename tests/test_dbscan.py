@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from sklearn.cluster import DBSCAN
 
-from dynremove.scan._kernels import _dbscan
+from dynremove.method.scan._kernels import _dbscan
 
 
 @pytest.mark.parametrize("min_pts", [1, 2, 3, 4])

@@ -8,11 +8,11 @@ import numpy as np
 import numpy.testing as npt
 import pytest
 
-from dynremove import geometry
-from dynremove.params import Params
-from dynremove.scan import _kernels as kn
-from dynremove.scan import reference as R
-from dynremove.scan.driver import pack_params
+from dynremove.method import geometry
+from dynremove.params import PAPER
+from dynremove.method.scan import _kernels as kn
+from dynremove.method.scan import reference as R
+from dynremove.method.scan.driver import pack_params
 
 # F of a pure x-translation: epipolar lines are the rows, x_sᵀ F x_r = y_r − y_s
 F_TX = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -56,7 +56,7 @@ def _tiny_features():
 
 
 def test_C_s_equation_1():
-    p = Params(sift_scale=1.0, coord_scale_px=1.0)
+    p = PAPER.replace(sift_scale=1.0, coord_scale_px=1.0)
     u = 0.025  # SIFT unit: distance 10 → 0.25 = σ_g
     pf, pi = pack_params(p, sift_unit=u)
     fc_r, fg_r, fc_s, fg_s = _tiny_features()
@@ -80,7 +80,7 @@ def test_C_s_equation_1():
 
 
 def test_C_s_without_epipolar_keeps_total_weight():
-    p = Params(use_epipolar=False)
+    p = PAPER.replace(use_epipolar=False)
     pf, pi = pack_params(p, sift_unit=0.025)
     fc_r, fg_r, fc_s, fg_s = _tiny_features()
     fc_s[0, 1, 2] = fc_r[1, 1]
@@ -92,7 +92,7 @@ def test_C_s_without_epipolar_keeps_total_weight():
 
 def test_B_and_M_on_a_hand_made_pixel():
     """Three candidates: two agree (one cluster), one is far (noise / own cluster)."""
-    p = Params(dbscan_eps=0.5, dbscan_min_pts=1, sift_scale=1.0)
+    p = PAPER.replace(dbscan_eps=0.5, dbscan_min_pts=1, sift_scale=1.0)
     u = 0.025
     pf, pi = pack_params(p, sift_unit=u)
     ctx = R._Ctx(pf, pi, np.zeros((1, 3, 3)), np.array([False]))

@@ -11,9 +11,10 @@ import cv2
 import numpy as np
 import pytest
 
-from dynremove import composite, synth
+from dynremove.evaluation import composite
+from dynremove.evaluation import synth
 from dynremove.cli import main
-from dynremove.evaluate import METHODS, find_sets, run_eval
+from dynremove.evaluation.evaluate import METHODS, find_sets, run_eval
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +98,7 @@ def test_composite_layout_and_determinism(tmp_path):
 
 
 def test_composite_masks_are_the_pasted_alpha(tmp_path):
-    from dynremove.evaluate import find_sets
+    from dynremove.evaluation.evaluate import find_sets
 
     _static_set(tmp_path / "static")
     synth.write_scene(synth.make_scene(seed=4, n_views=5, size=(120, 160), n_objects=1),
@@ -122,7 +123,7 @@ def test_composite_masks_are_the_pasted_alpha(tmp_path):
 
 
 def test_eval_full_size_and_ablation_skips_unknown_fields(data, tmp_path, monkeypatch, capsys):
-    from dynremove import evaluate
+    from dynremove.evaluation import evaluate
 
     out = tmp_path / "a.json"
     monkeypatch.setitem(evaluate.ABLATIONS, "bogus", {"no_such_field": 1})
@@ -143,7 +144,7 @@ DATA = Path(os.environ.get("DYNREMOVE_DATA", Path(__file__).resolve().parents[2]
 @pytest.mark.skipif(not (DATA / "static/fountain-P11").is_dir() or not (DATA / "davis/camel").is_dir(),
                     reason="needs shared/data (static/fountain-P11 and davis/camel)")
 def test_composite_on_real_data(tmp_path):
-    from dynremove.evaluate import find_sets
+    from dynremove.evaluation.evaluate import find_sets
 
     objs = find_sets(DATA / "davis", "camel")
     info = composite.make_composite(DATA / "static/fountain-P11", DATA / "davis",

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynremove import fusion, postprocess, preset, synth
-from dynremove.metrics import jaccard, psnr_in_mask
+from dynremove import preset
+from dynremove.evaluation import synth
+from dynremove.refine import fields, fill, mask, morphology
+from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 
 
 def _disc_hole(H, W, cx, cy, r):
@@ -21,21 +23,21 @@ def test_harmonic_fill_reproduces_a_linear_field():
     hole = _disc_hole(H, W, 70, 60, 30) | _disc_hole(H, W, 130, 30, 12)
     broken = field.copy()
     broken[hole] = 1e3  # garbage under the hole must not leak out
-    out = fusion.harmonic_fill(broken, hole)
+    out = fields.harmonic_fill(broken, hole)
     np.testing.assert_array_equal(out[~hole], field[~hole])  # valid pixels untouched
     assert np.abs(out[hole] - field[hole]).max() < 0.1  # a plane is a membrane
     # the quick Gaussian interpolation is biased on the same field
-    gauss = fusion.interpolate_field(broken, hole)
+    gauss = fields.interpolate_field(broken, hole)
     assert np.abs(gauss[hole] - field[hole]).max() > 5 * np.abs(out[hole] - field[hole]).max()
 
 
 def test_harmonic_fill_edge_cases():
     f = np.ones((30, 40, 2), np.float32)
-    np.testing.assert_array_equal(fusion.harmonic_fill(f, np.zeros((30, 40), bool)), f)
-    np.testing.assert_array_equal(fusion.harmonic_fill(f, np.ones((30, 40), bool)), f)
+    np.testing.assert_array_equal(fields.harmonic_fill(f, np.zeros((30, 40), bool)), f)
+    np.testing.assert_array_equal(fields.harmonic_fill(f, np.ones((30, 40), bool)), f)
     tiny = np.zeros((8, 8), bool)
     tiny[3:5, 3:5] = True
-    np.testing.assert_allclose(fusion.harmonic_fill(np.ones((8, 8, 1), np.float32), tiny), 1.0)
+    np.testing.assert_allclose(fields.harmonic_fill(np.ones((8, 8, 1), np.float32), tiny), 1.0)
 
 
 @pytest.fixture(scope="module")
@@ -53,10 +55,10 @@ def test_fuse_with_true_matches_restores_the_background(scene):
     sources, Nf = _true_fields(scene)
     ref = scene.images[scene.ref_index]
     gt = scene.masks[scene.ref_index]
-    clean, n_valid = fusion.fuse_background(ref, sources, Nf, gt)
+    clean, n_valid = fill.fuse_background(ref, sources, Nf, gt)
     assert psnr_in_mask(clean, scene.background, gt) > 26.0  # input: ~10 dB
     assert psnr_in_mask(ref, scene.background, gt) < 15.0
-    outside = ~postprocess.dilate_disc(gt, 2)
+    outside = ~morphology.dilate_disc(gt, 2)
     np.testing.assert_array_equal(clean[outside], ref[outside])  # only the region is written
     assert (n_valid[gt] == len(sources)).mean() > 0.9
 
@@ -66,18 +68,18 @@ def test_fuse_rejects_bad_arguments(scene):
     ref = scene.images[scene.ref_index]
     gt = scene.masks[scene.ref_index]
     with pytest.raises(ValueError, match="combine"):
-        fusion.fuse_background(ref, sources, Nf, gt, combine="mean")
+        fill.fuse_background(ref, sources, Nf, gt, combine="mean")
     with pytest.raises(ValueError, match="homographies"):
-        fusion.fuse_background(ref, sources, Nf, gt, realign=1)
+        fill.fuse_background(ref, sources, Nf, gt, realign=1)
     empty = np.zeros_like(gt)
-    np.testing.assert_array_equal(fusion.fuse_background(ref, sources, Nf, empty)[0], ref)
+    np.testing.assert_array_equal(fill.fuse_background(ref, sources, Nf, empty)[0], ref)
 
 
 def test_source_votes_separate_object_from_background(scene):
     sources, Nf = _true_fields(scene)
     ref = scene.images[scene.ref_index]
     gt = scene.masks[scene.ref_index]
-    D = fusion.source_votes(ref, sources, Nf, np.zeros_like(gt))
+    D = fields.source_votes(ref, sources, Nf, np.zeros_like(gt))
     agree = (D < 16.0).sum(0)
     # background pixels: nearly every source agrees; object pixels: nearly none
     assert np.median(agree[~gt]) == len(sources)
@@ -89,15 +91,15 @@ def test_refine_mask_fixes_a_too_wide_and_a_too_narrow_map(scene):
     ref = scene.images[scene.ref_index]
     gt = scene.masks[scene.ref_index]
     params = preset("default")
-    wide = postprocess.dilate_disc(gt, 3)  # the p/2 halo of the scan
-    refined = postprocess.refine_mask(ref, sources, Nf, wide, params)
+    wide = morphology.dilate_disc(gt, 3)  # the p/2 halo of the scan
+    refined = mask.refine_mask(ref, sources, Nf, wide, params)
     assert jaccard(refined, gt) > jaccard(wide, gt) + 0.05
     # a map that stops short of the object's outline grows back
-    cut = gt & ~postprocess.dilate_disc(~gt, 4)
-    regrown = postprocess.refine_mask(ref, sources, Nf, cut, params)
+    cut = gt & ~morphology.dilate_disc(~gt, 4)
+    regrown = mask.refine_mask(ref, sources, Nf, cut, params)
     assert jaccard(regrown, gt) > jaccard(cut, gt) + 0.03
     # nothing far from the map changes
-    far = ~postprocess.dilate_disc(wide, params.refine_ring_px * params.refine_iters + 2)
+    far = ~morphology.dilate_disc(wide, params.refine_ring_px * params.refine_iters + 2)
     assert not refined[far].any()
 
 
@@ -108,9 +110,9 @@ def test_snap_to_edges_moves_the_border_onto_the_object():
     obj = _disc_hole(H, W, 60, 60, 25) | _disc_hole(H, W, 115, 70, 15)
     img[obj] = np.clip(rng.normal((40, 60, 200), 12, (int(obj.sum()), 3)), 0, 255)
     params = preset("default")
-    for start in (postprocess.dilate_disc(obj, 5), obj & ~postprocess.dilate_disc(~obj, 4)):
-        snapped = postprocess.snap_to_edges(img, start, params)
+    for start in (morphology.dilate_disc(obj, 5), obj & ~morphology.dilate_disc(~obj, 4)):
+        snapped = mask.snap_to_edges(img, start, params)
         assert jaccard(start, obj) < 0.85
         assert jaccard(snapped, obj) > 0.95
     empty = np.zeros((H, W), bool)
-    assert not postprocess.snap_to_edges(img, empty, params).any()
+    assert not mask.snap_to_edges(img, empty, params).any()

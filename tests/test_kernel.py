@@ -8,7 +8,7 @@ import pytest
 from dynremove import MemorySink, preset
 from dynremove.events import replay_replacements
 from dynremove.pipeline import prepare
-from dynremove.scan.driver import run_scans
+from dynremove.method.scan.driver import run_scans
 
 
 def _both(scene, params, **kw):

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 
 
-from dynremove import metrics  # noqa: E402
+from dynremove.evaluation import metrics  # noqa: E402
 
 
 @pytest.fixture

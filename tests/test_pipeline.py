@@ -8,9 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from dynremove import MemorySink, NullSink, preset, remove_dynamic, synth
+from dynremove import MemorySink, NullSink, preset, remove_dynamic
+from dynremove.evaluation import synth
 from dynremove.cli import main
-from dynremove.metrics import jaccard, psnr_in_mask
+from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 
 
 @pytest.fixture(scope="module")

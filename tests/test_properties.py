@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from dynremove import MemorySink, preset, remove_dynamic
 from dynremove.events import replay_replacements
-from dynremove.pipeline import InputError
+from dynremove.errors import InputError
 
 SETTINGS = settings(max_examples=15, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.too_slow])

@@ -1,10 +1,9 @@
-"""Tests of the synthetic scene generator ``dynremove.synth``."""
+"""Tests of the synthetic scene generator ``dynremove.evaluation.synth``."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
+
 
 import cv2
 import numpy as np
@@ -12,14 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-try:
-    from dynremove import synth
-except Exception:  # the rest of the package may be mid-edit: load the file alone
-    _path = Path(__file__).resolve().parents[1] / "dynremove" / "synth.py"
-    _spec = importlib.util.spec_from_file_location("_dynremove_synth", _path)
-    synth = importlib.util.module_from_spec(_spec)
-    sys.modules[_spec.name] = synth
-    _spec.loader.exec_module(synth)
+from dynremove.evaluation import synth
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,8 @@ import cv2
 import numpy as np
 import pytest
 
-from dynremove import preset, remove_dynamic, synth
+from dynremove import preset, remove_dynamic
+from dynremove.evaluation import synth
 from dynremove.cli import main
 
 OUTPUTS = ("clean.png", "dynamic_mask.png", "coverage.png", "report.json")

@@ -12,7 +12,8 @@ pytest.importorskip("rerun")
 
 from test_viewer import cli_env, counts_of  # noqa: E402
 
-from dynremove import MemorySink, NullSink, preset, remove_dynamic, synth  # noqa: E402
+from dynremove import MemorySink, NullSink, preset, remove_dynamic  # noqa: E402
+from dynremove.evaluation import synth  # noqa: E402
 from dynremove.cli import main  # noqa: E402
 from dynremove.events import replay_replacements  # noqa: E402
 from viewer import RerunSink, serve  # noqa: E402

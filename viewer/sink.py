@@ -32,7 +32,7 @@ from dynremove.events import EventBatch, RunInfo, ScanState, WHY_PROBE
 from viewer import paths as P
 from viewer._images import (CLASS_COLORS, cluster_colors, colormap, encode_jpeg,
                             encode_png, error_labels, jaccard)
-from viewer.blueprint import make_blueprint
+from viewer.blueprint import make_blueprint, make_compare_blueprint
 
 _DIRECTION = {1: "top-left → bottom-right", -1: "bottom-right → top-left"}
 _STAT_STYLE = {  # name: (RGB, label)
@@ -554,8 +554,6 @@ def open_compare_stream(path: str | Path, source_names: list[str], *, roots: lis
 
     The caller passes it as ``rec`` to one RerunSink per run and disconnects it.
     """
-    from viewer.blueprint import make_compare_blueprint
-
     rec = rr.RecordingStream(application_id, recording_id=f"dynremove-{uuid.uuid4().hex[:12]}")
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     rec.save(Path(path), default_blueprint=make_compare_blueprint(source_names, roots))

@@ -13,6 +13,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from dynremove.method.geometry import apply_homography, sampson_sq
+
 _DIS_PRESETS = {
     "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
     "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
@@ -24,15 +26,6 @@ def pixel_grid(H: int, W: int) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.
     """x and y coordinates of every pixel, two (H, W) float32 arrays."""
     ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
     return xs, ys
-
-
-def apply_homography(Hm: npt.NDArray[np.float64], xs: np.ndarray, ys: np.ndarray):
-    """Map points (x, y) by a 3×3 homography; returns float32 (x', y')."""
-    den = Hm[2, 0] * xs + Hm[2, 1] * ys + Hm[2, 2]
-    den = np.where(np.abs(den) < 1e-12, 1e-12, den)
-    xo = (Hm[0, 0] * xs + Hm[0, 1] * ys + Hm[0, 2]) / den
-    yo = (Hm[1, 0] * xs + Hm[1, 1] * ys + Hm[1, 2]) / den
-    return xo.astype(np.float32), yo.astype(np.float32)
 
 
 def dis_flow(gray_a: npt.NDArray[np.uint8], gray_b: npt.NDArray[np.uint8], *,
@@ -86,8 +79,6 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
             far = np.hypot(mx - hx, my - hy) > gate_px
             if F is not None and epipolar_px > 0:
                 # parallax moves matches along epipolar lines: keep those flows too
-                from dynremove.geometry import sampson_sq
-
                 on_line = sampson_sq(F, np.stack([xs, ys], -1),
                                      np.stack([mx, my], -1)) <= epipolar_px ** 2
                 far &= ~on_line

@@ -3,37 +3,59 @@ speed ratio of the compiled scan against the readable reference (same run)."""
 
 from __future__ import annotations
 
-import argparse
 import resource
 import sys
+import tempfile
 import time
 import warnings
+from pathlib import Path
+from typing import Callable
 
-
-from dynremove import io, synth
-from dynremove.events import MemorySink, NullSink
+from dynremove import io
+from dynremove.events import EventSink, MemorySink, NullSink
+from dynremove.evaluation import synth
+from dynremove.method.scan.driver import run_scans
+from dynremove.params import DEFAULT, Params
 from dynremove.pipeline import prepare, remove_dynamic
-from dynremove.scan.driver import run_scans
+
+RecordingSink = Callable[[Path, object], EventSink]
 
 
 def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def run_bench(args: argparse.Namespace, *, recording_sink=None) -> int:
-    """``recording_sink(path, gt_mask)`` makes the sink whose cost is measured
-    (the CLI passes viewer.RerunSink; the core never imports the viewer)."""
-    from dynremove.cli import params_from_args
+def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
+              size: tuple[int, int] = (854, 480), views: int = 7, repeat: int = 1,
+              reference: bool = True, json_path: str | Path | None = "out/bench.json",
+              quiet: bool = False, recording_sink: RecordingSink | None = None) -> dict:
+    """Time the pipeline on a synthetic scene; print a table and return the figures.
 
-    params = params_from_args(args)
-    try:
-        W, H = (int(v) for v in args.size.lower().split("x"))
-    except ValueError:
-        raise ValueError(f"--size must be WxH, got {args.size!r}") from None
-    say = (lambda m: None) if args.quiet else (lambda m: print(m, file=sys.stderr))
-    scene = synth.make_scene(seed=0, n_views=args.views, size=(H, W))
+    Parameters
+    ----------
+    params : Params
+        The parameters timed; ``preset_name`` only labels them in the output.
+    size : (W, H)
+        Image size of the synthetic scene (pixels).
+    views : int
+        Number of images.
+    repeat : int
+        Timed runs after the warm-up (the fastest is reported).
+    reference : bool
+        Also time one scan of the readable reference kernel on a small crop.
+    json_path : path, optional
+        Where to write the figures as JSON (None: not written).
+    quiet : bool
+        No progress lines on stderr.
+    recording_sink : callable, optional
+        ``recording_sink(path, gt_mask)`` makes the sink whose cost is measured
+        (the CLI passes ``viewer.RerunSink``; dynremove never imports the viewer).
+    """
+    W, H = size
+    say = (lambda m: None) if quiet else (lambda m: print(m, file=sys.stderr))
+    scene = synth.make_scene(seed=0, n_views=views, size=(H, W))
     ref = scene.ref_index
-    say(f"bench: {args.views} synthetic views {W}x{H}, preset {args.preset}; warm-up (JIT) ...")
+    say(f"bench: {views} synthetic views {W}x{H}, preset {preset_name}; warm-up (JIT) ...")
     t = time.perf_counter()
     small = [im[: min(H, 64), : min(W, 96)].copy() for im in scene.images]
     with warnings.catch_warnings():
@@ -41,7 +63,7 @@ def run_bench(args: argparse.Namespace, *, recording_sink=None) -> int:
         remove_dynamic(small, ref=ref, params=params)  # compiles (or loads the cache)
     warm = time.perf_counter() - t
     runs = []
-    for i in range(max(1, args.repeat)):
+    for i in range(max(1, repeat)):
         t = time.perf_counter()
         res = remove_dynamic(scene.images, ref=ref, params=params)
         wall = time.perf_counter() - t
@@ -58,27 +80,24 @@ def run_bench(args: argparse.Namespace, *, recording_sink=None) -> int:
     wall_mem = time.perf_counter() - t
     rec = _recording_cost(scene, params, recording_sink) if recording_sink else {}
     out = {
-        "size": [W, H], "views": args.views, "preset": args.preset,
+        "size": [W, H], "views": views, "preset": preset_name,
         "warmup_s": warm, "end_to_end_s": wall, "end_to_end_all_s": [r[0] for r in runs],
         "stages_s": {k: float(v) for k, v in res.timings.items()},
         "scans": per_scan, "peak_rss_mb": _peak_rss_mb(),
         "memory_sink_end_to_end_s": wall_mem,
         **rec,
     }
-    if not args.no_reference:
+    if reference:
         out["kernel_vs_reference"] = _kernel_ratio(scene, params)
     _print_table(out)
-    if args.json:
-        io.write_json(args.json, out)
-        print(f"wrote {args.json}")
-    return 0
+    if json_path:
+        io.write_json(json_path, out)
+        print(f"wrote {json_path}")
+    return out
 
 
 def _recording_cost(scene, params, make_sink) -> dict:
     """End-to-end seconds and .rrd size with a recording at the default cadence."""
-    import tempfile
-    from pathlib import Path
-
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "bench.rrd"
         t = time.perf_counter()

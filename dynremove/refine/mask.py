@@ -1,9 +1,8 @@
-"""Clean-up and border refinement of the dynamic map L (default preset only).
+"""Border refinement of the dynamic map L (default preset only).
 
-The scans label pixels one at a time, so L has isolated false positives and
-pin holes. Morphological opening then closing (a disc of ~p/2), dropping
-components smaller than ``min_region_px`` and filling enclosed holes give a
-map that matches how objects look (measured: README "Results").
+Two steps after the scans, each a ``Params`` switch: pixel votes of the
+sources at L's border (``refine_mask``, ``Params.refine_tau``) and a graph cut
+of the border onto colour edges (``snap_to_edges``, ``Params.snap``).
 """
 
 from __future__ import annotations
@@ -13,48 +12,8 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.params import Params
-
-
-def disc(r: int) -> np.ndarray:
-    """Disc structuring element of radius ``r`` ((2r+1)², uint8)."""
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
-
-
-def dilate_disc(m: np.ndarray, r: int) -> npt.NDArray[np.bool_]:
-    """``m`` (bool) dilated by a disc of radius ``r``; a copy when ``r`` <= 0."""
-    if r <= 0:
-        return np.asarray(m, bool).copy()
-    return cv2.dilate(np.asarray(m, np.uint8), disc(r)).astype(bool)
-
-
-def clean_mask(L: npt.NDArray[np.bool_], params: Params) -> npt.NDArray[np.bool_]:
-    """Open, close, drop small components and fill holes of a (H, W) bool map."""
-    m = L.astype(np.uint8)
-    k = disc(max(1, params.patch_size // 4))
-    m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
-    m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, k)
-    if params.min_region_px > 0:
-        m = drop_small(m, params.min_region_px)
-    m = fill_holes(m)
-    return m.astype(bool)
-
-
-def drop_small(m: np.ndarray, min_px: int) -> np.ndarray:
-    n, lab, stats, _ = cv2.connectedComponentsWithStats(m.astype(np.uint8), connectivity=8)
-    keep = np.zeros(n, bool)
-    keep[1:] = stats[1:, cv2.CC_STAT_AREA] >= min_px
-    return keep[lab].astype(np.uint8)
-
-
-def fill_holes(m: np.ndarray) -> np.ndarray:
-    """Fill background regions not connected to the image border."""
-    inv = (m == 0).astype(np.uint8)
-    n, lab = cv2.connectedComponents(inv, connectivity=4)
-    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
-    hole = (lab > 0) & ~np.isin(lab, border)
-    out = m.copy()
-    out[hole] = 1
-    return out
+from dynremove.refine.fields import source_votes
+from dynremove.refine.morphology import clean_mask, dilate_disc, disc, drop_small, fill_holes
 
 
 def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
@@ -64,7 +23,7 @@ def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
     The scan decides on p×p patches, so L overshoots every object by up to
     p/2 pixels and can stop short of a part whose patches looked static. Near
     the border of the map, the pixel itself is put to the sources' vote
-    (``fusion.source_votes``: Lab distance to each source through the
+    (``fields.source_votes``: Lab distance to each source through the
     background field): a pixel of the inner rim (``refine_rim_px`` wide) is
     dropped when at least ``refine_shrink_frac`` of the sources agree with it
     (distance < ``refine_tau``), and a pixel of the outer ring
@@ -73,15 +32,13 @@ def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
     background in some sources, and a pixel vote there would erase it.
     Repeated ``refine_iters`` times (the ring moves with the map).
     """
-    from dynremove import fusion  # fusion builds on this module's morphology
-
     m = mask.copy()
     for _ in range(params.refine_iters):
         mu = m.astype(np.uint8)
         ring = dilate_disc(m, params.refine_ring_px) & ~m
         rim = m & ~cv2.erode(mu, disc(params.refine_rim_px)).astype(bool)
         hole = cv2.dilate((m | ring).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-        D = fusion.source_votes(reference, sources, Nf, hole)
+        D = source_votes(reference, sources, Nf, hole)
         valid = np.isfinite(D).sum(0)
         agree = (D < params.refine_tau).sum(0)
         need = np.maximum(1, np.ceil(params.refine_shrink_frac * valid - 1e-6))
@@ -139,3 +96,6 @@ def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
     if params.min_region_px > 0:
         out = drop_small(out, params.min_region_px).astype(bool)
     return fill_holes(out.astype(np.uint8)).astype(bool)
+
+
+__all__ = ["refine_mask", "snap_to_edges"]

@@ -13,7 +13,7 @@ import math
 import numpy as np
 from sklearn.cluster import DBSCAN
 
-from dynremove.scan import _kernels as kn
+from dynremove.method.scan import _kernels as kn
 
 
 def S_e(d2: float, sigma: float) -> float:

@@ -39,6 +39,12 @@ from typing import Any, Sequence
 import cv2
 import numpy as np
 
+from dynremove import io
+from dynremove.errors import InputError
+from dynremove.evaluation.baselines import estimate_homography
+from dynremove.evaluation.evaluate import find_sets, image_files
+from dynremove.method.geometry import detect, project_homography
+
 MAX_SIDE = 854  # static views are resized so the longer side is at most this
 AREA_RANGE = (0.08, 0.15)  # object area in the reference, fraction of the image
 STEP_RANGE = (0.6, 0.85)  # path step, in units of the object's extent along it
@@ -74,8 +80,6 @@ class _Cut:
 # --------------------------------------------------------------------------- inputs
 def _read_static(static_dir: str | os.PathLike, n_views: int, max_side: int
                  ) -> tuple[list[np.ndarray], list[str], list[Path]]:
-    from dynremove import io
-    from dynremove.pipeline import InputError
 
     paths, _ = io.list_inputs([static_dir])
     if len(paths) < n_views:
@@ -93,8 +97,6 @@ def _read_static(static_dir: str | os.PathLike, n_views: int, max_side: int
 
 
 def _object_sets(objects_dir: str | os.PathLike) -> list:
-    from dynremove.evaluate import find_sets
-    from dynremove.pipeline import InputError
 
     sets = [s for s in find_sets(objects_dir) if any(s.mask_path(f) for f in s.frames)]
     if not sets:
@@ -104,7 +106,6 @@ def _object_sets(objects_dir: str | os.PathLike) -> list:
 
 def _cutouts(es: Any, pad: int) -> list[_Cut]:
     """Every annotated frame of a set, cropped to its mask's box plus ``pad`` px."""
-    from dynremove import io
 
     cuts = []
     for f in es.frames:
@@ -131,15 +132,13 @@ def _cutouts(es: Any, pad: int) -> list[_Cut]:
 def _homographies(statics: Sequence[np.ndarray], ref: int, seed: int
                   ) -> tuple[list[np.ndarray], list[str]]:
     """H_k: reference pixel -> view k pixel (identity for the reference / on failure)."""
-    from dynremove import baselines
-
-    feats = [baselines._sift(cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)) for im in statics]
+    feats = [detect(cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)) for im in statics]
     Hs, failed = [], []
     for k in range(len(statics)):
         if k == ref:
             Hs.append(np.eye(3))
             continue
-        H = baselines._estimate_homography(feats[k], feats[ref], seed)
+        H = estimate_homography(feats[ref], feats[k], seed)
         if H is None:
             failed.append(k)
             H = np.eye(3)
@@ -148,8 +147,8 @@ def _homographies(statics: Sequence[np.ndarray], ref: int, seed: int
 
 
 def _apply_h(H: np.ndarray, p: np.ndarray) -> np.ndarray:
-    q = H @ np.array([p[0], p[1], 1.0])
-    return q[:2] / q[2] if abs(q[2]) > 1e-12 else np.array([np.inf, np.inf])
+    x, y, w = project_homography(H, float(p[0]), float(p[1]))
+    return np.array([x, y]) if abs(w) > 1e-12 else np.array([np.inf, np.inf])
 
 
 # --------------------------------------------------------------------------- pasting
@@ -213,7 +212,6 @@ def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_s
 
     The reference is the middle view (``len(statics) // 2``). Deterministic in ``seed``.
     """
-    from dynremove.pipeline import InputError
 
     if n_objects < 1:
         raise InputError(f"--objects must be >= 1, got {n_objects}")
@@ -323,8 +321,6 @@ def write_composite(comp: Composite, out_dir: str | os.PathLike) -> Path:
     A folder written before by this function is overwritten (its old frames and
     masks removed); any other non-empty ``frames/`` is refused.
     """
-    from dynremove import io
-    from dynremove.pipeline import InputError
 
     out = io.prepare_out_dir(out_dir)
     for sub in ("frames", "masks"):
@@ -352,7 +348,6 @@ def make_composite(static_dir: str | os.PathLike, objects_dir: str | os.PathLike
     ``object_sets`` restricts the objects to these sets (EvalSet) of ``objects_dir``.
     Returns the provenance dict (also written as ``composite.json``).
     """
-    from dynremove.pipeline import InputError
 
     if n_views < 2:
         raise InputError(f"--n-views must be >= 2, got {n_views}")
@@ -366,10 +361,8 @@ def make_composite(static_dir: str | os.PathLike, objects_dir: str | os.PathLike
 
 
 def _static_sets(static_root: Path, n_views: int) -> list[Path]:
-    from dynremove.evaluate import _image_files
-
     dirs = [static_root] + sorted(p for p in static_root.iterdir() if p.is_dir())
-    return [d for d in dirs if len(_image_files(d)) >= n_views]
+    return [d for d in dirs if len(image_files(d)) >= n_views]
 
 
 def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathLike,
@@ -383,7 +376,6 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
     sets while there are enough), with seed derived from ``(seed, i)``. Each is
     written to ``out_root/<static>+<object>[+<object>...]``.
     """
-    from dynremove.pipeline import InputError
 
     root = Path(static_root)
     if not root.is_dir():

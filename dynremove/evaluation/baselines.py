@@ -14,7 +14,9 @@ Built the way a careful user would build them with OpenCV:
   single-image method with an unfair advantage (it is told where the object is).
 
 Images are BGR ``uint8`` arrays ``(H, W, 3)`` indexed ``[y, x]``; points are
-``(x, y)``. The module is standalone (numpy + OpenCV only).
+``(x, y)``. Keypoints, matching, the robust homography fit and its application
+are the method's own (:mod:`dynremove.method.geometry`), and so is the
+convention: a homography maps *reference* pixels to *source* pixels.
 
 Homography fallback
 -------------------
@@ -37,11 +39,15 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from dynremove.method.correspondence import pixel_grid
+from dynremove.method.geometry import detect, fit_homography, match, project_homography
+
 __all__ = [
     "AlignmentFallbackWarning",
     "ALIGN_MODES",
     "MEDIAN_THRESHOLD_LAB",
     "MIN_GOOD_MATCHES",
+    "estimate_homography",
     "align_homography",
     "align_homography_flow",
     "median_stack",
@@ -69,8 +75,6 @@ MEDIAN_THRESHOLD_LAB: Mapping[str, float] = types.MappingProxyType(
 #: Below this many ratio-test matches the homography falls back to identity.
 MIN_GOOD_MATCHES: int = 8
 
-_SIFT_FEATURES = 4000  # cap on SIFT keypoints per image
-_RATIO = 0.75  # Lowe's ratio test
 _MAGSAC_THRESHOLD_PX = 3.0  # reprojection threshold (max sigma) of MAGSAC++
 _MAGSAC_MAX_ITERS = 5000
 _MAGSAC_CONFIDENCE = 0.999
@@ -150,45 +154,40 @@ def _check_align(align: str) -> str:
 # --------------------------------------------------------------------------- alignment
 
 
-def _sift(gray: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """SIFT keypoints as an (N, 2) float32 ``(x, y)`` array plus descriptors."""
-    sift = cv2.SIFT_create(nfeatures=_SIFT_FEATURES)
-    kps, desc = sift.detectAndCompute(gray, None)
-    xy = np.array([kp.pt for kp in kps], np.float32).reshape(-1, 2)
-    return xy, desc
+def _features(bgr: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """SIFT keypoints ``(N, 2)`` ``(x, y)`` and descriptors of a BGR image."""
+    return detect(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY))
 
 
-def _estimate_homography(
-    ref_feat: tuple[np.ndarray, np.ndarray | None],
-    src_feat: tuple[np.ndarray, np.ndarray | None],
+def estimate_homography(
+    feat_a: tuple[np.ndarray, np.ndarray | None],
+    feat_b: tuple[np.ndarray, np.ndarray | None],
     seed: int,
 ) -> np.ndarray | None:
-    """Homography mapping source ``(x, y)`` to reference ``(x, y)``, or None.
+    """Homography mapping image a's ``(x, y)`` to image b's ``(x, y)``, or None.
 
-    Brute-force L2 matching (deterministic, unlike FLANN), Lowe's ratio test,
-    then ``cv2.findHomography`` with MAGSAC++ after seeding OpenCV's RNG.
+    a's keypoints are matched in b (Lowe's ratio test,
+    :func:`~dynremove.method.geometry.match`) and the homography is fitted with
+    MAGSAC++ after seeding OpenCV's RNG
+    (:func:`~dynremove.method.geometry.fit_homography`); a degenerate fit is
+    rejected and the result is scaled so that ``H[2, 2] = 1``.
+    ``feat_a``/``feat_b``: ``(xy, descriptors)`` from
+    :func:`~dynremove.method.geometry.detect`.
     """
-    ref_xy, ref_desc = ref_feat
-    src_xy, src_desc = src_feat
-    if ref_desc is None or src_desc is None or len(ref_xy) < 2 or len(src_xy) < 2:
+    xy_a, desc_a = feat_a
+    xy_b, desc_b = feat_b
+    pairs = match(desc_a, desc_b)
+    if len(pairs) < MIN_GOOD_MATCHES:
         return None
-    matcher = cv2.BFMatcher(cv2.NORM_L2)
-    knn = matcher.knnMatch(src_desc, ref_desc, k=2)
-    good = [p[0] for p in knn if len(p) == 2 and p[0].distance < _RATIO * p[1].distance]
-    if len(good) < MIN_GOOD_MATCHES:
-        return None
-    src_pts = src_xy[[m.queryIdx for m in good]]
-    ref_pts = ref_xy[[m.trainIdx for m in good]]
-    cv2.setRNGSeed(int(seed))
-    H, _inliers = cv2.findHomography(
-        src_pts,
-        ref_pts,
-        cv2.USAC_MAGSAC,
-        _MAGSAC_THRESHOLD_PX,
-        maxIters=_MAGSAC_MAX_ITERS,
+    H, _ = fit_homography(
+        xy_a[pairs[:, 0]],
+        xy_b[pairs[:, 1]],
+        seed=seed,
+        threshold_px=_MAGSAC_THRESHOLD_PX,
+        max_iters=_MAGSAC_MAX_ITERS,
         confidence=_MAGSAC_CONFIDENCE,
     )
-    if H is None or H.shape != (3, 3) or not np.isfinite(H).all():
+    if H is None or not np.isfinite(H).all():
         return None
     if abs(np.linalg.det(H)) < 1e-8:
         return None
@@ -200,8 +199,10 @@ def _homography_or_identity(
     src_feat: tuple[np.ndarray, np.ndarray | None],
     seed: int,
 ) -> tuple[np.ndarray, bool]:
-    H = _estimate_homography(ref_feat, src_feat, seed)
-    if H is None:
+    # fitted source -> reference (the source's keypoints matched in the reference),
+    # then inverted: every homography here maps reference pixels to source pixels
+    H_sr = estimate_homography(src_feat, ref_feat, seed)
+    if H_sr is None:
         warnings.warn(
             f"homography estimation failed (fewer than {MIN_GOOD_MATCHES} good SIFT "
             "matches or no robust fit); falling back to the identity with all "
@@ -210,24 +211,7 @@ def _homography_or_identity(
             stacklevel=3,
         )
         return np.eye(3), True
-    return H, False
-
-
-def _pixel_grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    h, w = shape
-    return np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-
-
-def _project(
-    H: np.ndarray, x: np.ndarray, y: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Apply ``H`` to ``(x, y)`` arrays; also return ``w`` (the projective depth)."""
-    h = H.astype(np.float64)
-    w = h[2, 0] * x + h[2, 1] * y + h[2, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = (h[0, 0] * x + h[0, 1] * y + h[0, 2]) / w
-        v = (h[1, 0] * x + h[1, 1] * y + h[1, 2]) / w
-    return u, v, w
+    return np.linalg.inv(H_sr), False
 
 
 def _inside(u: np.ndarray, v: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
@@ -257,36 +241,34 @@ def _sample(src: np.ndarray, map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray
 
 def _warp_with_homography(
     ref_shape: tuple[int, int], src: np.ndarray, H: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Source sampled in the reference frame; also returns the sampling maps."""
-    x, y = _pixel_grid(ref_shape)
-    map_x, map_y, w = _project(np.linalg.inv(H), x, y)
+) -> tuple[np.ndarray, np.ndarray]:
+    """Source sampled in the reference frame through ``H`` (reference -> source)."""
+    x, y = pixel_grid(*ref_shape)
+    map_x, map_y, w = project_homography(H, x, y)
     valid = _inside(map_x, map_y, src.shape[:2]) & (w > 0)
     warped = _sample(src, map_x, map_y)
     warped[~valid] = 0
-    return warped, valid, map_x, map_y
+    return warped, valid
 
 
 def _align_homography_feat(
     ref: np.ndarray, src: np.ndarray, ref_feat: tuple, seed: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    src_feat = _sift(cv2.cvtColor(src, cv2.COLOR_BGR2GRAY))
-    H, fell_back = _homography_or_identity(ref_feat, src_feat, seed)
+    H, fell_back = _homography_or_identity(ref_feat, _features(src), seed)
     if fell_back:
         return src.copy(), np.ones(ref.shape[:2], bool), H, True
-    warped, valid, _, _ = _warp_with_homography(ref.shape[:2], src, H)
+    warped, valid = _warp_with_homography(ref.shape[:2], src, H)
     return warped, valid, H, False
 
 
 def _align_flow_feat(
     ref: np.ndarray, src: np.ndarray, ref_feat: tuple, seed: int
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    src_feat = _sift(cv2.cvtColor(src, cv2.COLOR_BGR2GRAY))
-    H, fell_back = _homography_or_identity(ref_feat, src_feat, seed)
+    H, fell_back = _homography_or_identity(ref_feat, _features(src), seed)
     shape = ref.shape[:2]
-    x, y = _pixel_grid(shape)
+    x, y = pixel_grid(*shape)
     # Pre-warp with replicated borders so the flow does not chase a black frame.
-    pre_x, pre_y, _ = _project(np.linalg.inv(H), x, y)
+    pre_x, pre_y, _ = project_homography(H, x, y)
     prewarp = _sample(src, pre_x, pre_y)
     ref_gray = cv2.cvtColor(ref, cv2.COLOR_BGR2GRAY)
     pre_gray = cv2.cvtColor(prewarp, cv2.COLOR_BGR2GRAY)
@@ -294,7 +276,7 @@ def _align_flow_feat(
     flow = dis.calc(ref_gray, pre_gray, None)  # ref(p) ~ prewarp(p + flow(p))
     # Compose: reference pixel -> pre-warped frame -> source, then sample the source
     # once (a single bilinear interpolation instead of two).
-    map_x, map_y, w = _project(np.linalg.inv(H), x + flow[..., 0], y + flow[..., 1])
+    map_x, map_y, w = project_homography(H, x + flow[..., 0], y + flow[..., 1])
     valid = _inside(map_x, map_y, src.shape[:2]) & (w > 0)
     if fell_back:
         valid = np.ones(shape, bool)
@@ -329,7 +311,8 @@ def align_homography(
     valid : (H, W) bool ndarray
         Reference pixels whose pre-image falls inside the source image.
     H : (3, 3) float64 ndarray
-        Homography mapping source ``(x, y)`` to reference ``(x, y)``.
+        Homography mapping reference ``(x, y)`` to source ``(x, y)`` (the
+        convention of :mod:`dynremove.method.geometry`).
 
     Warns
     -----
@@ -339,7 +322,7 @@ def align_homography(
         ``H`` is the identity.
     """
     ref, src = _check_pair(ref_bgr, src_bgr)
-    ref_feat = _sift(cv2.cvtColor(ref, cv2.COLOR_BGR2GRAY))
+    ref_feat = _features(ref)
     warped, valid, H, _ = _align_homography_feat(ref, src, ref_feat, seed)
     return warped, valid, H
 
@@ -371,7 +354,7 @@ def align_homography_flow(
     valid : (H, W) bool ndarray
         Reference pixels whose flow-displaced pre-image falls inside the source.
     H : (3, 3) float64 ndarray
-        The pre-warp homography (source ``(x, y)`` to reference ``(x, y)``).
+        The pre-warp homography (reference ``(x, y)`` to source ``(x, y)``).
 
     Warns
     -----
@@ -380,7 +363,7 @@ def align_homography_flow(
         the unwarped source, and ``valid`` is all ``True``).
     """
     ref, src = _check_pair(ref_bgr, src_bgr)
-    ref_feat = _sift(cv2.cvtColor(ref, cv2.COLOR_BGR2GRAY))
+    ref_feat = _features(ref)
     return _align_flow_feat(ref, src, ref_feat, seed)
 
 
@@ -455,7 +438,7 @@ def median_stack(
     imgs, r = _check_images(images, ref_index)
     _check_align(align)
     ref = imgs[r]
-    ref_feat = _sift(cv2.cvtColor(ref, cv2.COLOR_BGR2GRAY))
+    ref_feat = _features(ref)
     V = len(imgs)
     stack = np.empty((V,) + ref.shape, np.uint8)
     valid = np.empty((V,) + ref.shape[:2], bool)

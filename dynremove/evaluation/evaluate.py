@@ -1,4 +1,4 @@
-"""Evaluation on sets with ground truth: ``dynremove eval`` and ``dynremove composite``.
+"""Evaluation on sets with ground truth (``dynremove eval``).
 
 Layout of an evaluation set (DESIGN.md sec. 6)::
 
@@ -38,7 +38,7 @@ Ray is a dependency of dynremove; install them yourself)::
     # Dask
     from dask.distributed import Client
     import joblib
-    from dynremove.evaluate import run_eval
+    from dynremove.evaluation.evaluate import run_eval
     client = Client("tcp://scheduler:8786")          # or Client() for a local one
     with joblib.parallel_config(backend="dask"):
         report = run_eval("data/", jobs=-1)
@@ -57,7 +57,6 @@ identical to a local run (every method is seeded).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import fnmatch
 import math
@@ -68,7 +67,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
+import cv2
 import numpy as np
+from joblib import Parallel, delayed
+
+from dynremove import io
+from dynremove.errors import InputError
+from dynremove.evaluation import baselines
+from dynremove.evaluation.metrics import jaccard, psnr_in_mask, ssim_in_mask
+from dynremove.params import Params, preset
+from dynremove.pipeline import remove_dynamic
 
 METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
@@ -121,12 +129,11 @@ class EvalSet:
         return p if p.is_file() else None
 
 
-def _image_files(folder: Path) -> list[Path]:
-    from dynremove.io import IMAGE_EXTS
-
+def image_files(folder: Path) -> list[Path]:
+    """The image files of a folder (by extension, hidden files skipped), sorted."""
     return sorted(q for q in folder.iterdir()
                   if q.is_file() and not q.name.startswith(".")
-                  and q.suffix.lower() in IMAGE_EXTS)
+                  and q.suffix.lower() in io.IMAGE_EXTS)
 
 
 def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) -> list[EvalSet]:
@@ -136,8 +143,6 @@ def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) 
     name (``davis/camel``) or its last part (``camel``). Sets with fewer than 2
     frames are ignored.
     """
-    from dynremove.pipeline import InputError
-
     root = Path(data_dir)
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")
@@ -154,7 +159,7 @@ def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) 
         if pats and not any(fnmatch.fnmatch(name, p) or fnmatch.fnmatch(set_dir.name, p)
                             for p in pats):
             continue
-        frames = _image_files(fr)
+        frames = image_files(fr)
         if len(frames) >= 2:
             found.append(EvalSet(name=name, path=set_dir, frames=tuple(frames)))
     return sorted(found, key=lambda s: s.name)
@@ -175,10 +180,6 @@ class LoadedSet:
 def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None = None
              ) -> LoadedSet:
     """Read the frames (downscaled as ``io.load_image_set``), the ref mask and background."""
-    import cv2
-
-    from dynremove import io
-
     iset = io.load_image_set(list(es.frames), max_side=max_side)
     r = io.resolve_ref(ref, iset.names)
     H, W = iset.images[0].shape[:2]
@@ -206,8 +207,6 @@ def _finite(x: float | None, cap: float = PSNR_CAP_DB) -> float | None:
 def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None
           ) -> dict[str, float | None]:
     """Jaccard (if a detection and a true mask exist), PSNR/SSIM in the true mask."""
-    from dynremove.metrics import jaccard, psnr_in_mask, ssim_in_mask
-
     out: dict[str, float | None] = {"jaccard": None, "psnr": None, "ssim": None}
     if dynamic is not None and ls.gt is not None:
         out["jaccard"] = float(jaccard(dynamic, ls.gt))
@@ -220,8 +219,6 @@ def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None
 def run_method(method: str, ls: LoadedSet, params: Any | None = None
                ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
     """Run one method on a loaded set: (clean, dynamic, notes); None = not applicable."""
-    from dynremove import baselines
-
     notes: list[str] = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -235,8 +232,6 @@ def run_method(method: str, ls: LoadedSet, params: Any | None = None
             else:
                 clean, dyn = baselines.telea_inpaint(ls.images[ls.ref], ls.gt), None
         else:
-            from dynremove.pipeline import remove_dynamic
-
             if params is None:
                 raise ValueError(f"method {method!r} needs params")
             res = remove_dynamic(ls.images, ref=ls.ref, params=params, names=ls.names)
@@ -255,15 +250,11 @@ def _params_dict(p: Any) -> dict:
 
 
 def _make_params(d: dict) -> Any:
-    from dynremove.params import Params
-
     return Params(**d)
 
 
 def method_params(method: str, chosen: Any) -> Any | None:
     """Params of a pipeline method (``dynremove`` = ``chosen``); None for baselines."""
-    from dynremove.params import preset
-
     if method == "dynremove":
         return chosen
     if method == "paper":
@@ -282,8 +273,6 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
     that raises is recorded with null figures and an ``error`` string, so one
     failing set does not lose the others.
     """
-    import cv2
-
     if single_thread:
         cv2.setNumThreads(1)  # in a worker: parallelism comes from joblib
     t_set = time.perf_counter()
@@ -323,8 +312,6 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
 def _run_parallel(sets: Sequence[EvalSet], variants: Sequence[tuple[str, dict | None]], *,
                   jobs: int, max_side: int | None, ref: str | int | None,
                   on_done: Callable[[int, int, dict], None] | None = None) -> list[dict]:
-    from joblib import Parallel, delayed
-
     results: dict[str, dict] = {}
     tasks = (delayed(eval_set)(es, variants, max_side=max_side, ref=ref, single_thread=True)
              for es in sets)
@@ -370,9 +357,6 @@ def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | Non
              jobs: int = 1, max_side: int | None = None, ref: str | int | None = None,
              progress: bool = True) -> dict:
     """Evaluate ``methods`` on every set below ``data_dir``; returns the JSON report."""
-    from dynremove.params import preset
-    from dynremove.pipeline import InputError
-
     bad = [m for m in methods if m not in METHODS]
     if bad:
         raise InputError(f"unknown method(s) {', '.join(bad)}; choose from {', '.join(METHODS)}")
@@ -411,9 +395,6 @@ def ablation_variants(base: Any, names: Sequence[str] | None = None
     Variants are ``dataclasses.replace(base, **changes)``; robust to Params
     changing: unknown fields or rejected values skip the variant.
     """
-    from dynremove.params import Params
-    from dynremove.pipeline import InputError
-
     fields = {f.name for f in dataclasses.fields(Params)}
     if names:
         unknown = [n for n in names if n not in ABLATIONS]
@@ -448,8 +429,6 @@ def run_ablation(data_dir: str | Path, *, base: Any, names: Sequence[str] | None
                  ref: str | int | None = None, progress: bool = True,
                  preset_name: str = "default") -> dict:
     """Every ablation variant of ``base`` on every set: rows and per-variant means."""
-    from dynremove.pipeline import InputError
-
     variants, notes = ablation_variants(base, names)
     found = find_sets(data_dir, sets)
     if not found:
@@ -532,137 +511,7 @@ def format_ablation(report: dict) -> str:
     return "\n".join(lines + [f"note: {n}" for n in report.get("skipped", [])])
 
 
-# --------------------------------------------------------------------------- CLI
-def parse_max_side(s: str) -> int | None:
-    """``none``/``0`` = full size; ``auto`` = io's default; else pixels."""
-    t = s.strip().lower()
-    if t in ("none", "0", "full"):
-        return 0
-    if t == "auto":
-        return None
-    try:
-        v = int(t)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected pixels, 'none' or 'auto', got {s!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"--max-side must be >= 0, got {v}")
-    return v
-
-
-def _parse_jobs(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
-    if v == 0:
-        raise argparse.ArgumentTypeError("--jobs must not be 0 (use -1 for all cores)")
-    return v
-
-
-def cmd_eval(args: argparse.Namespace, params_from_args: Callable) -> int:
-    from dynremove import io
-    from dynremove.pipeline import InputError
-
-    params = params_from_args(args)
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    if not methods:
-        raise InputError("--methods: empty list")
-    if args.json:
-        out = Path(args.json)
-        if out.is_dir():
-            raise InputError(f"--json {out}: is a folder")
-    progress = not args.quiet
-    if args.ablation:
-        names = [n.strip() for n in (args.variants or "").split(",") if n.strip()] or None
-        report = run_ablation(args.data_dir, base=params, names=names, sets=args.sets,
-                              jobs=args.jobs, max_side=args.max_side, ref=args.ref,
-                              progress=progress, preset_name=args.preset)
-        print(format_ablation(report))
-    else:
-        report = run_eval(args.data_dir, sets=args.sets, params=params,
-                          preset_name=args.preset, methods=methods, jobs=args.jobs,
-                          max_side=args.max_side, ref=args.ref, progress=progress)
-        print(format_table(report))
-    n_sets = len({r["set"] for r in report["sets"]})
-    print(f"{n_sets} sets, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
-          + (f" -> {args.json}" if args.json else ""))
-    if args.json:
-        io.write_json(args.json, report)
-    return 0
-
-
-def cmd_composite(args: argparse.Namespace) -> int:
-    from dynremove import composite
-
-    if args.n_sets:
-        outs = composite.make_composites(args.static_dir, args.objects_dir, args.out,
-                                         n_sets=args.n_sets, seed=args.seed,
-                                         n_views=args.n_views, n_objects=args.objects)
-        for o in outs:
-            print(o)
-        print(f"wrote {len(outs)} composite sets under {args.out}")
-    else:
-        info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
-                                        seed=args.seed, n_views=args.n_views,
-                                        n_objects=args.objects)
-        print(f"wrote {args.out}: {info['n_views']} views {info['size'][0]}x"
-              f"{info['size'][1]}, objects "
-              + ", ".join(o["set"] for o in info["objects"])
-              + f", reference mask {100 * info['ref_mask_fraction']:.1f} %")
-    return 0
-
-
-def add_commands(sub: Any, *, add_param_flags: Callable, params_from_args: Callable) -> None:
-    """Register ``eval`` and ``composite`` on the CLI's sub-parsers."""
-    e = sub.add_parser(
-        "eval", help="Jaccard / PSNR / SSIM of the method and baselines on sets with truth",
-        description="Evaluate on every <set>/frames/ below DATA_DIR (masks/<stem>.png and "
-                    "background.png optional): the method, the paper preset, the median "
-                    "baselines, Telea inpainting with the true mask and the single-scan "
-                    "ablation. Prints a table; --json writes every figure.")
-    e.add_argument("data_dir", metavar="DATA_DIR")
-    e.add_argument("--sets", default=None, metavar="GLOB",
-                   help="only sets whose name matches (comma-separated globs)")
-    e.add_argument("--jobs", type=_parse_jobs, default=1, metavar="N",
-                   help="sets in parallel (joblib; -1 = all cores; default 1)")
-    e.add_argument("--json", default=None, metavar="FILE", help="write the report here")
-    e.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
-                   help="downscale to at most PX ('none' = full size; default: only "
-                        "above 1280 px)")
-    e.add_argument("--ref", default=None,
-                   help="reference: index or file name (default: the middle frame)")
-    e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
-                   help=f"comma-separated subset of {','.join(METHODS)}")
-    e.add_argument("--ablation", action="store_true",
-                   help="instead of the methods: variants of the preset (dataclasses.replace "
-                        "of it, see ABLATIONS); prints mean J / PSNR per variant")
-    e.add_argument("--variants", default=None, metavar="LIST",
-                   help=f"with --ablation: comma-separated subset of {','.join(ABLATIONS)}")
-    e.add_argument("--quiet", action="store_true", help="no per-set progress on stderr")
-    add_param_flags(e)
-    e.set_defaults(fn=lambda a: cmd_eval(a, params_from_args))
-
-    c = sub.add_parser(
-        "composite", help="paste real moving objects into a static multi-view set",
-        description="Cut objects out of a DAVIS-style folder (<set>/frames, <set>/masks) "
-                    "and paste them, moving, into consecutive views of a static set. "
-                    "Writes DIR/frames/, DIR/masks/ (0/255), DIR/background.png and "
-                    "DIR/composite.json: the layout 'dynremove eval' reads.")
-    c.add_argument("static_dir", metavar="STATIC_DIR",
-                   help="folder of static images (with --n-sets: a folder of such folders)")
-    c.add_argument("objects_dir", metavar="OBJECTS_DIR",
-                   help="DAVIS-style sets with masks (e.g. shared/data/davis)")
-    c.add_argument("--out", required=True, metavar="DIR")
-    c.add_argument("--seed", type=int, default=0)
-    c.add_argument("--n-views", type=int, default=6, metavar="N")
-    c.add_argument("--objects", type=int, default=1, metavar="K", help="objects per set")
-    c.add_argument("--n-sets", type=int, default=0, metavar="N",
-                   help="write N sets under DIR (one per static set x objects), "
-                        "STATIC_DIR being a folder of static sets")
-    c.set_defaults(fn=cmd_composite)
-
-
 __all__ = ["METHODS", "ABLATIONS", "EvalSet", "LoadedSet", "find_sets", "load_set",
            "score", "run_method", "eval_set", "run_eval", "run_ablation",
            "ablation_variants", "summarize", "format_table", "format_ablation",
-           "add_commands"]
+           "image_files"]

@@ -2,7 +2,10 @@
 
 SIFT keypoints with Lowe's ratio test; F_s by USAC/MAGSAC (seeded, so runs are
 reproducible); a homography H_s (reference → source) for the pre-warp of the
-dense correspondences. The convention is ``x_sᵀ F_s x_r = 0``.
+dense correspondences. The conventions are ``x_sᵀ F_s x_r = 0`` and
+``x_s ~ H_s x_r``: every homography in dynremove maps *reference* pixels to
+*source* pixels (the baselines and the composites use the same functions and
+the same direction).
 """
 
 from __future__ import annotations
@@ -14,10 +17,6 @@ import numpy as np
 import numpy.typing as npt
 
 MIN_MATCHES = 15  # fewer matches than this: no reliable F for that source
-
-
-class GeometryError(ValueError):
-    """Two images share too few features to relate them."""
 
 
 @dataclass(frozen=True)
@@ -39,11 +38,15 @@ def detect(gray_u8: npt.NDArray[np.uint8], *, max_features: int = 4000):
     return xy, desc
 
 
-def match(desc_r, desc_s, *, ratio: float = 0.75) -> npt.NDArray[np.int64]:
-    """Ratio-test matches, (M, 2) index pairs (reference, source)."""
-    if desc_r is None or desc_s is None or len(desc_r) < 2 or len(desc_s) < 2:
+def match(desc_a, desc_b, *, ratio: float = 0.75) -> npt.NDArray[np.int64]:
+    """Lowe's ratio-test matches of ``desc_a``'s descriptors in ``desc_b``.
+
+    Brute-force L2 (deterministic, unlike FLANN). Returns (M, 2) index pairs
+    (index in a, index in b), in the order of a.
+    """
+    if desc_a is None or desc_b is None or len(desc_a) < 2 or len(desc_b) < 2:
         return np.zeros((0, 2), np.int64)
-    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(desc_r, desc_s, k=2)
+    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(desc_a, desc_b, k=2)
     pairs = [(m[0].queryIdx, m[0].trainIdx) for m in knn
              if len(m) == 2 and m[0].distance < ratio * m[1].distance]
     return np.array(pairs, np.int64).reshape(-1, 2)
@@ -66,13 +69,50 @@ def estimate_two_view(xy_r: npt.NDArray[np.float32], xy_s: npt.NDArray[np.float3
             nF = int(inl.sum())
             if nF >= 8:
                 F = F_est.astype(np.float64)
-        cv2.setRNGSeed(int(seed))
-        H_est, inl = cv2.findHomography(xy_r, xy_s, cv2.USAC_MAGSAC, 3.0, maxIters=10000,
-                                        confidence=0.999)
-        if H_est is not None and inl is not None and int(inl.sum()) >= 8:
-            nH = int(inl.sum())
-            H = H_est.astype(np.float64)
+        H_est, n_inl = fit_homography(xy_r, xy_s, seed=seed)
+        if H_est is not None and n_inl >= 8:
+            nH = n_inl
+            H = H_est
     return TwoView(F=F, H=H, n_matches=n, n_inliers_F=nF, n_inliers_H=nH)
+
+
+def fit_homography(xy_a: npt.NDArray[np.float32], xy_b: npt.NDArray[np.float32], *,
+                   seed: int = 0, threshold_px: float = 3.0, max_iters: int = 10000,
+                   confidence: float = 0.999
+                   ) -> tuple[npt.NDArray[np.float64] | None, int]:
+    """Homography ``x_b ~ H x_a`` by USAC/MAGSAC++ from matched points (M, 2) each.
+
+    OpenCV's RNG is seeded with ``seed`` first, so the fit is reproducible.
+    Returns ``(H, n_inliers)``; ``(None, 0)`` when OpenCV finds none.
+    """
+    cv2.setRNGSeed(int(seed))
+    H, inl = cv2.findHomography(xy_a, xy_b, cv2.USAC_MAGSAC, threshold_px,
+                                maxIters=max_iters, confidence=confidence)
+    if H is None or inl is None or H.shape != (3, 3):
+        return None, 0
+    return H.astype(np.float64), int(inl.sum())
+
+
+def project_homography(Hm: npt.NDArray[np.float64], xs: npt.ArrayLike, ys: npt.ArrayLike
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Map points (x, y) by a 3×3 homography; float64 (x', y', w).
+
+    ``w`` is the projective depth (a point with ``w <= 0`` is behind the
+    camera); where ``|w| < 1e-12`` the division uses 1e-12, so x', y' are
+    finite (and huge).
+    """
+    w = Hm[2, 0] * xs + Hm[2, 1] * ys + Hm[2, 2]
+    den = np.where(np.abs(w) < 1e-12, 1e-12, w)
+    xo = (Hm[0, 0] * xs + Hm[0, 1] * ys + Hm[0, 2]) / den
+    yo = (Hm[1, 0] * xs + Hm[1, 1] * ys + Hm[1, 2]) / den
+    return xo, yo, w
+
+
+def apply_homography(Hm: npt.NDArray[np.float64], xs: np.ndarray, ys: np.ndarray
+                     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Map points (x, y) by a 3×3 homography; returns float32 (x', y')."""
+    xo, yo, _ = project_homography(Hm, xs, ys)
+    return xo.astype(np.float32), yo.astype(np.float32)
 
 
 def sampson_sq(F: npt.NDArray[np.float64], xy_r: npt.ArrayLike,

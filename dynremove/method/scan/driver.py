@@ -24,7 +24,7 @@ from dynremove.events import (
     decision_dtype,
 )
 from dynremove.params import Params
-from dynremove.scan import _kernels as kn
+from dynremove.method.scan import _kernels as kn
 
 
 @dataclass
@@ -173,7 +173,9 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
     if kernel == "numba":
         scan_fn = kn._scan_rows
     elif kernel == "reference":
-        from dynremove.scan.reference import scan_rows as scan_fn
+        # lazy on purpose: the reference scan needs sklearn.cluster (~1.5 s to import),
+        # and only tests and bench use it
+        from dynremove.method.scan.reference import scan_rows as scan_fn
     else:
         raise ValueError(f"kernel must be 'numba' or 'reference', got {kernel!r}")
     for scan in range(params.max_scans):

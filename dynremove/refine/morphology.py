@@ -1,0 +1,61 @@
+"""Morphology of binary maps: discs, small components, holes, the clean-up of L.
+
+The scans label pixels one at a time, so L has isolated false positives and
+pin holes. Morphological opening then closing (a disc of ~p/2), dropping
+components smaller than ``min_region_px`` and filling enclosed holes give a
+map that matches how objects look (measured: README "Results"). Default
+preset only (``Params.clean_mask``).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from dynremove.params import Params
+
+
+def disc(r: int) -> np.ndarray:
+    """Disc structuring element of radius ``r`` ((2r+1)², uint8)."""
+    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
+
+
+def dilate_disc(m: np.ndarray, r: int) -> npt.NDArray[np.bool_]:
+    """``m`` (bool) dilated by a disc of radius ``r``; a copy when ``r`` <= 0."""
+    if r <= 0:
+        return np.asarray(m, bool).copy()
+    return cv2.dilate(np.asarray(m, np.uint8), disc(r)).astype(bool)
+
+
+def clean_mask(L: npt.NDArray[np.bool_], params: Params) -> npt.NDArray[np.bool_]:
+    """Open, close, drop small components and fill holes of a (H, W) bool map."""
+    m = L.astype(np.uint8)
+    k = disc(max(1, params.patch_size // 4))
+    m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
+    m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, k)
+    if params.min_region_px > 0:
+        m = drop_small(m, params.min_region_px)
+    m = fill_holes(m)
+    return m.astype(bool)
+
+
+def drop_small(m: np.ndarray, min_px: int) -> np.ndarray:
+    n, lab, stats, _ = cv2.connectedComponentsWithStats(m.astype(np.uint8), connectivity=8)
+    keep = np.zeros(n, bool)
+    keep[1:] = stats[1:, cv2.CC_STAT_AREA] >= min_px
+    return keep[lab].astype(np.uint8)
+
+
+def fill_holes(m: np.ndarray) -> np.ndarray:
+    """Fill background regions not connected to the image border."""
+    inv = (m == 0).astype(np.uint8)
+    n, lab = cv2.connectedComponents(inv, connectivity=4)
+    border = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
+    hole = (lab > 0) & ~np.isin(lab, border)
+    out = m.copy()
+    out[hole] = 1
+    return out
+
+
+__all__ = ["disc", "dilate_disc", "clean_mask", "drop_small", "fill_holes"]
