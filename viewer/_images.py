@@ -80,14 +80,6 @@ def error_labels(dynamic: np.ndarray, gt: np.ndarray) -> np.ndarray:
     return out
 
 
-def jaccard(dynamic: np.ndarray, gt: np.ndarray) -> float:
-    """Intersection over union of two masks (1.0 when both are empty)."""
-    d = np.asarray(dynamic, bool)
-    g = np.asarray(gt, bool)
-    union = np.count_nonzero(d | g)
-    return 1.0 if union == 0 else np.count_nonzero(d & g) / union
-
-
 def overlay(bgr: np.ndarray, mask: np.ndarray, color=(40, 40, 255),
             alpha: float = 0.5) -> np.ndarray:
     """Blend ``color`` (BGR) into ``bgr`` where ``mask`` is true (new array)."""

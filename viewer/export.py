@@ -4,8 +4,9 @@ Frames are built from the recorded snapshots (``reference/image`` JPEGs and
 ``reference/dynamic`` label maps, latest-at by ``step``): left, the input
 reference with L overlaid in red; right, the rewritten reference.
 
-GIF: a small encoder written here (global k-means palette + LZW compiled with
-numba), so there is no Pillow dependency. MP4: ``cv2.VideoWriter`` ('mp4v').
+GIF: Pillow, with one global palette (the frames' own colours when there are at
+most 256 of them, else Pillow's median cut over a sample of the frames).
+MP4: ``cv2.VideoWriter`` ('mp4v').
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
-import numba
 import numpy as np
+from PIL import Image
 
 from viewer import inspect as vi
 from viewer import paths as P
@@ -104,105 +105,24 @@ def write_mp4(frames: list[np.ndarray], out_path: str | Path, *, fps: float = 10
         vw.release()
 
 
-# -- GIF encoder -------------------------------------------------------------------
-def _palette(frames: list[np.ndarray], n_colors: int = 256,
-             seed: int = 0) -> np.ndarray:
-    """Global palette (n_colors, 3) BGR uint8 by k-means on a pixel sample."""
-    rng = np.random.default_rng(seed)
-    pix = np.concatenate([f.reshape(-1, 3) for f in frames[:: max(1, len(frames) // 16)]])
-    sample = pix[rng.choice(len(pix), size=min(len(pix), 40000), replace=False)]
-    uniq = np.unique(sample, axis=0)
+# -- GIF ---------------------------------------------------------------------------
+def gif_palette(frames: list[np.ndarray], n_colors: int = 256) -> Image.Image:
+    """One palette ("P" image) for all frames (BGR uint8).
+
+    The frames' own colours when there are at most ``n_colors`` of them (the GIF
+    is then lossless), else Pillow's median cut over every k-th frame.
+    """
+    sample = np.concatenate([f.reshape(-1, 3) for f in frames[:: max(1, len(frames) // 16)]])
+    uniq = np.unique(np.concatenate([f.reshape(-1, 3) for f in frames]), axis=0)
     if len(uniq) <= n_colors:
-        pal = uniq
-    else:
-        cv2.setRNGSeed(seed)
-        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 8, 1.0)
-        _, _, centers = cv2.kmeans(sample.astype(np.float32), n_colors, None, crit, 1,
-                                   cv2.KMEANS_PP_CENTERS)
-        pal = np.clip(np.rint(centers), 0, 255).astype(np.uint8)
-    out = np.zeros((n_colors, 3), np.uint8)
-    out[:len(pal)] = pal
-    return out
-
-
-def _lut(palette: np.ndarray) -> np.ndarray:
-    """(32, 32, 32) uint8: nearest palette index of each 5-bit BGR cell centre."""
-    g = (np.arange(32) * 8 + 4).astype(np.float32)
-    cells = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
-    pal = palette.astype(np.float32)
-    idx = np.empty(len(cells), np.uint8)
-    for a in range(0, len(cells), 4096):
-        d = ((cells[a:a + 4096, None, :] - pal[None]) ** 2).sum(-1)
-        idx[a:a + 4096] = np.argmin(d, axis=1)
-    return idx.reshape(32, 32, 32)
-
-
-@numba.njit(cache=True, nogil=True)
-def _lzw(indices, min_code_size, out):
-    """GIF LZW of a 1-D uint8 index array into ``out`` (bytes); returns its length."""
-    clear = 1 << min_code_size
-    eoi = clear + 1
-    table = np.full((4096, 256), -1, np.int16)
-    next_code = eoi + 1
-    code_size = min_code_size + 1
-    acc = 0
-    nbits = 0
-    n = 0
-    # emit clear
-    acc |= clear << nbits
-    nbits += code_size
-    while nbits >= 8:
-        out[n] = acc & 255
-        n += 1
-        acc >>= 8
-        nbits -= 8
-    prefix = np.int64(indices[0])
-    for i in range(1, indices.shape[0]):
-        k = indices[i]
-        c = table[prefix, k]
-        if c >= 0:
-            prefix = np.int64(c)
-            continue
-        acc |= prefix << nbits
-        nbits += code_size
-        while nbits >= 8:
-            out[n] = acc & 255
-            n += 1
-            acc >>= 8
-            nbits -= 8
-        table[prefix, k] = next_code
-        next_code += 1
-        if next_code > (1 << code_size) and code_size < 12:
-            code_size += 1
-        if next_code == 4096:  # table full: clear (sent at 12 bits)
-            acc |= clear << nbits
-            nbits += code_size
-            while nbits >= 8:
-                out[n] = acc & 255
-                n += 1
-                acc >>= 8
-                nbits -= 8
-            table[:, :] = -1
-            next_code = eoi + 1
-            code_size = min_code_size + 1
-        prefix = np.int64(k)
-    for code in (prefix, np.int64(eoi)):
-        acc |= code << nbits
-        nbits += code_size
-        while nbits >= 8:
-            out[n] = acc & 255
-            n += 1
-            acc >>= 8
-            nbits -= 8
-    if nbits > 0:
-        out[n] = acc & 255
-        n += 1
-    return n
-
-
-def _sub_blocks(data: bytes) -> bytes:
-    parts = [bytes([len(data[i:i + 255])]) + data[i:i + 255] for i in range(0, len(data), 255)]
-    return b"".join(parts) + b"\x00"
+        pal = Image.new("P", (1, 1))
+        rgb = np.zeros((256, 3), np.uint8)
+        rgb[:len(uniq)] = uniq[:, ::-1]
+        pal.putpalette(rgb.tobytes())
+        return pal
+    montage = Image.fromarray(np.ascontiguousarray(sample[None, :, ::-1]), "RGB")
+    return montage.quantize(colors=n_colors, method=Image.Quantize.MEDIANCUT,
+                            dither=Image.Dither.NONE)
 
 
 def write_gif(frames: list[np.ndarray], out_path: str | Path, *, fps: float = 10,
@@ -211,22 +131,11 @@ def write_gif(frames: list[np.ndarray], out_path: str | Path, *, fps: float = 10
     if not frames:
         raise ValueError("no frames to write")
     h, w = frames[0].shape[:2]
-    pal = _palette(frames)
-    lut = _lut(pal)
-    delay = max(2, int(round(100 / max(fps, 1e-3))))
-    rgb_table = pal[:, ::-1].tobytes()  # GIF stores RGB
-    out = bytearray(b"GIF89a")
-    out += np.array([w, h], "<u2").tobytes() + bytes([0xF7, 0, 0]) + rgb_table
-    out += b"\x21\xFF\x0BNETSCAPE2.0\x03\x01" + np.array([loop], "<u2").tobytes() + b"\x00"
-    buf = np.empty(w * h * 2 + 1024, np.uint8)
-    for f in frames:
-        if f.shape[:2] != (h, w):
-            raise ValueError("all frames must have the same size")
-        q = f >> 3
-        idx = np.ascontiguousarray(lut[q[..., 0], q[..., 1], q[..., 2]].reshape(-1))
-        n = _lzw(idx, 8, buf)
-        out += b"\x21\xF9\x04\x04" + np.array([delay], "<u2").tobytes() + b"\x00\x00"
-        out += b"\x2C" + np.array([0, 0, w, h], "<u2").tobytes() + b"\x00"
-        out += b"\x08" + _sub_blocks(buf[:n].tobytes())
-    out += b"\x3B"
-    Path(out_path).write_bytes(bytes(out))
+    if any(f.shape[:2] != (h, w) for f in frames):
+        raise ValueError("all frames must have the same size")
+    pal = gif_palette(frames)
+    images = [Image.fromarray(np.ascontiguousarray(f[..., ::-1]), "RGB")
+              .quantize(palette=pal, dither=Image.Dither.NONE) for f in frames]
+    delay_ms = 10 * max(2, int(round(100 / max(fps, 1e-3))))
+    images[0].save(out_path, format="GIF", save_all=True, append_images=images[1:],
+                   duration=delay_ms, loop=loop, optimize=False)

@@ -28,10 +28,11 @@ import pandas  # noqa: F401  (pre-import: pyarrow would import it lazily, ~0.4 s
 import pyarrow as pa
 import rerun as rr
 
+from dynremove.evaluation.metrics import jaccard
 from dynremove.events import EventBatch, RunInfo, ScanState, WHY_PROBE
 from viewer import paths as P
 from viewer._images import (CLASS_COLORS, cluster_colors, colormap, encode_jpeg,
-                            encode_png, error_labels, jaccard)
+                            encode_png, error_labels)
 from viewer.blueprint import make_blueprint, make_compare_blueprint
 
 _DIRECTION = {1: "top-left → bottom-right", -1: "bottom-right → top-left"}
