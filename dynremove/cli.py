@@ -183,6 +183,8 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
 
 def cmd_demo(args: argparse.Namespace) -> int:
     params = params_from_args(args)
+    if args.scene_seed < 0:
+        raise InputError(f"--scene-seed must be >= 0, got {args.scene_seed}")
     out = io.prepare_out_dir(args.out)
     scene = synth.make_scene(seed=args.scene_seed, n_views=6, size=(360, 640))
     synth.write_scene(scene, out / "scene")
@@ -222,6 +224,9 @@ def cmd_bench(args: argparse.Namespace) -> int:
         W, H = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         raise InputError(f"--size must be WxH, got {args.size!r}") from None
+    if W < 64 or H < 48 or args.views < 2:
+        raise InputError(f"bench needs --size of at least 64x48 and --views >= 2, got "
+                         f"{args.size} and {args.views}")
     from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
 
     run_bench(params=params_from_args(args), preset_name=args.preset, size=(W, H),

@@ -513,3 +513,24 @@ def test_subprocess_exit_codes(tmp_path, scene, case):
     assert len(lines) == 1 and lines[0].startswith("dynremove: error: "), r.stderr
     if case != "out-is-file":
         assert files_under(out) == []
+
+
+def test_cli_bad_flags_exit_2_and_leave_no_folder(tmp_path, capsys):
+    out = tmp_path / "demo"
+    assert main(["demo", "--scene-seed", "-1", "--no-record", "--quiet", "--out", str(out)]) == 2
+    assert main(["bench", "--views", "1", "--quiet"]) == 2
+    assert not out.exists()
+    assert "error:" in capsys.readouterr().err
+
+
+def test_cli_other_exceptions_are_internal_errors(tmp_path, monkeypatch, capsys):
+    import dynremove.cli as cli
+
+    def broken(*a, **k):
+        raise ValueError("a bug, not the user's input")
+
+    monkeypatch.setattr(cli, "remove_dynamic", broken)
+    monkeypatch.delenv("DYNREMOVE_DEBUG", raising=False)
+    assert main(["demo", "--no-record", "--quiet", "--out", str(tmp_path / "d")]) == 1
+    err = capsys.readouterr().err
+    assert "internal error: ValueError" in err and len(err.strip().splitlines()) == 1
