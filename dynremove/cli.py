@@ -460,7 +460,12 @@ def build_parser() -> argparse.ArgumentParser:
         description="Evaluate on every <set>/frames/ below DATA_DIR (masks/<stem>.png and "
                     "background.png optional): the method, the paper preset, the median "
                     "baselines, Telea inpainting with the true mask and the single-scan "
-                    "ablation. Prints a table; --json writes every figure.")
+                    "ablation. Prints a table; --json writes every figure. Sets with a "
+                    "background.png also get whole-photo figures: PSNR/SSIM of the whole "
+                    "image, damage % (pixels outside the true mask + 5 px that were right "
+                    "in the input and are wrong in the output, CIE76 dE > 10) and leftover "
+                    "% (recoverable true-mask pixels still wrong; free.png gives the "
+                    "recoverable part, the rest is reported as unrecoverable %).")
     e.add_argument("data_dir", metavar="DATA_DIR")
     e.add_argument("--sets", default=None, metavar="GLOB",
                    help="only sets whose name matches (comma-separated globs)")
@@ -487,8 +492,9 @@ def build_parser() -> argparse.ArgumentParser:
         "composite", help="paste real moving objects into a static multi-view set",
         description="Cut objects out of a DAVIS-style folder (<set>/frames, <set>/masks) "
                     "and paste them, moving, into consecutive views of a static set. "
-                    "Writes DIR/frames/, DIR/masks/ (0/255), DIR/background.png and "
-                    "DIR/composite.json: the layout 'dynremove eval' reads.")
+                    "Writes DIR/frames/, DIR/masks/ (0/255), DIR/background.png, "
+                    "DIR/free.png (0/255: reference pixels some other view shows free of "
+                    "the objects) and DIR/composite.json: the layout 'dynremove eval' reads.")
     c.add_argument("static_dir", metavar="STATIC_DIR",
                    help="folder of static images (with --n-sets: a folder of such folders)")
     c.add_argument("objects_dir", metavar="OBJECTS_DIR",

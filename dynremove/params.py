@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 CORRESPONDENCE_METHODS = ("homography+flow", "homography", "flow", "gated")
 WRITE_MODES = ("patch", "pixel")
+FILL_MODES = ("select", "median")
 
 
 @dataclass(frozen=True, kw_only=True, slots=True)
@@ -93,6 +94,16 @@ class Params:
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
     fuse_realign: int = 2  # passes re-measuring the matches from the cleaned reference (paper preset 0)
     fuse_realign_max_px: float = 8.0  # a re-measured match may move at most this far
+    fill: str = "select"  # "select": one free source per region (refine.select); "median": of all
+    select_tau: float = 10.0  # CIE76 ΔE under which two candidates agree
+    select_margin_px: int = 8  # the fill may change pixels within this of L
+    select_kappa: float = 6.0  # data cost (ΔE) of taking a source instead of the reference
+    select_ref_cost: float = 30.0  # data cost (ΔE) of keeping the reference inside L
+    select_beta: float = 0.3  # weight of the photomontage seam cost (ΔE)
+    select_gamma: float = 20.0  # data cost (ΔE) of a candidate with mover colours, × P(mover)
+    select_epipolar_px: float = 2.0  # a flow match explaining the reference is this near its line
+    select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
+    select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
 
@@ -119,6 +130,15 @@ class Params:
             raise ValueError(f"write must be one of {WRITE_MODES}, got {self.write!r}")
         if self.flow_preset not in ("fast", "medium", "ultrafast"):
             raise ValueError(f"flow_preset must be fast/medium/ultrafast, got {self.flow_preset!r}")
+        if self.fill not in FILL_MODES:
+            raise ValueError(f"fill must be one of {FILL_MODES}, got {self.fill!r}")
+        for name in ("select_tau", "select_beta"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
+                     "select_parallax_px", "select_margin_px"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.fuse_combine not in ("median", "medoid"):
             raise ValueError(f"fuse_combine must be median/medoid, got {self.fuse_combine!r}")
         if not self.fuse_realign_max_px > 0:

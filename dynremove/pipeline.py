@@ -27,6 +27,7 @@ from dynremove.params import DEFAULT, Params
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges
 from dynremove.refine.morphology import clean_mask
+from dynremove.refine.select import Selection, select_fill
 
 Progress = Callable[[str, float], None]
 
@@ -49,9 +50,12 @@ class Result:
     params: dict
     geometry: list[dict] = field(default_factory=list)  # matches/inliers per source
     # L after each step that changes it, in order: "scan", then (default preset)
-    # "clean", "votes", "snap"; the last one equals ``dynamic``
+    # "clean", "votes", "snap", "select" (pixels replaced by the fill); the last
+    # one equals ``dynamic``
     stages: dict[str, np.ndarray] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    # the fill by selection (default preset): per-pixel source, mover maps, seams
+    selection: Selection | None = None
 
 
 def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
@@ -221,7 +225,21 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
             progress("refine", 1.0)
     timings["refine"] = time.perf_counter() - t
     t = time.perf_counter()
-    if params.fuse:
+    selection = None
+    if params.fuse and params.fill == "select":
+        if progress:
+            progress("fusion", 0.0)
+        selection = select_fill(ref_img, st.src_img, views, dyn, params)
+        clean = selection.clean
+        dyn = stages["select"] = selection.replaced
+        n_ns = int(selection.no_source.sum())
+        if n_ns:
+            msgs.append(f"{n_ns} px ({100 * n_ns / max(1, dyn.sum()):.1f} % of the replaced "
+                        "region) were seen free by no source: inpainted (OpenCV Telea)")
+            warnings.warn(msgs[-1], stacklevel=2)
+        if progress:
+            progress("fusion", 1.0)
+    elif params.fuse:
         if progress:
             progress("fusion", 0.0)
         clean, _ = fuse_background(
@@ -238,9 +256,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         scans=np.array(summaries), timings=timings, N=st.N, C=st.C, ref_index=ref,
         params=params.to_dict(),
         geometry=[{"source": names[srcs[k]], "matches": v.n_matches,
-                   "inliers_F": v.n_inliers_F, "inliers_H": v.n_inliers_H}
+                   "inliers_F": v.n_inliers_F, "inliers_H": v.n_inliers_H,
+                   "parallax_px": (round(v.parallax_px, 2) if np.isfinite(v.parallax_px)
+                                   else None)}
                   for k, v in enumerate(views)],
-        warnings=msgs, stages=stages)
+        warnings=msgs, stages=stages, selection=selection)
     sink.finish(result)
     return result
 

@@ -58,7 +58,8 @@ def test_recording_replays_and_counts(scene, tmp_path, name):
     # the map after each post-scan step: what the run had, in order, ending at L
     stages = vi.read_stages(path)
     assert list(stages) == list(res.stages)
-    assert list(stages) == (["scan"] if name == "paper" else ["scan", "clean", "votes", "snap"])
+    assert list(stages) == (["scan"] if name == "paper"
+                            else ["scan", "clean", "votes", "snap", "select"])
     for k in stages:
         np.testing.assert_array_equal(stages[k], res.stages[k])
     np.testing.assert_array_equal(stages[list(stages)[-1]], res.dynamic)

@@ -192,7 +192,7 @@ def read_final_dynamic(path: str | Path, *, root: str = "") -> np.ndarray | None
     return rows[0][1].astype(bool) if rows else None
 
 
-STAGE_ORDER = ("scan", "clean", "votes", "snap")  # pipeline.remove_dynamic's order
+STAGE_ORDER = ("scan", "clean", "votes", "snap", "select")  # pipeline.remove_dynamic's order
 
 
 def read_stages(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]:

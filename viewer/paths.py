@@ -72,6 +72,10 @@ RESULT_CLEAN = "result/clean"
 RESULT_CLEAN_SCAN = "result/clean_scan"  # as the scans left it (before fusion)
 RESULT_DYNAMIC = "result/dynamic"
 RESULT_STAGES = "result/stages"  # L after each post-scan step: result/stages/<name>
+RESULT_SOURCE = "result/selection/source"  # which image filled each pixel (0 = reference)
+RESULT_SEAMS = "result/selection/seams"  # boundaries between the chosen images
+RESULT_MOVERS = "result/selection/movers"  # per source: where it shows a mover (rejected)
+RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure
 EVENTS_DECISIONS = "events/decisions"
 EVENTS_REPLACEMENTS = "events/replacements"
 EVENTS_UPDATES = "events/updates"

@@ -235,6 +235,19 @@ class RerunSink:
         for name, stage in (getattr(result, "stages", None) or {}).items():
             self.rec.log(self.p(f"{P.RESULT_STAGES}/{name}"),
                          rr.SegmentationImage(np.asarray(stage, np.uint8)), static=True)
+        sel = getattr(result, "selection", None)
+        if sel is not None:  # the fill by selection (default preset)
+            src_names = list(getattr(self, "src_names", []))
+            self.rec.log(self.p(P.RESULT_SOURCE), rr.SegmentationImage(
+                np.clip(np.asarray(sel.label, np.int32), 0, 255).astype(np.uint8)), static=True)
+            self.rec.log(self.p(P.RESULT_SEAMS), rr.SegmentationImage(
+                np.asarray(sel.seams, np.uint8)), static=True)
+            self.rec.log(self.p(P.RESULT_EXPLAINED), rr.SegmentationImage(
+                np.asarray(sel.explained, np.uint8)), static=True)
+            for k, mv in enumerate(np.asarray(sel.movers, bool)):
+                name = src_names[k] if k < len(src_names) else f"source{k}"
+                self.rec.log(self.p(f"{P.RESULT_MOVERS}/{name}"),
+                             rr.SegmentationImage(mv.astype(np.uint8)), static=True)
         clean_scan = getattr(result, "clean_scan", None)
         if clean_scan is not None:  # what the Replacement events rebuild
             self.rec.log(self.p(P.RESULT_CLEAN_SCAN), rr.EncodedImage(

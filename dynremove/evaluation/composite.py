@@ -25,6 +25,8 @@ Output (the layout ``dynremove eval`` reads)::
     DIR/frames/NN_<static stem>.png   composited views
     DIR/masks/NN_<static stem>.png    true dynamic masks, 0/255
     DIR/background.png                the static reference view (no objects)
+    DIR/free.png                      0/255: reference pixels some OTHER view shows
+                                      free of every pasted object (see free_map)
     DIR/composite.json                provenance: sources, frames, scale, path, seed
 """
 
@@ -66,6 +68,7 @@ class Composite:
     ref_index: int
     names: list[str]
     info: dict = field(default_factory=dict)
+    free: np.ndarray | None = None  # (H, W) bool, reference-sized: see free_map
 
 
 @dataclass
@@ -204,6 +207,31 @@ def _covered_in(mask_k: np.ndarray, H_k: np.ndarray, ref_mask: np.ndarray) -> fl
     return float((back.astype(bool) & ref_mask).sum() / max(1, ref_mask.sum()))
 
 
+def free_map(masks: Sequence[np.ndarray], Hs: Sequence[np.ndarray], ref: int) -> np.ndarray:
+    """Reference pixels that at least one OTHER view shows free of every pasted object.
+
+    View ``k``'s mask is brought into the reference with the homography
+    ``H_k`` (reference pixel -> view ``k`` pixel), as :func:`_covered_in` does:
+    ``cv2.warpPerspective(mask_k, H_k, (W, H), INTER_NEAREST | WARP_INVERSE_MAP,
+    borderValue=1)``, so a reference pixel that falls outside view ``k``'s frame
+    counts as not free in that view. A pixel is free when some ``k != ref``
+    leaves it uncovered. (A view whose homography estimation failed uses the
+    identity, like the pasting does.)
+
+    Returns an ``(H, W)`` bool array (all False with a single view).
+    """
+    Hh, Ww = masks[ref].shape
+    free = np.zeros((Hh, Ww), bool)
+    for k, (m, H) in enumerate(zip(masks, Hs)):
+        if k == ref:
+            continue
+        back = cv2.warpPerspective(m.astype(np.uint8), np.asarray(H, np.float64), (Ww, Hh),
+                                   flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=1)
+        free |= back == 0
+    return free
+
+
 # --------------------------------------------------------------------------- compose
 def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_sets: Sequence,
             *, seed: int = 0, n_objects: int = 1, feather_px: float = FEATHER_PX,
@@ -300,6 +328,7 @@ def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_s
         if ok:
             break
     ok, (images, alphas, masks, meta, covered, attempt) = best
+    free = free_map(masks, Hs, ref)
     names = [f"{k:02d}_{n}.png" for k, n in enumerate(static_names)]
     info = {
         "seed": int(seed), "n_views": V, "ref": names[ref], "size": [Ww, Hh],
@@ -309,14 +338,17 @@ def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_s
         "mask_fraction": [round(float(m.mean()), 4) for m in masks],
         "ref_region_covered": covered, "placement_ok": bool(ok),
         "placement_attempts": attempt + 1, "homography_failed_views": failed,
+        "ref_mask_recoverable": round(float(free[masks[ref]].mean()), 4)
+        if masks[ref].any() else None,
     }
     return Composite(images=images, masks=masks, alphas=alphas,
                      background=statics[ref].copy(), statics=list(statics), ref_index=ref,
-                     names=names, info=info)
+                     names=names, info=info, free=free)
 
 
 def write_composite(comp: Composite, out_dir: str | os.PathLike) -> Path:
-    """Write frames/, masks/ (0/255), background.png and composite.json atomically.
+    """Write frames/, masks/ (0/255), background.png, free.png (0/255, when
+    ``comp.free`` is set) and composite.json atomically.
 
     A folder written before by this function is overwritten (its old frames and
     masks removed); any other non-empty ``frames/`` is refused.
@@ -335,6 +367,10 @@ def write_composite(comp: Composite, out_dir: str | os.PathLike) -> Path:
         io.write_image(out / "frames" / name, img)
         io.write_image(out / "masks" / name, m.astype(np.uint8) * np.uint8(255))
     io.write_image(out / "background.png", comp.background)
+    if comp.free is not None:
+        io.write_image(out / "free.png", comp.free.astype(np.uint8) * np.uint8(255))
+    elif (out / "free.png").is_file():
+        (out / "free.png").unlink()  # a stale map would mislead eval
     io.write_json(out / "composite.json", comp.info)
     return out
 
@@ -399,5 +435,5 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
     return outs
 
 
-__all__ = ["Composite", "compose", "write_composite", "make_composite", "make_composites",
-           "MAX_SIDE", "AREA_RANGE", "FEATHER_PX"]
+__all__ = ["Composite", "compose", "free_map", "write_composite", "make_composite",
+           "make_composites", "MAX_SIDE", "AREA_RANGE", "FEATHER_PX"]

@@ -5,6 +5,8 @@ Layout of an evaluation set (DESIGN.md sec. 6)::
     <set>/frames/*            the views, sorted by name (any image format)
     <set>/masks/<stem>.png    optional: true dynamic mask of a frame (0 / 255)
     <set>/background.png      optional: the reference view without moving objects
+    <set>/free.png            optional: 0/255, reference pixels some other view sees
+                              free of movers (written by ``dynremove composite``)
 
 Every folder below ``DATA_DIR`` that has a ``frames/`` sub-folder is a set; its
 name is its path relative to ``DATA_DIR`` (``davis/camel``). The reference is
@@ -26,6 +28,15 @@ the method's own clean-up); PSNR and SSIM of the cleaned reference against
 at :data:`PSNR_CAP_DB` so that JSON stays finite); seconds of the method on
 that set (alignment and everything, not the loading). ``null`` where a figure
 does not apply.
+
+Whole-photo figures (sets with a background; see :mod:`dynremove.evaluation.metrics`):
+``psnr_whole`` / ``ssim_whole`` over the whole image; ``damage`` = percent of
+all pixels, outside the true mask dilated by 5 px, that were right in the
+input reference and are wrong in the output (CIE76 ΔE > 10 after a 1 px
+blur); ``leftover`` = percent of the recoverable true-mask pixels (``free.png``;
+the whole true mask without it) still wrong in the output; ``unrecoverable`` =
+percent of the true mask that no other view saw free (``null`` without
+``free.png``).
 
 Parallelism and clusters
 ------------------------
@@ -74,12 +85,16 @@ from joblib import Parallel, delayed
 from dynremove import io
 from dynremove.errors import InputError
 from dynremove.evaluation import baselines
-from dynremove.evaluation.metrics import jaccard, psnr_in_mask, ssim_in_mask
+from dynremove.evaluation.metrics import (damage_percent, jaccard, leftover_percent, psnr,
+                                          psnr_in_mask, ssim, ssim_in_mask)
 from dynremove.params import Params, preset
 from dynremove.pipeline import remove_dynamic
 
 METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
+#: Figures of a row (``null`` where they do not apply).
+SCORE_KEYS = ("jaccard", "psnr", "ssim", "psnr_whole", "ssim_whole", "damage", "leftover",
+              "unrecoverable")
 
 # Variants of the base preset for ``--ablation`` (field -> value). A variant whose
 # fields are not all Params fields, or whose values Params rejects, is skipped with
@@ -122,6 +137,11 @@ class EvalSet:
     @property
     def background(self) -> Path | None:
         p = self.path / "background.png"
+        return p if p.is_file() else None
+
+    @property
+    def free(self) -> Path | None:
+        p = self.path / "free.png"
         return p if p.is_file() else None
 
     def mask_path(self, frame: Path) -> Path | None:
@@ -175,6 +195,7 @@ class LoadedSet:
     background: np.ndarray | None  # (H, W, 3) uint8, true clean reference
     scale: float
     notes: list[str]
+    free: np.ndarray | None = None  # (H, W) bool: ref pixels some other view sees free
 
 
 def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None = None
@@ -191,8 +212,11 @@ def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None 
         if bg.shape[:2] != (H, W):
             interp = cv2.INTER_AREA if bg.shape[1] > W else cv2.INTER_LINEAR
             bg = cv2.resize(bg, (W, H), interpolation=interp)
+    free = None
+    if es.free is not None:
+        free = io.read_mask(es.free, (W, H))
     return LoadedSet(name=es.name, images=iset.images, names=iset.names, ref=r, gt=gt,
-                     background=bg, scale=iset.scale, notes=list(iset.notes))
+                     background=bg, scale=iset.scale, notes=list(iset.notes), free=free)
 
 
 # --------------------------------------------------------------------------- methods
@@ -206,13 +230,26 @@ def _finite(x: float | None, cap: float = PSNR_CAP_DB) -> float | None:
 
 def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None
           ) -> dict[str, float | None]:
-    """Jaccard (if a detection and a true mask exist), PSNR/SSIM in the true mask."""
-    out: dict[str, float | None] = {"jaccard": None, "psnr": None, "ssim": None}
+    """Every figure of :data:`SCORE_KEYS` that applies (the others None).
+
+    Jaccard if a detection and a true mask exist; PSNR/SSIM in the true mask;
+    whole-image PSNR/SSIM with a background; damage / leftover / unrecoverable
+    with a background and a true mask (``free.png`` for the recoverable part).
+    """
+    out: dict[str, float | None] = dict.fromkeys(SCORE_KEYS)
     if dynamic is not None and ls.gt is not None:
         out["jaccard"] = float(jaccard(dynamic, ls.gt))
-    if clean is not None and ls.gt is not None and ls.background is not None and ls.gt.any():
+    if clean is None or ls.background is None:
+        return out
+    out["psnr_whole"] = _finite(psnr(clean, ls.background))
+    out["ssim_whole"] = float(ssim(clean, ls.background))
+    if ls.gt is not None and ls.gt.any():
         out["psnr"] = _finite(psnr_in_mask(clean, ls.background, ls.gt))
         out["ssim"] = float(ssim_in_mask(clean, ls.background, ls.gt))
+    if ls.gt is not None and clean.ndim == 3 and clean.shape[2] == 3:
+        out["damage"] = float(damage_percent(ls.images[ls.ref], clean, ls.background, ls.gt))
+        left, unrec = leftover_percent(clean, ls.background, ls.gt, ls.free)
+        out["leftover"], out["unrecoverable"] = left, unrec
     return out
 
 
@@ -296,13 +333,13 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
             row.update(score(ls, clean, dyn))
             row["seconds"] = round(secs, 3) if (clean is not None or dyn is not None) else None
         except Exception as e:  # noqa: BLE001 - recorded, the run goes on
-            row.update({"jaccard": None, "psnr": None, "ssim": None, "seconds": None,
-                        "error": f"{type(e).__name__}: {e}"})
+            row.update(dict.fromkeys(SCORE_KEYS))
+            row.update({"seconds": None, "error": f"{type(e).__name__}: {e}"})
         rows.append(row)
     H, W = ls.images[0].shape[:2]
     info = {"set": es.name, "n_images": len(ls.images), "ref": ls.names[ls.ref],
             "size": [W, H], "scale": round(ls.scale, 4), "has_mask": ls.gt is not None,
-            "has_background": ls.background is not None,
+            "has_background": ls.background is not None, "has_free": ls.free is not None,
             "mask_fraction": float(ls.gt.mean()) if ls.gt is not None else None,
             "notes": notes}
     return {"set": es.name, "rows": rows, "info": info,
@@ -342,13 +379,14 @@ def _mean(vals: Iterable[float | None]) -> float | None:
 
 
 def summarize(rows: Sequence[dict], methods: Sequence[str]) -> dict[str, dict]:
-    """Per method: mean jaccard / psnr / ssim / seconds over the sets where defined."""
+    """Per method: mean of every figure (:data:`SCORE_KEYS`) and seconds over the sets
+    where defined, with ``n_<figure>`` counts for jaccard, psnr and the whole-photo ones."""
     out = {}
     for m in methods:
         rs = [r for r in rows if r["method"] == m]
-        out[m] = {k: _mean(r.get(k) for r in rs) for k in ("jaccard", "psnr", "ssim", "seconds")}
-        out[m]["n_jaccard"] = sum(r.get("jaccard") is not None for r in rs)
-        out[m]["n_psnr"] = sum(r.get("psnr") is not None for r in rs)
+        out[m] = {k: _mean(r.get(k) for r in rs) for k in SCORE_KEYS + ("seconds",)}
+        for k in ("jaccard", "psnr", "psnr_whole", "damage", "leftover"):
+            out[m][f"n_{k}"] = sum(r.get(k) is not None for r in rs)
     return out
 
 
@@ -442,6 +480,8 @@ def run_ablation(data_dir: str | Path, *, base: Any, names: Sequence[str] | None
     summ = summarize(rows, [n for n, _, _ in variants])
     table = [{"variant": n, "changes": ch, "mean_jaccard": summ[n]["jaccard"],
               "mean_psnr": summ[n]["psnr"], "mean_ssim": summ[n]["ssim"],
+              "mean_psnr_whole": summ[n]["psnr_whole"], "mean_damage": summ[n]["damage"],
+              "mean_leftover": summ[n]["leftover"],
               "mean_seconds": summ[n]["seconds"], "n_sets": summ[n]["n_jaccard"]}
              for n, ch, _ in variants]
     return {"ablation": table, "sets": rows, "set_info": [res["info"] for res in results],
@@ -454,9 +494,24 @@ def _fmt(x: float | None, spec: str) -> str:
     return "-" if x is None else format(x, spec)
 
 
+def _render(table: list[list[str]], n_body: int, n_left: int = 1) -> list[str]:
+    """Aligned lines: header, rule, ``n_body`` rows, rule, the rest (means)."""
+    widths = [max(len(r[i]) for r in table) for i in range(len(table[0]))]
+    lines = []
+    for k, r in enumerate(table):
+        if k == 1 or k == n_body + 1:
+            lines.append("  ".join("-" * w for w in widths))
+        lines.append("  ".join(c.ljust(w) if i < n_left else c.rjust(w)
+                               for i, (c, w) in enumerate(zip(r, widths))))
+    return lines
+
+
 def format_table(report: dict) -> str:
-    """Sets as rows, methods as columns: ``J`` (and ``J/PSNR/SSIM`` where a
-    background exists), then the means per method."""
+    """Sets as rows, methods as columns: ``J`` (and ``J/PSNR/SSIM`` in the true mask
+    where a background exists), then the means per method. Sets with a background
+    get a second table, "whole photo": per method ``PSNR SSIM dmg% left%`` over the
+    whole image, the set's ``unrec%`` (true-mask pixels no other view saw free), and
+    the means."""
     methods = report["methods"]
     rows = report["sets"]
     info = {i["set"]: i for i in report.get("set_info", [])}
@@ -486,15 +541,50 @@ def format_table(report: dict) -> str:
         table.append(["mean PSNR dB (in mask)"] + [_fmt(summ[m]["psnr"], ".2f") for m in methods])
         table.append(["mean SSIM (in mask)"] + [_fmt(summ[m]["ssim"], ".3f") for m in methods])
     table.append(["mean seconds"] + [_fmt(summ[m]["seconds"], ".1f") for m in methods])
-    widths = [max(len(r[i]) for r in table) for i in range(len(table[0]))]
-    lines = []
-    for k, r in enumerate(table):
-        if k == 1 or k == len(set_names) + 1:
-            lines.append("  ".join("-" * w for w in widths))
-        lines.append("  ".join(c.ljust(w) if i == 0 else c.rjust(w)
-                               for i, (c, w) in enumerate(zip(r, widths))))
-    head = "cells: Jaccard" + (" | sets with a background: Jaccard PSNR(dB) SSIM" if any_bg else "")
-    return head + "\n" + "\n".join(lines)
+    head = "cells: Jaccard" + (" | sets with a background: Jaccard PSNR(dB) SSIM in the true "
+                               "mask" if any_bg else "")
+    out = [head] + _render(table, len(set_names))
+    if any_bg:
+        out += [""] + _format_whole(report, methods, by, info, set_names)
+    return "\n".join(out)
+
+
+def _format_whole(report: dict, methods: Sequence[str], by: dict, info: dict,
+                  set_names: Sequence[str]) -> list[str]:
+    """The "whole photo" table of :func:`format_table` (sets with a background)."""
+    bg_sets = [s for s in set_names if info.get(s, {}).get("has_background")]
+
+    def cell(r: dict | None) -> str:
+        if r is None:
+            return "-"
+        if "error" in r:
+            return "error"
+        return (f"{_fmt(r.get('psnr_whole'), '.1f')} {_fmt(r.get('ssim_whole'), '.3f')} "
+                f"{_fmt(r.get('damage'), '.2f')} {_fmt(r.get('leftover'), '.1f')}")
+
+    def unrec(s: str) -> float | None:
+        vals = [by[(s, m)].get("unrecoverable") for m in methods if (s, m) in by]
+        return next((v for v in vals if v is not None), None)
+
+    table = [["set", "unrec%"] + list(methods)]
+    for s in bg_sets:
+        table.append([s, _fmt(unrec(s), ".1f")] + [cell(by.get((s, m))) for m in methods])
+    bg_rows = [r for r in report["sets"] if r["set"] in set(bg_sets)]
+    summ = summarize(bg_rows, methods)
+    mean_unrec = _mean(unrec(s) for s in bg_sets)
+    n = len(bg_sets)
+    table.append([f"mean PSNR dB ({n} sets)", ""]
+                 + [_fmt(summ[m]["psnr_whole"], ".2f") for m in methods])
+    table.append(["mean SSIM", ""] + [_fmt(summ[m]["ssim_whole"], ".3f") for m in methods])
+    table.append(["mean damage %", ""] + [_fmt(summ[m]["damage"], ".2f") for m in methods])
+    table.append(["mean leftover %", _fmt(mean_unrec, ".1f")]
+                 + [_fmt(summ[m]["leftover"], ".1f") for m in methods])
+    head = ["whole photo, cells: PSNR(dB) SSIM damage% leftover%",
+            "  damage%: of all pixels, outside the true mask + 5 px: right in the input, "
+            "wrong in the output (CIE76 dE > 10, 1 px blur)",
+            "  leftover%: of the recoverable true mask, still wrong; "
+            "unrec%: of the true mask, seen free by no other view"]
+    return head + _render(table, len(bg_sets), n_left=1)
 
 
 def format_ablation(report: dict) -> str:
@@ -511,7 +601,7 @@ def format_ablation(report: dict) -> str:
     return "\n".join(lines + [f"note: {n}" for n in report.get("skipped", [])])
 
 
-__all__ = ["METHODS", "ABLATIONS", "EvalSet", "LoadedSet", "find_sets", "load_set",
+__all__ = ["METHODS", "ABLATIONS", "SCORE_KEYS", "EvalSet", "LoadedSet", "find_sets", "load_set",
            "score", "run_method", "eval_set", "run_eval", "run_ablation",
            "ablation_variants", "summarize", "format_table", "format_ablation",
            "image_files"]

@@ -28,6 +28,9 @@ class TwoView:
     n_matches: int
     n_inliers_F: int
     n_inliers_H: int
+    # 90th percentile of |x_s - H x_r| over the F inliers (px): how far the static
+    # scene departs from the homography (parallax); inf when F or H is unknown
+    parallax_px: float = float("inf")
 
 
 def detect(gray_u8: npt.NDArray[np.uint8], *, max_features: int = 4000):
@@ -62,18 +65,27 @@ def estimate_two_view(xy_r: npt.NDArray[np.float32], xy_s: npt.NDArray[np.float3
     F = None
     H = np.eye(3)
     nF = nH = 0
+    parallax = float("inf")
     if n >= MIN_MATCHES:
         cv2.setRNGSeed(int(seed))
         F_est, inl = cv2.findFundamentalMat(xy_r, xy_s, cv2.USAC_MAGSAC, 1.0, 0.999, 10000)
+        inl_F = None
         if F_est is not None and F_est.shape == (3, 3) and inl is not None:
             nF = int(inl.sum())
             if nF >= 8:
                 F = F_est.astype(np.float64)
+                inl_F = inl.ravel().astype(bool)
         H_est, n_inl = fit_homography(xy_r, xy_s, seed=seed)
         if H_est is not None and n_inl >= 8:
             nH = n_inl
             H = H_est
-    return TwoView(F=F, H=H, n_matches=n, n_inliers_F=nF, n_inliers_H=nH)
+            if inl_F is not None:
+                a, b = xy_r[inl_F].astype(np.float64), xy_s[inl_F].astype(np.float64)
+                q = np.c_[a, np.ones(len(a))] @ H.T
+                q = q[:, :2] / np.where(np.abs(q[:, 2:]) < 1e-12, 1e-12, q[:, 2:])
+                parallax = float(np.percentile(np.hypot(*(b - q).T), 90))
+    return TwoView(F=F, H=H, n_matches=n, n_inliers_F=nF, n_inliers_H=nH,
+                   parallax_px=parallax)
 
 
 def fit_homography(xy_a: npt.NDArray[np.float32], xy_b: npt.NDArray[np.float32], *,

@@ -63,18 +63,27 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
     # the field is interpolated over a slightly larger hole: flow at object edges bleeds
     hole = cv2.dilate(region.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
     fields = [background_field(Nf[s], hole) for s in range(len(sources))]
-    clean = _fuse(reference, sources, fields, region, combine, n_valid)
+    clean, n_valid = median_fill(reference, sources, fields, region, combine=combine)
     if realign > 0 and homographies is None:
         raise ValueError("realign needs the homographies")
     grays = [cv2.cvtColor(src, cv2.COLOR_BGR2GRAY) for src in sources] if realign > 0 else []
     for _ in range(max(0, int(realign))):
-        fields = _realign(clean, grays, fields, hole, homographies, flow_preset,
-                          realign_max_px)
-        clean = _fuse(reference, sources, fields, region, combine, n_valid)
+        fields = realign_fields(clean, grays, fields, hole, homographies, flow_preset,
+                                realign_max_px)
+        clean, n_valid = median_fill(reference, sources, fields, region, combine=combine)
     return clean, n_valid
 
 
-def _fuse(reference, sources, fields, region, combine, n_valid):
+def median_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
+                fields: list[npt.NDArray[np.float32]], region: npt.NDArray[np.bool_], *,
+                combine: str = "median"
+                ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8]]:
+    """``reference`` with ``region`` replaced by the median (or medoid) of the sources.
+
+    ``fields``: per source, (H, W, 2) float32 matches reference → source.
+    Returns the image and, per pixel, how many sources were inside their frame.
+    """
+    n_valid = np.zeros(region.shape, np.uint8)
     ys, xs = np.nonzero(region)
     samples = np.zeros((len(sources), len(ys), 3), np.float32)
     ok = np.zeros((len(sources), len(ys)), bool)
@@ -94,10 +103,10 @@ def _fuse(reference, sources, fields, region, combine, n_valid):
     out = reference.copy()
     have = ok.any(0)
     out[ys[have], xs[have]] = np.clip(fill[have] + 0.5, 0, 255).astype(np.uint8)
-    return out
+    return out, n_valid
 
 
-def _realign(clean, src_grays, fields, hole, homographies, flow_preset, max_px):
+def realign_fields(clean, src_grays, fields, hole, homographies, flow_preset, max_px):
     """Matches inside ``hole`` re-measured by flow from the cleaned reference.
 
     Only the bounding box of the hole (plus a margin for the flow's context)
@@ -124,4 +133,4 @@ def _realign(clean, src_grays, fields, hole, homographies, flow_preset, max_px):
     return out
 
 
-__all__ = ["fuse_background"]
+__all__ = ["fuse_background", "median_fill", "realign_fields"]

@@ -1,0 +1,272 @@
+"""Fill by selection: keep the reference where it is right, copy one free source elsewhere.
+
+The default preset's last step (not in the paper). It replaces the per-channel
+median of all sources (``fill.fuse_background``), which averages every
+source's *own* mover into the fill as a ghost and refills static 3-D structure
+that the scan flagged with doubled content.
+
+1. **Evidence that the reference is static** (geometry). Each source is
+   matched to the reference by homography + DIS flow, without the scan's gate.
+   A flow match *explains* a reference pixel when it agrees in colour (CIE76
+   ΔE < ``tau``), lies within ``select_epipolar_px`` of its epipolar line, and
+   departs from the homography by no more than the parallax the static scene
+   shows between the two views (``TwoView.parallax_px``, measured on the F
+   inliers; a rotation or a planar scene allows ~1 px, a wide baseline tens).
+   Pixels of L explained by at least half of the sources are static 3-D
+   structure that the scan's homography-gated matches could not follow.
+2. **Background candidates.** Every source is sampled through its field,
+   re-interpolated across the rest of L (``fields.background_field``) and
+   re-aligned by flow from the filled reference (``fill.realign_fields``).
+3. **Consensus with independent, weighted witnesses.** A colour model of the
+   movers (histogram of L against a ring around it, as GrabCut's) gives each
+   candidate a mover probability; a witness counts ``1 - p``, so a source
+   showing its own mover (or a near-copy of the reference) carries no weight.
+   The consensus at a pixel is the candidate with the most weighted support.
+4. **Graph cut** (``montage.expansion_labels``, photomontage). Labels: the
+   reference and every source. The data cost is the distance to the
+   consensus, plus a preference for the reference outside L and a cost for
+   keeping it inside L (unless explained); the seam cost puts seams where
+   the sources agree. Where the sets' parallax is large (median
+   ``parallax_px`` > ``select_parallax_px``), the consensus may also keep the
+   reference inside L: the scan's flags there are mostly 3-D structure.
+5. **Blend** (``montage.offset_blend``): exposure and white-balance
+   differences leave no edge. Pixels of L that no source shows free are
+   inpainted (OpenCV Telea) and reported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from dynremove.method.correspondence import apply_homography, dense_correspondence, pixel_grid
+from dynremove.method.geometry import TwoView, sampson_sq
+from dynremove.params import Params
+from dynremove.refine.fields import background_field, blurred_lab, sample_bilinear
+from dynremove.refine.fill import median_fill, realign_fields
+from dynremove.refine.montage import expansion_labels, offset_blend
+from dynremove.refine.morphology import dilate_disc
+
+_FORBIDDEN = 1e6  # data cost of a label that may not be used
+_DE_CAP = 40.0  # colour distances are capped here in the data cost
+
+
+@dataclass
+class Selection:
+    """What the fill by selection decided (all (H, W) unless said)."""
+
+    clean: npt.NDArray[np.uint8]  # (H, W, 3) the clean reference
+    replaced: npt.NDArray[np.bool_]  # the final dynamic map: pixels of L taken from a source,
+    # and pixels near L whose source differs from the reference (ΔE >= tau)
+    label: npt.NDArray[np.int16]  # -1 not considered, 0 reference kept, k+1 source k
+    explained: npt.NDArray[np.bool_]  # pixels of L kept as static 3-D structure
+    movers: npt.NDArray[np.bool_]  # (S, H, W) where source k's candidate shows a mover
+    no_source: npt.NDArray[np.bool_]  # replaced pixels no source showed free (inpainted)
+    seams: npt.NDArray[np.bool_]  # boundaries between labels inside the region
+    parallax_px: float  # median measured parallax of the set (px)
+    consensus_mode: str  # "scan" (trust L) or "parallax" (colour consensus inside L)
+
+
+def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
+                       bins: int = 12) -> np.ndarray:
+    """P(mover | colour): histograms of L's core against a ring around L (Lab)."""
+    core = cv2.erode(L.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    ring = dilate_disc(L, 30) & ~dilate_disc(L, 4)
+    if not core.any() or not ring.any():
+        return np.zeros(values.shape[:-1], np.float32)
+
+    def q(x):
+        lum = np.clip(x[..., 0] / 100 * bins, 0, bins - 1).astype(np.intp)
+        a = np.clip((x[..., 1] + 64) / 128 * bins, 0, bins - 1).astype(np.intp)
+        b = np.clip((x[..., 2] + 64) / 128 * bins, 0, bins - 1).astype(np.intp)
+        return (lum * bins + a) * bins + b
+
+    def hist(m):
+        h = np.bincount(q(lab_ref[m]), minlength=bins ** 3).astype(np.float64)
+        h = cv2.GaussianBlur(h.reshape(bins, bins * bins), (3, 3), 0.7).ravel()
+        return h / max(h.sum(), 1e-9)
+
+    hf, hb = hist(core), hist(ring)
+    post = (hf + 1e-4) / (hf + hb + 2e-4)
+    return post[q(values)].astype(np.float32)
+
+
+def _cluster_median(cand_img, labs, lab, rep, free, tau):
+    """Each replaced pixel's chosen source, replaced by the per-channel median of the
+    free sources that agree with it (ΔE < ``tau``): the chosen region keeps one
+    source's content while its noise and sub-pixel misalignment average out."""
+    out = cand_img.copy()
+    ys, xs = np.nonzero(rep)
+    chosen = lab[ys, xs]
+    lab_c = labs[chosen, ys, xs]  # (n, 3)
+    tau = np.broadcast_to(tau, rep.shape)[ys, xs]
+    member = free[:, ys, xs] & (np.linalg.norm(labs[1:, ys, xs] - lab_c[None], axis=-1) < tau)
+    member[chosen - 1, np.arange(len(ys))] = True
+    vals = np.where(member[..., None], cand_img[1:, ys, xs].astype(np.float32), np.nan)
+    med = np.nanmedian(vals, axis=0)
+    out[chosen, ys, xs] = np.clip(med + 0.5, 0, 255).astype(np.uint8)
+    return out
+
+
+def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
+                views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params
+                ) -> Selection:
+    """Fill ``mask`` by selecting, per region, one source that is free there.
+
+    Parameters
+    ----------
+    reference : (H, W, 3) uint8 ndarray
+    sources : (S, H, W, 3) uint8 ndarray
+    views : list of TwoView
+        The reference → source geometry (H, F, measured parallax) per source.
+    mask : (H, W) bool ndarray
+        The dynamic map L after the refinement steps.
+    params : Params
+        ``select_*`` fields (see ``Params``).
+
+    Returns
+    -------
+    Selection
+        ``clean`` equals ``reference`` outside ``mask`` dilated by
+        ``select_margin_px``.
+    """
+    H, W = mask.shape
+    S = len(sources)
+    P = params
+    par = float(np.median([v.parallax_px if np.isfinite(v.parallax_px) else 0.0
+                           for v in views])) if views else 0.0
+    mode = "parallax" if par > P.select_parallax_px else "scan"
+    empty = Selection(clean=reference.copy(), replaced=np.zeros((H, W), bool),
+                      label=np.full((H, W), -1, np.int16), explained=np.zeros((H, W), bool),
+                      movers=np.zeros((S, H, W), bool), no_source=np.zeros((H, W), bool),
+                      seams=np.zeros((H, W), bool), parallax_px=par, consensus_mode=mode)
+    region = dilate_disc(mask, P.select_margin_px)
+    if not mask.any() or S == 0:
+        return empty
+    tau = P.select_tau
+    lab_r = blurred_lab(reference, 1.0)
+    g_r = cv2.cvtColor(reference, cv2.COLOR_BGR2GRAY)
+    src_gray = [cv2.cvtColor(s, cv2.COLOR_BGR2GRAY) for s in sources]
+    gx, gy = pixel_grid(H, W)
+    grid = np.stack([gx, gy], -1)
+
+    # 1. flow matches and the pixels of L they explain
+    votes = np.zeros((S, H, W), np.float32)
+    base = []
+    for k in range(S):
+        v = views[k]
+        nf = dense_correspondence(g_r, src_gray[k], v.H, method="homography+flow",
+                                  flow_preset=P.flow_preset)
+        hx, hy = apply_homography(v.H, gx, gy)
+        bound = (v.parallax_px if np.isfinite(v.parallax_px) else 0.0) + 2.0
+        off_h = np.hypot(nf[..., 0] - hx, nf[..., 1] - hy)
+        within = off_h <= bound
+        # the fill's field keeps flow as far as the scan's gate allows
+        keep = off_h <= max(bound, P.flow_gate * max(H, W))
+        base.append(np.where(keep[..., None], nf, np.stack([hx, hy], -1)).astype(np.float32))
+        warped, inside = sample_bilinear(sources[k], nf)
+        lab_w = blurred_lab(warped, 1.0)
+        ok = inside & within & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+        if v.F is not None and P.select_epipolar_px > 0:
+            ok &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
+        votes[k] = ok * (1.0 - _mover_probability(lab_r, mask, lab_w))
+    p_ref = _mover_probability(lab_r, mask, lab_r)
+    need = max(1, int(np.ceil(0.5 * S - 1e-6)))
+    explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5)
+    core = mask & ~explained
+
+    # 2. background candidates through the fields, re-aligned
+    hole = cv2.dilate(dilate_disc(core, 2).astype(np.uint8), np.ones((7, 7), np.uint8)
+                      ).astype(bool)
+    fields = [background_field(base[k], hole) for k in range(S)]
+    if P.fuse_realign > 0 and core.any():
+        for _ in range(P.fuse_realign):
+            first, _ = median_fill(reference, sources, fields, dilate_disc(core, 2))
+            fields = realign_fields(first, src_gray, fields, hole, [v.H for v in views],
+                                    P.flow_preset, P.fuse_realign_max_px)
+
+    ys, xs = np.nonzero(region)
+    y0, y1 = max(ys.min() - 2, 0), min(ys.max() + 3, H)
+    x0, x1 = max(xs.min() - 2, 0), min(xs.max() + 3, W)
+    roi = (slice(y0, y1), slice(x0, x1))
+    reg, in_core, in_mask = region[roi], core[roi], mask[roi]
+    cand = [reference[roi]]
+    inside = [np.ones(reg.shape, bool)]
+    for k in range(S):
+        warped, ins = sample_bilinear(sources[k], fields[k])
+        cand.append(warped[roi])
+        inside.append(ins[roi])
+    cand_img = np.stack(cand)
+    usable = np.stack(inside)
+    labs = np.stack([blurred_lab(c, 1.0) for c in cand_img])
+    nl = S + 1
+
+    # 3. weighted consensus
+    p_mover = _mover_probability(lab_r, mask, labs)
+    weight = (1.0 - p_mover) * usable
+    weight[0] = 1.0  # outside L the reference is a trusted witness
+    weight[0][in_mask] = 1.0 - p_mover[0][in_mask]
+    dist = np.linalg.norm(labs[:, None] - labs[None], axis=-1)  # (nl, nl, h, w)
+    agree = (dist < tau) & usable[:, None] & usable[None]
+    support = (agree * weight[None]).sum(1)
+    v_roi = votes[:, y0:y1, x0:x1]
+    support[0] = weight[0] + np.maximum(agree[0, 1:] * weight[1:], v_roi).sum(0)
+
+    def consensus(sup, first):
+        best = first + np.argmax(sup + 1e-3 * (np.arange(len(sup)) == 0)[:, None, None], 0)
+        c = np.take_along_axis(labs, best[None, ..., None].repeat(3, -1), 0)[0]
+        return np.minimum(np.linalg.norm(labs - c[None], axis=-1), _DE_CAP), c
+
+    D, cons = consensus(support, 0)
+    if mode == "scan":
+        # inside L the reference is the suspect: the sources' own consensus decides
+        Ds, cons_s = consensus(support[1:], 1)
+        D = np.where(in_core[None], Ds, D)
+        D[0] = np.where(in_core, P.select_ref_cost, D[0])
+        cons = np.where(in_core[..., None], cons_s, cons)
+    D[1:] += P.select_kappa + P.select_gamma * p_mover[1:]
+    D[~usable] = _FORBIDDEN
+    D[1:, ~reg] = _FORBIDDEN
+    D[0, ~reg] = 0.0
+
+    # 4. graph cut, 5. blend
+    lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2)
+    rep = lab != 0
+    movers = np.zeros((S, H, W), bool)
+    mv = usable[1:] & (p_mover[1:] > 0.5) & (np.linalg.norm(labs[1:] - cons[None], axis=-1) > tau)
+    movers[:, y0:y1, x0:x1] = mv & reg[None]
+    free = usable[1:] & ~mv
+    no_src = rep & in_core & ~free.any(0)
+    clean = reference.copy()
+    if rep.any():
+        d_ref = np.linalg.norm(labs - labs[0][None], axis=-1)
+        if P.select_cluster_median:
+            # where the scan is trusted, every free source is a witness of the
+            # hidden background, not only those agreeing with the chosen one
+            cand_img = _cluster_median(cand_img, labs, lab, rep, free,
+                                       np.where(in_core, np.inf, tau) if mode == "scan" else tau)
+        clean[roi] = offset_blend(reference[roi], cand_img, lab, rep, usable, d_ref)
+    if no_src.any():
+        sub = np.ascontiguousarray(clean[roi])
+        clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    label = np.full((H, W), -1, np.int16)
+    label[roi] = np.where(reg, lab, -1)
+    seams = np.zeros((H, W), bool)
+    seams[roi] = reg & ((np.diff(lab, axis=0, prepend=lab[:1]) != 0)
+                        | (np.diff(lab, axis=1, prepend=lab[:, :1]) != 0))
+    # the dynamic map: replaced pixels of L, and those outside it where the
+    # reference differed from what replaced it (not mere seam placement)
+    d_chosen = np.take_along_axis(np.linalg.norm(labs - labs[0][None], axis=-1), lab[None], 0)[0]
+    replaced = np.zeros((H, W), bool)
+    replaced[roi] = rep & (in_mask | (d_chosen >= tau))
+    nos = np.zeros((H, W), bool)
+    nos[roi] = no_src
+    return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
+                     movers=movers, no_source=nos, seams=seams, parallax_px=par,
+                     consensus_mode=mode)
+
+
+__all__ = ["Selection", "select_fill"]
