@@ -1,0 +1,71 @@
+"""Side-by-side panel of the real hand-held bursts: reference | default | median stack.
+
+Usage::
+
+    python examples/burst_panel.py [DATA_DIR] [--out examples/bursts_panel.png]
+
+DATA_DIR defaults to ``$DYNREMOVE_DATA`` or ``../shared/data``; the bursts are the
+``bursts/<set>/frames`` folders below it (reference: the middle frame). Each row is
+one burst, scaled to 360 px high.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import warnings
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from dynremove import io, remove_dynamic
+from dynremove.evaluation.baselines import median_baseline
+
+
+def _label(img: np.ndarray, text: str) -> np.ndarray:
+    out = img.copy()
+    cv2.rectangle(out, (0, 0), (out.shape[1], 26), (0, 0, 0), -1)
+    cv2.putText(out, text, (6, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1,
+                cv2.LINE_AA)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", nargs="?",
+                    default=os.environ.get("DYNREMOVE_DATA", "../shared/data"))
+    ap.add_argument("--out", default="examples/bursts_panel.png")
+    ap.add_argument("--height", type=int, default=360, help="row height (px)")
+    args = ap.parse_args(argv)
+    root = Path(args.data) / "bursts"
+    sets = sorted(p.parent for p in root.glob("*/frames"))
+    if not sets:
+        print(f"no bursts under {root}", file=sys.stderr)
+        return 2
+    rows = []
+    for s in sets:
+        iset = io.load_image_set([s / "frames"])
+        ref = len(iset.images) // 2
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = remove_dynamic(iset.images, ref=ref, names=iset.names)
+            med, _ = median_baseline(iset.images, ref, align="homography")
+        h = args.height
+        tiles = []
+        for img, text in ((iset.images[ref], f"{s.name}: reference {iset.names[ref]}"),
+                          (res.clean, "dynremove (default)"), (med, "median stack")):
+            w = round(img.shape[1] * h / img.shape[0])
+            tiles.append(_label(cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA), text))
+        rows.append(np.hstack(tiles))
+        print(f"{s.name}: {int(res.dynamic.sum())} px replaced", file=sys.stderr)
+    width = max(r.shape[1] for r in rows)
+    rows = [np.pad(r, ((0, 0), (0, width - r.shape[1]), (0, 0))) for r in rows]
+    io.write_image(Path(args.out), np.vstack(rows))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
