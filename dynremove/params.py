@@ -47,7 +47,7 @@ class Params:
     # --- similarity, Eq. (1) and H ------------------------------------------
     lambda1: float = 0.15  # λ1 : Lab weight in C_s and H
     lambda2: float = 0.40  # λ2 : SIFT weight in C_s and H
-    lambda3: float = 0.45  # λ3 : epipolar weight in C_s and H
+    lambda3: float = 0.45  # λ3 : epipolar weight in C_s and H (absent: λ1, λ2 scaled to λ1+λ2+λ3)
     sigma_c: float = 4.8  # σ_c : Lab (CIE units)
     sigma_g: float = 0.25  # σ_g : SIFT (after sift_scale)
     sigma_e: float = 0.17  # σ_e : squared Sampson distance (coord units)
@@ -60,7 +60,7 @@ class Params:
     # --- removal, patch choice q* -------------------------------------------
     lambda6: float = 0.12  # λ6 : Lab term of q*
     lambda7: float = 0.36  # λ7 : HoG term of q*
-    lambda8: float = 0.03  # λ8 : epipolar term of q*
+    lambda8: float = 0.03  # λ8 : epipolar term of q* (absent: the overlap terms scaled up by λ8)
     sigma_h: float = 4.8  # σ_h : HoG (after hog_scale)
     tie_tol: float = 1e-3  # patches within this of the best score tie
     write: str = "patch"  # "patch": write p×p; "pixel": centre only
@@ -68,7 +68,7 @@ class Params:
     # --- scans ---------------------------------------------------------------
     max_scans: int = 1  # stop earlier when a scan finds no dynamic pixel (paper preset 4)
     update: bool = True  # update f, N and C after a write (Sec. 3.2.3)
-    use_epipolar: bool = True  # λ3/λ8 terms on (off: weights renormalised)
+    use_epipolar: bool = True  # λ3/λ8 terms on (off, or a source without F: the other terms rescaled to the same top score)
     use_hog: bool = True  # λ7 term on
 
     # --- correspondences ----------------------------------------------------
@@ -94,6 +94,7 @@ class Params:
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
     fuse_realign: int = 2  # passes re-measuring the matches from the cleaned reference (paper preset 0)
     fuse_realign_max_px: float = 8.0  # a re-measured match may move at most this far
+    near_copy_agree: float = 0.99  # drop sources agreeing with the reference on this share of pixels (0 = off)
     fill: str = "select"  # "select": one free source per region (refine.select); "median": of all
     select_tau: float = 10.0  # CIE76 ΔE under which two candidates agree
     select_margin_px: int = 8  # the fill may change pixels within this of L
@@ -106,6 +107,7 @@ class Params:
     select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
+    candidate_set: bool = False  # P as a set: a repeated (s, x, y) candidate counts once (paper preset True)
 
     def __post_init__(self) -> None:
         if self.patch_size < 3 or self.patch_size % 2 == 0:
@@ -130,6 +132,8 @@ class Params:
             raise ValueError(f"write must be one of {WRITE_MODES}, got {self.write!r}")
         if self.flow_preset not in ("fast", "medium", "ultrafast"):
             raise ValueError(f"flow_preset must be fast/medium/ultrafast, got {self.flow_preset!r}")
+        if not 0.0 <= self.near_copy_agree <= 1.0:
+            raise ValueError(f"near_copy_agree must be in [0, 1], got {self.near_copy_agree}")
         if self.fill not in FILL_MODES:
             raise ValueError(f"fill must be one of {FILL_MODES}, got {self.fill!r}")
         for name in ("select_tau", "select_beta"):
@@ -151,6 +155,8 @@ class Params:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.hog_bins < 2:
             raise ValueError(f"hog_bins must be >= 2, got {self.hog_bins}")
+        if self.candidate_set not in (True, False):
+            raise ValueError(f"candidate_set must be True or False, got {self.candidate_set!r}")
 
     # λ4, λ5 of Eq. (DB_cost) and M
     @property
@@ -177,7 +183,7 @@ DEFAULT = Params()
 # t_r 0.4, and none of the engineered steps of dynremove.refine.
 PAPER = Params(patch_size=9, t_r=0.4, correspondence="homography+flow", max_scans=4,
                clean_mask=False, min_region_px=0, refine_tau=0.0, snap=False,
-               fuse=False, fuse_realign=0)
+               fuse=False, fuse_realign=0, candidate_set=True, near_copy_agree=0.0)
 
 PRESETS: dict[str, Params] = {"default": DEFAULT, "paper": PAPER}
 

@@ -6,6 +6,7 @@ engineered steps, each switched by ``Params``).
 
 from __future__ import annotations
 
+import dataclasses
 import platform
 import time
 import warnings
@@ -24,6 +25,7 @@ from dynremove.method import correspondence, features, geometry
 from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
 from dynremove.params import DEFAULT, Params
+from dynremove.refine.duplicates import agreement_with_reference
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges
 from dynremove.refine.morphology import clean_mask
@@ -141,7 +143,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
                    probes: Sequence[tuple[int, int]] = (), sample_static: float = 0.0,
                    names: Sequence[str] | None = None, preset_name: str = "custom",
                    kernel: str = "numba", chunk_rows: int | None = None,
-                   progress: Progress | None = None) -> Result:
+                   progress: Progress | None = None,
+                   valid_masks: Sequence[np.ndarray] | None = None) -> Result:
     """Detect the moving objects in the reference and replace them (Algorithm 1).
 
     Parameters
@@ -159,6 +162,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         Fraction of static decisions recorded (deterministic sample).
     kernel : {"numba", "reference"}
         The compiled scan or the slow readable one (tests).
+    valid_masks : sequence of (H, W) bool ndarrays, optional
+        Per image, where it has content (False: transparent or empty border of a
+        pre-aligned frame). Never flagged in the reference (the input is kept
+        there), never used as fill from a source.
 
     Returns
     -------
@@ -177,6 +184,19 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     st, views = prepare(images, ref, params, timings=timings, progress=progress)
     msgs = []
     srcs = [i for i in range(len(images)) if i != ref]
+    if params.near_copy_agree > 0 and len(srcs) > 1:
+        agree = agreement_with_reference(np.asarray(images[ref]), st.src_img,
+                                         [v.H for v in views])
+        copy = agree >= params.near_copy_agree
+        if copy.any() and not copy.all():
+            keep = np.flatnonzero(~copy)
+            msgs.append("near-copies of the reference, not used as evidence (they would "
+                        "out-vote the views that saw the background): " + ", ".join(
+                            f"{names[srcs[k]]} ({100 * agree[k]:.1f} % alike)"
+                            for k in np.flatnonzero(copy)))
+            st = _keep_sources(st, keep)
+            views = [views[k] for k in keep]
+            srcs = [srcs[k] for k in keep]
     for k, v in enumerate(views):
         if v.F is None:
             msgs.append(f"{names[srcs[k]]}: only {v.n_matches} keypoint matches with the "
@@ -229,7 +249,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     if params.fuse and params.fill == "select":
         if progress:
             progress("fusion", 0.0)
-        selection = select_fill(ref_img, st.src_img, views, dyn, params)
+        selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=None if
+                                valid_masks is None else np.stack([valid_masks[s] for s in srcs]))
         clean = selection.clean
         dyn = stages["select"] = selection.replaced
         n_ns = int(selection.no_source.sum())
@@ -250,6 +271,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         if progress:
             progress("fusion", 1.0)
     timings["fusion"] = time.perf_counter() - t
+    if valid_masks is not None:  # no content in the reference: never flagged, kept as is
+        valid_ref = np.asarray(valid_masks[ref], bool)
+        dyn = stages["valid"] = dyn & valid_ref
+        clean = np.where(valid_ref[..., None], clean, ref_img)
     timings["total"] = time.perf_counter() - t_all
     result = Result(
         clean=clean, clean_scan=st.img, dynamic=dyn, dynamic_raw=L, M=M_maps, coverage=cov,
@@ -263,6 +288,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         warnings=msgs, stages=stages, selection=selection)
     sink.finish(result)
     return result
+
+
+def _keep_sources(st: ScanInputs, keep: np.ndarray) -> ScanInputs:
+    """``st`` restricted to the sources ``keep`` (indices along the S axis)."""
+    per_source = ("src_img", "src_lab", "src_gray", "fc_s", "fg_s", "N", "C", "F", "hasF", "Nf")
+    return dataclasses.replace(st, **{
+        k: np.ascontiguousarray(getattr(st, k)[keep]) for k in per_source
+        if getattr(st, k) is not None})
 
 
 def _coverage(st: ScanInputs, params: Params) -> np.ndarray:

@@ -150,3 +150,45 @@ def test_darker_reference_leaves_no_silhouette():
                 des.append(np.linalg.norm(lab[y:y + 32, x:x + 32][i].mean(0)
                                           - lab[y:y + 32, x:x + 32][o].mean(0)))
     assert des and max(des) <= 6.0 and np.mean(des) <= 3.0, des
+
+
+# --------------------------------------------------------------------------- near-copies
+def _data_root():
+    import os
+    from pathlib import Path
+
+    return Path(os.environ.get("DYNREMOVE_DATA",
+                               Path(__file__).resolve().parents[1] / ".." / "shared" / "data"))
+
+
+def _jittered_copy(img, seed):
+    """The reference again, as a paused subject gives it: sensor noise, a sub-pixel
+    shake and a JPEG round trip."""
+    rng = np.random.default_rng(seed)
+    cp = np.clip(img.astype(float) + rng.normal(0, 2, img.shape), 0, 255).astype(np.uint8)
+    cp = cv2.warpAffine(cp, np.float32([[1, 0, 0.7], [0, 1, -0.4]]), cp.shape[1::-1],
+                        borderMode=cv2.BORDER_REFLECT)
+    return cv2.imdecode(cv2.imencode(".jpg", cp, [cv2.IMWRITE_JPEG_QUALITY, 92])[1], 1)
+
+
+def test_near_copies_do_not_outvote_the_background():
+    """DAVIS camel with two of its six sources replaced by near-copies of the
+    reference: without the near-copy check the camel is called static."""
+    from dynremove import io
+    from dynremove.evaluation.metrics import jaccard
+
+    root = _data_root() / "davis" / "camel"
+    if not (root / "frames").is_dir():
+        pytest.skip(f"no {root} (set DYNREMOVE_DATA to the shared data)")
+    iset = io.load_image_set([root / "frames"], max_side=480)
+    ims, ref = list(iset.images), len(iset.images) // 2
+    H, W = ims[0].shape[:2]
+    gt = io.read_mask(root / "masks" / (iset.names[ref].rsplit(".", 1)[0] + ".png"), (W, H))
+    base = jaccard(remove_dynamic(ims, ref=ref).dynamic, gt)
+    ims[ref - 1], ims[ref + 1] = _jittered_copy(ims[ref], 1), _jittered_copy(ims[ref], 2)
+    with pytest.warns(UserWarning, match="near-copies"):
+        r = remove_dynamic(ims, ref=ref)
+    assert jaccard(r.dynamic, gt) >= base - 0.1
+    # planted: the check off, the copies out-vote the others (the failure it guards)
+    off = remove_dynamic(ims, ref=ref, params=preset("default").replace(near_copy_agree=0.0))
+    assert jaccard(off.dynamic, gt) < jaccard(r.dynamic, gt) - 0.2

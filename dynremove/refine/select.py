@@ -94,6 +94,14 @@ def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
     return post[q(values)].astype(np.float32)
 
 
+def _valid_at(valid: np.ndarray, field: np.ndarray) -> np.ndarray:
+    """``valid`` (H, W) bool looked up at the nearest pixel of ``field`` (H, W, 2)."""
+    m = cv2.remap(valid.astype(np.uint8), np.ascontiguousarray(field[..., 0]),
+                  np.ascontiguousarray(field[..., 1]), cv2.INTER_NEAREST,
+                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    return m.astype(bool)
+
+
 def _cluster_median(cand_img, labs, lab, rep, free, tau):
     """Each replaced pixel's chosen source, replaced by the per-channel median of the
     free sources that agree with it (ΔE < ``tau``): the chosen region keeps one
@@ -112,8 +120,8 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
 
 
 def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
-                views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params
-                ) -> Selection:
+                views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params, *,
+                valid: npt.NDArray[np.bool_] | None = None) -> Selection:
     """Fill ``mask`` by selecting, per region, one source that is free there.
 
     Parameters
@@ -126,6 +134,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         The dynamic map L after the refinement steps.
     params : Params
         ``select_*`` fields (see ``Params``).
+    valid : (S, H, W) bool ndarray, optional
+        Where each *source* has content (False: a transparent or empty border of
+        a pre-aligned frame). Sampling a source where it is not valid counts as
+        outside its frame: never evidence, never fill.
 
     Returns
     -------
@@ -168,6 +180,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         keep = off_h <= max(bound, P.flow_gate * max(H, W))
         base.append(np.where(keep[..., None], nf, np.stack([hx, hy], -1)).astype(np.float32))
         warped, inside = sample_bilinear(sources[k], nf)
+        if valid is not None:
+            inside &= _valid_at(valid[k], nf)
         lab_w = blurred_lab(warped, 1.0)
         ok = inside & within & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
         if v.F is not None and P.select_epipolar_px > 0:
@@ -197,6 +211,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     inside = [np.ones(reg.shape, bool)]
     for k in range(S):
         warped, ins = sample_bilinear(sources[k], fields[k])
+        if valid is not None:
+            ins &= _valid_at(valid[k], fields[k])
         cand.append(warped[roi])
         inside.append(ins[roi])
     cand_img = np.stack(cand)
