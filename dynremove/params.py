@@ -104,6 +104,7 @@ class Params:
     select_gamma: float = 20.0  # data cost (ΔE) of a candidate with mover colours, × P(mover)
     select_epipolar_px: float = 2.0  # a flow match explaining the reference is this near its line
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
+    select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
     select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
@@ -139,7 +140,7 @@ class Params:
         for name in ("select_tau", "select_beta"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
+        for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
                      "select_parallax_px", "select_margin_px"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")

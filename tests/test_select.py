@@ -192,3 +192,38 @@ def test_near_copies_do_not_outvote_the_background():
     # planted: the check off, the copies out-vote the others (the failure it guards)
     off = remove_dynamic(ims, ref=ref, params=preset("default").replace(near_copy_agree=0.0))
     assert jaccard(off.dynamic, gt) < jaccard(r.dynamic, gt) - 0.2
+
+
+# --------------------------------------------------------------------------- shadows
+def _with_cast_shadows(sc, dx, dy, factor):
+    """Each view's movers cast a shadow: their mask shifted by (dx, dy) darkens the
+    ground by ``factor``. Returns the images and each view's shadow mask."""
+    ims, shadows = [], []
+    for im, m in zip(sc.images, sc.masks):
+        s = np.zeros_like(m)
+        s[dy:, dx:] = m[:-dy, :-dx]
+        s = cv2.erode(s.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~m
+        out = im.copy()
+        out[s] = (out[s] * factor).astype(np.uint8)
+        ims.append(out)
+        shadows.append(s)
+    return ims, shadows
+
+
+def test_cast_shadow_is_removed_with_its_mover():
+    """A soft shadow detached from the mover, known mask: the scan flags little of
+    it (measured 39 % restored here without the growth step, 93 % with it)."""
+    sc = synth.make_scene(seed=0, n_views=6, size=(360, 640))
+    ims, shadows = _with_cast_shadows(sc, dx=30, dy=20, factor=0.7)
+    ref = sc.ref_index
+    s = shadows[ref]
+    assert s.sum() > 500
+
+    def restored(params):
+        r = remove_dynamic(ims, ref=ref, params=params)
+        return (_de(r.clean, sc.background)[s] <= 10).mean()
+
+    with_growth = restored(preset("default"))
+    without = restored(preset("default").replace(select_grow_px=0))
+    assert with_growth >= 0.85
+    assert without < with_growth - 0.2  # the step is what removes it

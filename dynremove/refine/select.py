@@ -102,6 +102,42 @@ def _valid_at(valid: np.ndarray, field: np.ndarray) -> np.ndarray:
     return m.astype(bool)
 
 
+def _consensus_growth(lab_r, sources, base, mask, valid, P):
+    """Pixels near L that the reference alone shows differently (a cast shadow, a
+    part of the mover the scan missed): at least ``max(2, S/2)`` sources, sampled
+    through their geometry-bounded matches, agree with one another and the
+    reference disagrees with all of them (ΔE >= ``select_tau``). Only components
+    touching L are kept, so the consensus never acts far from a detected mover."""
+    S = len(sources)
+    near = dilate_disc(mask, P.select_grow_px) & ~mask
+    if S < 2 or not near.any():
+        return np.zeros(mask.shape, bool)
+    ys, xs = np.nonzero(near)
+    labs, ok = [], []
+    for k in range(S):
+        warped, ins = sample_bilinear(sources[k], base[k])
+        if valid is not None:
+            ins &= _valid_at(valid[k], base[k])
+        labs.append(blurred_lab(warped, 1.0)[ys, xs])
+        ok.append(ins[ys, xs])
+    labs, ok = np.stack(labs), np.stack(ok)  # (S, n, 3), (S, n)
+    tau = P.select_tau
+    d = np.linalg.norm(labs[:, None] - labs[None], axis=-1)  # (S, S, n)
+    agree = (d < tau) & ok[:, None] & ok[None]
+    count = agree.sum(1)  # sources agreeing with source k (itself included)
+    best = np.argmax(count, 0)
+    n_best = count[best, np.arange(len(ys))]
+    cons = labs[best, np.arange(len(ys))]
+    d_ref = np.linalg.norm(lab_r[ys, xs] - cons, axis=-1)
+    need = max(2, int(np.ceil(0.5 * S - 1e-6)))
+    hit = np.zeros(mask.shape, np.uint8)
+    hit[ys, xs] = (n_best >= need) & (d_ref >= tau)
+    hit = cv2.morphologyEx(hit, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    n, lab = cv2.connectedComponents((hit | mask).astype(np.uint8), connectivity=8)
+    touching = np.unique(lab[mask])
+    return np.isin(lab, touching[touching > 0]) & (hit > 0)
+
+
 def _cluster_median(cand_img, labs, lab, rep, free, tau):
     """Each replaced pixel's chosen source, replaced by the per-channel median of the
     free sources that agree with it (ΔE < ``tau``): the chosen region keeps one
@@ -158,6 +194,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     region = dilate_disc(mask, P.select_margin_px)
     if not mask.any() or S == 0:
         return empty
+    mask = mask.copy()
     tau = P.select_tau
     lab_r = blurred_lab(reference, 1.0)
     g_r = cv2.cvtColor(reference, cv2.COLOR_BGR2GRAY)
@@ -187,6 +224,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         if v.F is not None and P.select_epipolar_px > 0:
             ok &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
         votes[k] = ok * (1.0 - _mover_probability(lab_r, mask, lab_w))
+    grown = np.zeros((H, W), bool)
+    if P.select_grow_px > 0:
+        grown = _consensus_growth(lab_r, sources, base, mask, valid, P)
+        mask = mask | grown
+        region = dilate_disc(mask, P.select_margin_px)
     p_ref = _mover_probability(lab_r, mask, lab_r)
     need = max(1, int(np.ceil(0.5 * S - 1e-6)))
     explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5)
