@@ -201,6 +201,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         if v.F is None:
             msgs.append(f"{names[srcs[k]]}: only {v.n_matches} keypoint matches with the "
                         "reference; no epipolar term and no homography pre-warp for it")
+    if len(images) == 2:
+        msgs.append("only 2 photos: where they disagree, either may show the mover; the "
+                    "reference is kept there unless the colours of the detected region "
+                    "single it out (3 or more photos decide by consensus)")
     if all(v.F is None for v in views) and params.use_epipolar:
         msgs.append("no source has a fundamental matrix: the epipolar terms are off")
     for m in msgs:

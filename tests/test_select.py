@@ -227,3 +227,14 @@ def test_cast_shadow_is_removed_with_its_mover():
     without = restored(preset("default").replace(select_grow_px=0))
     assert with_growth >= 0.85
     assert without < with_growth - 0.2  # the step is what removes it
+
+
+def test_two_photos_go_on_with_a_note_and_never_copy_a_mover():
+    sc = synth.make_scene(seed=1, n_views=2, size=(240, 432), n_objects=1)
+    with pytest.warns(UserWarning, match="only 2 photos"):
+        r = remove_dynamic(sc.images, ref=0)
+    src_mover = sc.masks[1]  # where the other photo shows its own mover, seen from itself
+    # the fill never shows the source's mover: every replaced pixel is background-like
+    wrong = _de(r.clean, sc.background) > 10
+    ref_right = _de(sc.images[0], sc.background) <= 10
+    assert (wrong & ref_right).mean() <= 0.005, src_mover.mean()

@@ -283,7 +283,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # inside L the reference is the suspect: the sources' own consensus decides
         Ds, cons_s = consensus(support[1:], 1)
         D = np.where(in_core[None], Ds, D)
-        D[0] = np.where(in_core, P.select_ref_cost, D[0])
+        ref_cost = P.select_ref_cost
+        if S == 1:  # two photos: which one shows the mover is not known; the colour
+            # model must say the reference does and the source does not
+            ref_cost = np.where((p_mover[0] > 0.5) & (p_mover[1] < 0.5), ref_cost, 0.0)
+        D[0] = np.where(in_core, ref_cost, D[0])
         cons = np.where(in_core[..., None], cons_s, cons)
     D[1:] += P.select_kappa + P.select_gamma * p_mover[1:]
     D[~usable] = _FORBIDDEN
