@@ -1,4 +1,4 @@
-"""Command line: ``dynremove run | demo | bench | eval | composite | view | inspect | export``.
+"""Command line: ``dynremove run | batch | demo | bench | eval | composite | view | inspect | export``.
 
 Every sub-command is defined here. Exit codes: 0 ok, 2 bad input (``InputError``,
 including flags that ``Params`` rejects), 1 internal error (any other exception),
@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from dynremove import io
+from dynremove.batch import choose_reference, write_outputs
 from dynremove.errors import InputError
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.bench import run_bench
@@ -95,9 +96,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     t0 = time.perf_counter()
-    iset = io.load_image_set(args.images, max_side=args.max_side)
+    iset = io.load_image_set(args.images, max_side=args.max_side,
+                             valid_mask=args.valid_mask, frames=args.frames, span=args.span,
+                             pick=args.pick)
+    ref, ref_info, ref_notes = choose_reference(args.ref, iset)
+    iset.notes.extend(ref_notes)
     t_load = time.perf_counter() - t0
-    ref = io.resolve_ref(args.ref, iset.names)
     for n in iset.notes:
         _note(args, n)
     gt = None
@@ -114,23 +118,32 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         rec = open_compare_stream(args.record, [n for i, n in enumerate(iset.names) if i != ref],
                                   roots=["runs/main", "runs/compare"])
     sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
+    sink_b = None
     bar = _bar(args)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             res = remove_dynamic(iset.images, ref=ref, params=params, sink=sink,
                                  probes=args.probe or (), sample_static=args.sample_static,
-                                 names=iset.names, preset_name=args.preset, progress=bar)
+                                 names=iset.names, preset_name=args.preset, progress=bar,
+                                 valid_masks=iset.valid_masks)
             if compare is not None:
                 sink_b = _make_sink(args, iset, gt, rec=rec, root="runs/compare")
                 res_b = remove_dynamic(iset.images, ref=ref, params=compare, sink=sink_b,
                                        probes=args.probe or (),
                                        sample_static=args.sample_static, names=iset.names,
-                                       preset_name="compare", progress=bar)
+                                       preset_name="compare", progress=bar,
+                                       valid_masks=iset.valid_masks)
                 _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic "
                      f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
         for w in caught:
             _note(args, str(w.message))
+    except (KeyboardInterrupt, Terminated):
+        # the sink (viewer.RerunSink) logs "interrupted at scan S, step N" when it can
+        for sk in (sink, sink_b):
+            if hasattr(sk, "interrupted"):
+                sk.interrupted()
+        raise
     finally:
         bar.close()
         if hasattr(sink, "close"):
@@ -140,45 +153,12 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.disconnect()
     res.timings["load"] = t_load
     write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
-                  record=args.record)
+                  record=args.record, reference=ref_info)
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
          + (f" and {args.record}" if args.record else "")
          + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, "
          f"{res.timings['total'] + t_load:.1f} s)")
     return EXIT_OK
-
-
-def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
-                  gt: np.ndarray | None = None, record: str | None = None) -> dict:
-    """clean.png, dynamic_mask.png (0/255), coverage.png and report.json, atomically."""
-    io.write_image(out / "clean.png", res.clean)
-    io.write_image(out / "dynamic_mask.png", res.dynamic.astype(np.uint8) * 255)
-    n_src = max(1, len(iset.images) - 1)
-    io.write_image(out / "coverage.png",
-                   (res.coverage.astype(np.float32) * (255.0 / n_src)).astype(np.uint8))
-    H, W = res.clean.shape[:2]
-    report = {
-        "inputs": [str(p) for p in iset.paths],
-        "reference": {"index": ref, "name": iset.names[ref]},
-        "size": {"width": W, "height": H, "original_width": iset.original_size[0],
-                 "original_height": iset.original_size[1], "scale": iset.scale},
-        "preset": preset_name,
-        "params": res.params,
-        "scans": [{"scan": int(s["scan"]), "direction": int(s["direction"]),
-                   "dynamic_px": int(s["n_dynamic"]), "replaced_px": int(s["n_replaced"]),
-                   "undecided_px": int(s["n_undecided"]), "seconds": float(s["seconds"])}
-                  for s in res.scans],
-        "dynamic_fraction": float(res.dynamic.mean()),
-        "uncovered_dynamic_px": int((res.dynamic & (res.coverage == 0)).sum()),
-        "geometry": res.geometry,
-        "seconds": {k: round(float(v), 4) for k, v in res.timings.items()},
-        "notes": list(iset.notes) + list(res.warnings),
-        "recording": str(record) if record else None,
-    }
-    if gt is not None:
-        report["jaccard_vs_gt"] = jaccard(res.dynamic, gt)
-    io.write_json(out / "report.json", report)
-    return report
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
@@ -284,6 +264,22 @@ def cmd_composite(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def cmd_batch(args: argparse.Namespace) -> int:
+    from dynremove.batch import run_batch, stderr_progress
+
+    params = params_from_args(args)
+    s = run_batch(args.root, args.out, params=params, preset_name=args.preset,
+                  jobs=args.jobs, max_side=args.max_side, ref=args.ref, frames=args.frames,
+                  span=args.span, pick=args.pick, scheduler=args.scheduler,
+                  on_done=None if args.quiet else stderr_progress)
+    print(f"{len(s['sets'])} sets: {s['n_ok']} done, {s['n_skipped']} skipped (already "
+          f"done), {s['n_failed']} failed; wall {s['wall_s']:.1f} s -> {args.out}/summary.csv")
+    for r in s["sets"]:
+        if r["status"] == "error":
+            print(f"dynremove: error: {r['set']}: {r['error']}", file=sys.stderr)
+    return EXIT_INTERNAL if s["n_failed"] else EXIT_OK
+
+
 # --- commands that read recordings (viewer, imported lazily: it needs Rerun) -------------
 def _recording(path: str) -> Path:
     p = Path(path)
@@ -295,7 +291,12 @@ def _recording(path: str) -> Path:
 def cmd_view(args: argparse.Namespace) -> int:
     from viewer.serve import view
 
-    view(_recording(args.recording), web=args.web, port=args.port, web_port=args.web_port)
+    proc = view(_recording(args.recording), web=args.web, port=args.port,
+                web_port=args.web_port)
+    if proc.returncode is not None and proc.returncode > 0:
+        print(f"dynremove: the viewer exited with code {proc.returncode}; without a "
+              "display, try --web", file=sys.stderr)
+        return EXIT_INTERNAL
     return EXIT_OK
 
 
@@ -316,6 +317,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 def cmd_export(args: argparse.Namespace) -> int:
     from viewer.export import export_gif
 
+    if Path(args.out).suffix.lower() not in (".gif", ".mp4"):
+        raise InputError(f"export: {args.out} must end in .gif or .mp4")
     out = export_gif(_recording(args.recording), args.out, fps=args.fps,
                      max_side=args.max_side, root=args.root)
     print(f"wrote {out}")
@@ -399,6 +402,33 @@ def parse_jobs(s: str) -> int:
     return v
 
 
+def parse_frames(s: str) -> int:
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+    if v < 2:
+        raise argparse.ArgumentTypeError(f"--frames must be at least 2, got {v}")
+    return v
+
+
+def add_input_flags(ap: argparse.ArgumentParser, *, valid_mask: bool = True) -> None:
+    g = ap.add_argument_group("inputs")
+    g.add_argument("--frames", type=parse_frames, default=None, metavar="N",
+                   help="video: how many frames to take (default 7)")
+    g.add_argument("--span", default=None, metavar="START:END",
+                   help="video: frame numbers to take them from (END excluded; default: "
+                        "the whole clip)")
+    g.add_argument("--pick", choices=("sharpest", "even"), default="sharpest",
+                   help="video: the sharpest frame of each of N even windows (variance of "
+                        "the Laplacian), or the windows' centres")
+    if valid_mask:
+        g.add_argument("--valid-mask", default=None, metavar="PNG|DIR",
+                       help="where the frames have content (white) and none (black): one "
+                            "PNG for every image, or a folder of <image stem>.png; "
+                            "combined with alpha 0 and black borders, found anyway")
+
+
 # --- parser --------------------------------------------------------------------------------
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
@@ -411,8 +441,11 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Remove the moving objects from the reference image of a "
                                    "multi-view set. Writes clean.png, dynamic_mask.png, "
                                    "coverage.png and report.json to --out.")
-    r.add_argument("images", nargs="+", help="a folder of images (sorted by name) or image files")
-    r.add_argument("--ref", default=None, help="reference: index or file name (default: middle)")
+    r.add_argument("images", nargs="+",
+                   help="a folder of images (sorted by name), image files, or one video")
+    r.add_argument("--ref", default=None,
+                   help="reference: index, file name or 'auto' (the sharpest frame with the "
+                        "most keypoint matches); default: the middle image")
     r.add_argument("--out", default="out/run", help="output folder (default: out/run)")
     r.add_argument("--max-side", type=int, default=None, metavar="PX",
                    help="downscale so the longer side is at most PX (default: only above "
@@ -431,8 +464,33 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also run with other parameters (a preset name or field=value,...) "
                         "and log both side by side in the --record file")
     r.add_argument("--quiet", action="store_true", help="no progress bars or notes")
+    add_input_flags(r)
     add_param_flags(r)
     r.set_defaults(fn=cmd_run)
+
+    bt = sub.add_parser(
+        "batch", help="run every set below a folder (resumable, parallel)",
+        description="Run every set found below ROOT: a folder holding images directly, a "
+                    "folder with frames/ (the eval layout; masks/ gives the Jaccard), or a "
+                    "video. Writes DIR/<set>/ (the outputs of 'run'), DIR/summary.csv and "
+                    "DIR/summary.json. A set whose outputs exist with the same parameters "
+                    "and inputs is skipped; a failing set is recorded in the summary and "
+                    "the command exits 1 at the end.")
+    bt.add_argument("root", metavar="ROOT")
+    bt.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    bt.add_argument("--jobs", type=parse_jobs, default=1, metavar="N",
+                    help="sets in parallel (joblib; -1 = all cores; default 1)")
+    bt.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                    help="run the sets on this Dask cluster (extra dynremove[dask])")
+    bt.add_argument("--ref", default=None,
+                    help="reference of every set: index, file name or 'auto' (default: middle)")
+    bt.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
+                    help="downscale to at most PX ('none' = full size; default: only "
+                         "above 1280 px)")
+    bt.add_argument("--quiet", action="store_true", help="no per-set lines on stderr")
+    add_input_flags(bt, valid_mask=False)
+    add_param_flags(bt)
+    bt.set_defaults(fn=cmd_batch)
 
     d = sub.add_parser("demo", help="run on the built-in synthetic scene and print metrics")
     d.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
@@ -508,7 +566,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "STATIC_DIR being a folder of static sets")
     c.set_defaults(fn=cmd_composite)
 
-    v = sub.add_parser("view", help="open a recording in the Rerun viewer (with its layout)")
+    v = sub.add_parser("view", help="open a recording in the Rerun viewer (with its layout)",
+                       description="Open a .rrd recording in Rerun's native viewer, with "
+                                   "the layout it was recorded with. Without a display, "
+                                   "use --web: the web viewer is served on 127.0.0.1 only "
+                                   "and its URL printed (one line). Every server binds "
+                                   "127.0.0.1.")
     v.add_argument("recording", help="a .rrd file")
     v.add_argument("--web", action="store_true",
                    help="serve the web viewer on 127.0.0.1 only and print the URL")
@@ -517,10 +580,13 @@ def build_parser() -> argparse.ArgumentParser:
     v.set_defaults(fn=cmd_view)
 
     i = sub.add_parser("inspect", help="explain a pixel or list failures from a recording",
-                       description="Read a recording back: every decision, candidate "
-                                   "cluster, replacement and correspondence update at a "
-                                   "pixel, or the worst false positives/negatives when "
-                                   "ground truth was recorded (run --gt).")
+                       description="Read a recording back. --pixel X,Y opens with a "
+                                   "verdict in words (M vs t_r, what neighbouring patches "
+                                   "had done before its turn, the winning cluster, the "
+                                   "post-scan steps, the fill), then the steps that "
+                                   "changed it. --failures lists the worst false "
+                                   "positives/negatives (run --gt) and the steps to jump "
+                                   "to in the viewer.")
     i.add_argument("recording", help="a .rrd file")
     i.add_argument("--pixel", type=parse_xy, metavar="X,Y", help="pixel to explain")
     i.add_argument("--failures", action="store_true", help="list the worst FP/FN regions")
@@ -528,7 +594,11 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--root", default="", help="entity root of the run (--compare recordings)")
     i.set_defaults(fn=cmd_inspect)
 
-    x = sub.add_parser("export", help="render the progressive removal to a GIF or MP4")
+    x = sub.add_parser("export", help="render the progressive removal to a GIF or MP4",
+                       description="Render a recording's snapshots, without a viewer, to "
+                                   "an animated GIF (Pillow, one palette) or an MP4 "
+                                   "(OpenCV): left the input with L in red, right the "
+                                   "rewritten reference, a caption with scan, step and |L|.")
     x.add_argument("recording", help="a .rrd file")
     x.add_argument("--gif", "--out", dest="out", required=True, metavar="OUT",
                    help="output .gif or .mp4")

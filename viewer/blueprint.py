@@ -2,14 +2,19 @@
 
 ::
 
-    ┌ reference + overlays ───────────┬ L ──────────┐
-    │ image, L, decisions, current,   │ M (scan)    │
-    │ chosen patch, scan line         │ errors/input│
-    ├ sources grid ───────────────────┼ stats / log ┤
-    │ image + candidates + q* + N     │ C_s, cover. │
-    └─────────────────────────────────┴─────────────┘
+    ┌ reference + overlays ───────────┬ L | M | errors ─────────────────┐
+    │ image, L, decisions, current +  ├ per scan | input | fill ────────┤
+    │ its verdict, chosen patch, line │                                 │
+    ├ sources | similarity | coverage ┼ counts | Jaccard | seconds ─────┤
+    │ image + candidates + q* + dim   ├ log | read M | run ─────────────┤
+    │ matches of the previous chunk   │                                 │
+    └─────────────────────────────────┴─────────────────────────────────┘
 
-The time panel is on ``step``: scrubbing it replays the removal pixel by pixel.
+Every container and view has a title, and no tab group holds more than three
+short-titled tabs, so none hides behind the tab bar's overflow arrow (checked on
+a 1600×900 headless Chromium screenshot). Views are named by
+the image's file name first (narrow titles are cut from the right). The time
+panel is on ``step`` and plays a whole scan in about a minute.
 """
 
 from __future__ import annotations
@@ -20,86 +25,132 @@ import rerun.blueprint as rrb
 
 from viewer import paths as P
 
+SCAN_SECONDS = 60.0  # default playback: one scan (H·W steps) in about a minute
+
 
 def _reference_view(p: P.Paths, name: str = "reference + overlays") -> rrb.Spatial2DView:
     return rrb.Spatial2DView(
         name=name,
         origin=p(P.REFERENCE),
-        contents=[p(P.REFERENCE_IMAGE), p(P.REFERENCE_DYNAMIC), p(P.REFERENCE_DECISIONS),
-                  p(P.REFERENCE_CURRENT), p(P.REFERENCE_CHOSEN_PATCH),
+        contents=[p(P.REFERENCE_IMAGE), p(P.REFERENCE_DYNAMIC),
+                  p(P.REFERENCE_DECISIONS) + "/**", p(P.REFERENCE_CURRENT),
+                  p(P.REFERENCE_CURRENT_LABEL), p(P.REFERENCE_CHOSEN_PATCH),
                   p(P.REFERENCE_SCANLINE)],
     )
 
 
-def _dynamic_view(p: P.Paths, name: str = "dynamic map L") -> rrb.Spatial2DView:
+def _dynamic_view(p: P.Paths, name: str = "L") -> rrb.Spatial2DView:
     return rrb.Spatial2DView(name=name, origin=p(P.REFERENCE),
                              contents=[p(P.REFERENCE_DYNAMIC), p(P.REFERENCE_SCANLINE)])
 
 
-def _side_views(p: P.Paths) -> rrb.Tabs:
+def _maps(p: P.Paths) -> rrb.Tabs:
     return rrb.Tabs(
         _dynamic_view(p),
-        rrb.Spatial2DView(name="M (current scan)", origin=p(P.REFERENCE),
+        rrb.Spatial2DView(name="M", origin=p(P.REFERENCE),
                           contents=[p(P.REFERENCE_M), p(P.REFERENCE_SCANLINE),
-                                    p(P.REFERENCE_CURRENT)]),
-        rrb.Spatial2DView(name="errors vs ground truth", origin=p(P.REFERENCE),
-                          contents=[p(P.REFERENCE_IMAGE), p(P.ERRORS_LABELS)]),
-        rrb.Spatial2DView(name="input + L", origin=p(P.REFERENCE),
-                          contents=[p(P.REFERENCE_INPUT), p(P.REFERENCE_DYNAMIC)]),
-        rrb.Spatial2DView(name="ground truth", origin=p(P.GROUND_TRUTH),
-                          contents=[p(P.GT_BACKGROUND), p(P.GT_MASK)]),
+                                    p(P.REFERENCE_CURRENT), p(P.REFERENCE_CURRENT_LABEL)]),
+        rrb.Spatial2DView(name="errors", origin=p(P.REFERENCE),
+                          contents=[p(P.REFERENCE_IMAGE), p(P.ERRORS_LABELS),
+                                    p(P.ERRORS_LEGEND), p(P.REFERENCE_SCANLINE)]),
+        name="maps",
     )
 
 
-def _source_view(p: P.Paths, name: str) -> rrb.Spatial2DView:
+def _more(p: P.Paths) -> rrb.Tabs:
+    per_scan = rrb.Grid(
+        rrb.Spatial2DView(name="M (lossless)", origin=p(P.scan_map("M"))),
+        rrb.Spatial2DView(name="verdict", origin=p(P.scan_map("verdict"))),
+        rrb.Spatial2DView(name="patch source", origin=p(P.scan_map("chosen_source"))),
+        rrb.Spatial2DView(name="overwritten before",
+                          origin=p(P.scan_map("overwritten_before"))),
+        grid_columns=2, name="per scan")
+    return rrb.Tabs(
+        per_scan,
+        rrb.Spatial2DView(name="input", origin=p(P.REFERENCE),
+                          contents=[p(P.REFERENCE_INPUT), p(P.REFERENCE_DYNAMIC),
+                                    p(P.GT_MASK), p(P.GT_BACKGROUND)]),
+        rrb.Spatial2DView(name="fill", origin=p("result"),
+                          contents=[p(P.RESULT_CLEAN), p(P.RESULT_SOURCE), p(P.RESULT_SEAMS),
+                                    p(P.ERRORS_BACKGROUND)]),
+        name="more maps",
+    )
+
+
+def _source_view(p: P.Paths, name: str, s: int) -> rrb.Spatial2DView:
     return rrb.Spatial2DView(
-        name=f"source {name}",
+        name=f"{name} (source {s})",
         origin=p(P.source(name, "")),
         contents=[p(P.source(name, leaf)) for leaf in
-                  (P.IMAGE, P.CANDIDATES, P.CHOSEN_PATCH, P.MATCHES)],
+                  (P.IMAGE, P.MATCHES, P.CANDIDATES, P.CHOSEN_PATCH)],
     )
+
+
+def _whole_run() -> rrb.VisibleTimeRange:
+    inf = rrb.TimeRangeBoundary.infinite()
+    return rrb.VisibleTimeRange("step", start=inf, end=inf)
+
+
+def _plot(p: P.Paths, name: str, stats: Sequence[str]) -> rrb.TimeSeriesView:
+    inf = rrb.TimeRangeBoundary.infinite()
+    return rrb.TimeSeriesView(
+        name=name, origin=p(P.STATS), contents=[p(P.stat(n)) for n in stats],
+        time_ranges=_whole_run(),  # the whole run, not a window around the cursor
+        axis_x=rrb.TimeAxis(view_range=rrb.TimeRange(start=inf, end=inf)),
+        plot_legend=rrb.PlotLegend(rrb.components.Corner2D.LeftTop))
 
 
 def _plots(p: P.Paths) -> rrb.Tabs:
     return rrb.Tabs(
-        rrb.TimeSeriesView(name="counts per scan", origin=p(P.STATS),
-                           contents=[p(P.stat(n)) for n in
-                                     ("n_dynamic", "n_replaced", "n_undecided",
-                                      "dynamic_px")]),
-        rrb.TimeSeriesView(name="Jaccard", origin=p(P.STATS),
-                           contents=[p(P.stat("jaccard"))]),
-        rrb.TimeSeriesView(name="seconds per scan", origin=p(P.STATS),
-                           contents=[p(P.stat("seconds"))]),
+        _plot(p, "counts", ("n_dynamic", "n_replaced", "n_undecided",
+                                     "dynamic_px")),
+        _plot(p, "Jaccard", ("jaccard",)),
+        _plot(p, "seconds", ("seconds",)),
+        name="plots",
+    )
+
+
+def _texts(p: P.Paths) -> rrb.Tabs:
+    return rrb.Tabs(
+        rrb.TextLogView(name="log", origin=p(), contents=[p(P.LOG), p("probes/**")]),
+        rrb.TextDocumentView(name="read M", origin=p(P.REFERENCE_M_LEGEND)),
+        rrb.TextDocumentView(name="run", origin=p(P.RUN_INFO)),
+        name="log and notes",
     )
 
 
 def _run_layout(names: list[str], p: P.Paths, *, label: str | None = None) -> rrb.Container:
-    sources = rrb.Grid(*[_source_view(p, n) for n in names],
+    sources = rrb.Grid(*[_source_view(p, n, s) for s, n in enumerate(names)],
                        grid_columns=max(1, min(3, len(names))), name="sources")
-    maps = rrb.Tabs(
-        rrb.Grid(*[rrb.Spatial2DView(name=f"C {n}", origin=p(P.similarity(n)))
-                   for n in names], name="similarity C_s"),
-        rrb.Spatial2DView(name="coverage", origin=p(P.COVERAGE)),
-    )
+    similarity = rrb.Grid(*[rrb.Spatial2DView(name=f"{n} C_{s}", origin=p(P.similarity(n)))
+                            for s, n in enumerate(names)],
+                          grid_columns=max(1, min(3, len(names))), name="similarity C_s")
     return rrb.Vertical(
-        rrb.Horizontal(_reference_view(p), _side_views(p), column_shares=[3, 2]),
+        rrb.Horizontal(_reference_view(p), rrb.Vertical(_maps(p), _more(p), name="maps",
+                                                          row_shares=[3, 2]),
+                       column_shares=[3, 2], name="reference"),
         rrb.Horizontal(
-            rrb.Tabs(sources, maps),
-            rrb.Vertical(_plots(p), rrb.TextLogView(name="log", origin=p(P.LOG)),
-                         row_shares=[1, 1]),
-            column_shares=[3, 2]),
+            rrb.Tabs(sources, similarity,
+                     rrb.Spatial2DView(name="coverage", origin=p(P.COVERAGE)),
+                     name="sources"),
+            rrb.Vertical(_plots(p), _texts(p), row_shares=[1, 1], name="plots and log"),
+            column_shares=[3, 2], name="sources and plots"),
         row_shares=[3, 2],
-        name=label,
+        name=label or "run",
     )
 
 
-def _panels() -> list:
-    return [rrb.TimePanel(timeline="step", state="expanded"),
+def _panels(size: tuple[int, int] | None = None) -> list:
+    fps = None
+    if size is not None:
+        fps = max(1.0, size[0] * size[1] / SCAN_SECONDS)
+    return [rrb.TimePanel(timeline="step", state="expanded", fps=fps),
             rrb.SelectionPanel(state="expanded"),
             rrb.BlueprintPanel(state="collapsed")]
 
 
-def make_blueprint(source_names: Sequence[str], *, root: str = "") -> rrb.Blueprint:
+def make_blueprint(source_names: Sequence[str], *, root: str = "",
+                   size: tuple[int, int] | None = None) -> rrb.Blueprint:
     """Default layout of one run.
 
     Parameters
@@ -109,14 +160,17 @@ def make_blueprint(source_names: Sequence[str], *, root: str = "") -> rrb.Bluepr
         into entity names with :func:`viewer.paths.entity_names`, as the sink does).
     root : str
         Root prefix of the run's entities (``""`` or e.g. ``"runs/paper"``).
+    size : (H, W), optional
+        Image size: the time panel then plays one scan (H·W steps) in about
+        :data:`SCAN_SECONDS` seconds instead of one step per frame.
     """
     names = P.entity_names(list(source_names))
-    return rrb.Blueprint(_run_layout(names, P.Paths(root)), *_panels(),
+    return rrb.Blueprint(_run_layout(names, P.Paths(root)), *_panels(size),
                          auto_views=False)
 
 
-def make_compare_blueprint(source_names: Sequence[str],
-                           roots: Sequence[str]) -> rrb.Blueprint:
+def make_compare_blueprint(source_names: Sequence[str], roots: Sequence[str], *,
+                           size: tuple[int, int] | None = None) -> rrb.Blueprint:
     """Layout of several runs logged side by side under ``roots`` (``--compare``).
 
     The first tab shows every run's reference and L next to each other; then
@@ -124,10 +178,14 @@ def make_compare_blueprint(source_names: Sequence[str],
     """
     names = P.entity_names(list(source_names))
     side = rrb.Vertical(
-        rrb.Horizontal(*[_reference_view(P.Paths(r), name=f"{r}: reference") for r in roots]),
-        rrb.Horizontal(*[_dynamic_view(P.Paths(r), name=f"{r}: L") for r in roots]),
-        rrb.Horizontal(*[rrb.TimeSeriesView(name=f"{r}: stats", origin=P.Paths(r)(P.STATS))
-                         for r in roots]),
+        rrb.Horizontal(*[_reference_view(P.Paths(r), name=f"{r}: reference") for r in roots],
+                       name="references"),
+        rrb.Horizontal(*[_dynamic_view(P.Paths(r), name=f"{r}: L") for r in roots],
+                       name="dynamic maps"),
+        rrb.Horizontal(*[rrb.TimeSeriesView(name=f"{r}: stats", origin=P.Paths(r)(P.STATS),
+                                            time_ranges=_whole_run())
+                         for r in roots], name="stats"),
         row_shares=[3, 2, 1], name="side by side")
     tabs = [_run_layout(names, P.Paths(r), label=r) for r in roots]
-    return rrb.Blueprint(rrb.Tabs(side, *tabs), *_panels(), auto_views=False)
+    return rrb.Blueprint(rrb.Tabs(side, *tabs, name="runs"), *_panels(size),
+                         auto_views=False)

@@ -42,8 +42,8 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
     img_steps = np.array([s for s, _ in images])
     dyn_steps = np.array([s for s, _ in snaps["dynamic"]])
     W2 = 2 * W + 8
-    scale = min(1.0, max_side / max(W2, H + 24))
-    out_w, out_h = max(2, int(round(W2 * scale))), max(2, int(round((H + 24) * scale)))
+    scale = min(1.0, max_side / max(W2, H))
+    out_w, out_h = max(2, int(round(W2 * scale))), max(2, int(round(H * scale)))
     scan_of = {}
     t = vi._arrow(store, p(P.REFERENCE_IMAGE))
     if t is not None:
@@ -60,14 +60,26 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
         cur = cache[i]
         j = int(np.searchsorted(dyn_steps, step, side="right")) - 1
         L = snaps["dynamic"][j][1] if j >= 0 else np.zeros((H, W), bool)
-        canvas = np.full((H + 24, W2, 3), 32, np.uint8)
-        canvas[24:, :W] = overlay(ref_in, L, color=(40, 40, 255), alpha=0.55)
-        canvas[24:, W + 8:] = cur
+        canvas = np.full((H, W2, 3), 32, np.uint8)
+        canvas[:, :W] = overlay(ref_in, L, color=(40, 40, 255), alpha=0.55)
+        canvas[:, W + 8:] = cur
         scan = scan_of.get(images[i][0], "?")
-        cv2.putText(canvas, f"scan {scan}  step {step}  |L|={int(L.sum())}", (6, 17),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)
-        frames.append(cv2.resize(canvas, (out_w, out_h), interpolation=cv2.INTER_AREA))
+        small = cv2.resize(canvas, (out_w, out_h), interpolation=cv2.INTER_AREA)
+        frames.append(np.concatenate([_caption(
+            out_w, f"scan {scan}   step {step}   |L| = {int(L.sum())} px"), small], 0))
     return frames
+
+
+CAPTION_ROWS = 26
+
+
+def _caption(width: int, text: str) -> np.ndarray:
+    """A caption bar drawn at the OUTPUT size (so it stays readable: ~13 px text)."""
+    bar = np.full((CAPTION_ROWS, width, 3), 32, np.uint8)
+    scale = 0.55 if width >= 360 else 0.4
+    cv2.putText(bar, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1,
+                cv2.LINE_AA)
+    return bar
 
 
 def export_gif(path_rrd: str | Path, out_path: str | Path, *, fps: float = 10,
@@ -82,6 +94,8 @@ def export_gif(path_rrd: str | Path, out_path: str | Path, *, fps: float = 10,
     max_side : longest side of the output, in pixels.
     """
     out_path = Path(out_path)
+    if out_path.suffix.lower() not in (".gif", ".mp4"):
+        raise ValueError(f"{out_path}: the output must end in .gif or .mp4")
     frames = render_frames(path_rrd, max_side=max_side, root=root)
     out_path.parent.mkdir(parents=True, exist_ok=True)
     if out_path.suffix.lower() == ".mp4":

@@ -19,9 +19,11 @@ import cv2
 import numpy as np
 from rerun.chunk import RrdReader
 
+from dynremove.errors import InputError
 from dynremove.events import (CORRESPONDENCE_UPDATE_DTYPE, REPLACEMENT_DTYPE,
                               WHY_DYNAMIC, WHY_PROBE, WHY_SAMPLE, decision_dtype)
 from viewer import paths as P
+from viewer._images import visit_step
 
 _KINDS = {"decisions": P.EVENTS_DECISIONS, "replacements": P.EVENTS_REPLACEMENTS,
           "updates": P.EVENTS_UPDATES}
@@ -30,7 +32,72 @@ _KINDS = {"decisions": P.EVENTS_DECISIONS, "replacements": P.EVENTS_REPLACEMENTS
 # -- low level -----------------------------------------------------------------
 @lru_cache(maxsize=4)
 def _store_cached(path: str, mtime_ns: int, size: int):
-    return RrdReader(path).stream().collect()
+    return read_rrd_tolerant(path)
+
+
+def read_rrd_tolerant(path: str):
+    """Read a recording, or as much of a damaged one as can be read, with one note.
+
+    A file without footer (interrupted run) or cut short (disk full, killed) is
+    read up to the last complete message, and one line on stderr says so. A file
+    that is not a recording, or holds no complete message, raises InputError.
+    Rerun's own warnings are not shown.
+    """
+    import os
+    import struct
+    import sys
+    import tempfile
+    import warnings
+
+    from dynremove.errors import InputError
+
+    def note(msg: str) -> None:
+        print(f"dynremove: note: {path}: {msg}", file=sys.stderr)
+
+    def has_scan(store) -> None:
+        ep = store.schema().entity_paths()
+        if not any(e.endswith(P.REFERENCE_IMAGE) for e in ep):
+            raise InputError(f"{path}: recording cut before the first snapshot of a scan: "
+                             "nothing to inspect")
+
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:4] != b"RRF2":
+        raise InputError(f"{path}: not a Rerun recording (.rrd)")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            store = RrdReader(path).stream().collect()
+            if any("footer" in str(w.message) for w in caught):
+                has_scan(store)
+                note("no footer (the run was interrupted or the file cut): read what "
+                     "was recorded")
+            return store
+        except Exception:  # noqa: BLE001 - damaged: read the complete messages below
+            pass
+        pos = n = 0
+        pos = 12  # FourCC, version, options; then (kind u64, length u64, payload)*
+        while pos + 16 <= len(data):
+            length = struct.unpack_from("<Q", data, pos + 8)[0]
+            if pos + 16 + length > len(data):
+                break
+            pos, n = pos + 16 + length, n + 1
+        if n < 2:
+            raise InputError(f"{path}: damaged recording, nothing readable "
+                             f"({len(data)} bytes)")
+        fd, tmp = tempfile.mkstemp(suffix=".rrd")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data[:pos])
+            store = RrdReader(tmp).stream().collect()
+        except Exception:  # noqa: BLE001
+            raise InputError(f"{path}: damaged recording, nothing readable") from None
+        finally:
+            os.unlink(tmp)
+    has_scan(store)
+    note(f"damaged or cut short after {pos} of {len(data)} bytes: read the "
+         f"{n} complete messages before the damage")
+    return store
 
 
 def load_store(path: str | Path):
@@ -88,6 +155,34 @@ def _image_rows(store, entity: str, archetype: str, *, index: str | None = "step
         if data.size != shape[0] * shape[1]:
             shape = shape + (data.size // (shape[0] * shape[1]),)
         out.append((steps[i], data.reshape(shape).copy()))
+    return out
+
+
+# rerun's ChannelDatatype enum values (0.41) → numpy dtypes
+_CHANNEL_DTYPES = {6: np.uint8, 7: np.int8, 8: np.uint16, 9: np.int16, 10: np.uint32,
+                   11: np.int32, 12: np.uint64, 13: np.int64, 33: np.float16,
+                   34: np.float32, 35: np.float64}
+
+
+def _typed_image_rows(store, entity: str, archetype: str, *, index: str | None = "step"):
+    """Like :func:`_image_rows`, with the buffer viewed as its channel datatype."""
+    t = _arrow(store, entity, index=index)
+    if t is None or t.num_rows == 0:
+        return []
+    buf = _column(t, f"{entity}:{archetype}:buffer")
+    fmt = _column(t, f"{entity}:{archetype}:format")
+    if buf is None or fmt is None:
+        return []
+    steps = t.column(index).to_pylist() if index else [None] * t.num_rows
+    out = []
+    for i in range(t.num_rows):
+        if not buf[i].is_valid or not fmt[i].is_valid:
+            continue
+        f = fmt[i].as_py()[0]
+        raw = buf[i].values[0].values.to_numpy(zero_copy_only=False)
+        dtype = _CHANNEL_DTYPES.get(f.get("channel_datatype") or 6, np.uint8)
+        data = np.frombuffer(raw.tobytes(), dtype)
+        out.append((steps[i], data.reshape(f["height"], f["width"]).copy()))
     return out
 
 
@@ -224,6 +319,62 @@ def read_snapshots(path: str | Path, *, root: str = "") -> dict[str, list]:
             "M": _blob_rows(store, p(P.REFERENCE_M))}
 
 
+def read_scan_maps(path: str | Path, *, root: str = "") -> list[dict[str, Any]]:
+    """The per-scan maps the sink records at each scan's last step, in scan order.
+
+    Each entry: ``scan``, ``step`` (the scan's last step), ``direction``, ``M``
+    (H, W) float32 (NaN = undecided), ``verdict`` (0 not visited, 1 static,
+    2 dynamic, 3 undecided), ``chosen_source`` (−1 = no patch written, else the
+    source), ``overwritten_before`` (patches centred elsewhere that overwrote the
+    pixel before the scan reached it) and ``first_overwritten`` (global step of
+    the first of them, −1 = none). Empty for recordings made before these maps.
+    """
+    store, p = load_store(path), P.Paths(root)
+    m_rows = _typed_image_rows(store, p(P.scan_map("M")), "DepthImage")
+    if not m_rows:
+        return []
+    ent = p(P.scan_map("M"))
+    t = _arrow(store, ent)
+    scans = _column(t, f"{ent}:scan")
+    dirs = _column(t, f"{ent}:direction")
+    by_step = {k: dict(_typed_image_rows(store, p(P.scan_map(k)), arch))
+               for k, arch in (("verdict", "SegmentationImage"),
+                               ("chosen_source", "SegmentationImage"),
+                               ("overwritten_before", "DepthImage"),
+                               ("first_overwritten", "DepthImage"))}
+    out = []
+    for i, (step, Mq) in enumerate(m_rows):
+        scan = int(scans[i].as_py()[0]) if scans is not None else i
+        H, W = Mq.shape
+        M = np.where(Mq == P.M_UNDECIDED, np.nan, Mq.astype(np.float32) / P.M_SCALE)
+        first = by_step["first_overwritten"].get(step)
+        out.append(dict(
+            scan=scan, step=int(step),
+            direction=int(dirs[i].as_py()[0]) if dirs is not None else
+            (1 if scan % 2 == 0 else -1),
+            M=M.astype(np.float32), verdict=by_step["verdict"].get(step),
+            chosen_source=(by_step["chosen_source"][step].astype(np.int32) - 1
+                           if step in by_step["chosen_source"] else None),
+            overwritten_before=by_step["overwritten_before"].get(step),
+            first_overwritten=(np.where(first > 0, first.astype(np.int64) - 1
+                                        + scan * H * W, -1) if first is not None else None)))
+    return out
+
+
+def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]:
+    """The fill by selection's maps: ``source`` (0 = reference kept, k = source k−1),
+    ``explained`` (L kept as static 3-D structure), ``seams``; absent keys when the
+    run had no selection step."""
+    store, p = load_store(path), P.Paths(root)
+    out = {}
+    for key, rel in (("source", P.RESULT_SOURCE), ("explained", P.RESULT_EXPLAINED),
+                     ("seams", P.RESULT_SEAMS)):
+        rows = _image_rows(store, p(rel), "SegmentationImage", index=None)
+        if rows:
+            out[key] = rows[0][1]
+    return out
+
+
 # -- pixel history -----------------------------------------------------------------
 def _why_names(why: int) -> list[str]:
     return [n for bit, n in ((WHY_DYNAMIC, "dynamic"), (WHY_PROBE, "probe"),
@@ -266,6 +417,10 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     dynamic ones, probes (``--probe``) and sampled static ones.
     """
     info = read_run_info(path, root=root)
+    H, W = int(info.get("height", 0) or 0), int(info.get("width", 0) or 0)
+    if H and W and not (0 <= x < W and 0 <= y < H):
+        raise InputError(f"pixel ({x}, {y}) is outside the {W}x{H} image "
+                         f"(x in 0..{W - 1}, y in 0..{H - 1})")
     names = info.get("source_names", [])
     params = info.get("params", {})
     t_r = float(params.get("t_r", np.nan))
@@ -290,8 +445,27 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
                     src_x=int(r["src_x"]), src_y=int(r["src_y"]), score=float(r["score"]),
                     tie_break=bool(r["tie_break"]), n_patches=int(r["n_patches"]))
 
+    scans = []
+    for m in read_scan_maps(path, root=root) if inside else []:
+        def at_(a):
+            return None if a is None else a[y, x]
+        v = at_(m["verdict"])
+        scans.append(dict(
+            scan=m["scan"], step=visit_step(m["scan"], x, y, L.shape[0], L.shape[1],
+                                            direction=m["direction"]),
+            direction=m["direction"], M=float(m["M"][y, x]),
+            verdict={0: "not visited", 1: "static", 2: "dynamic",
+                     3: "undecided"}.get(int(v), "?") if v is not None else "?",
+            chosen_source=None if m["chosen_source"] is None else int(m["chosen_source"][y, x]),
+            overwritten_before=None if m["overwritten_before"] is None
+            else int(m["overwritten_before"][y, x]),
+            first_overwritten=None if m["first_overwritten"] is None
+            else int(m["first_overwritten"][y, x])))
+    sel = {k: int(v[y, x]) for k, v in read_selection(path, root=root).items()} \
+        if inside else {}
     return dict(
-        x=int(x), y=int(y), source_names=names, t_r=t_r,
+        x=int(x), y=int(y), source_names=names, t_r=t_r, size=(H, W), scans=scans,
+        selection=sel, patch_size=p,
         decisions=[_decision_dict(d, t_r, names) for d in dec[at]],
         replacements=[rep_dict(r) for r in rep[here]],
         covered_by=[rep_dict(r) for r in rep[cover]],
@@ -304,61 +478,202 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     )
 
 
-def format_pixel_history(h: dict[str, Any]) -> str:
-    """Human-readable pixel history (one block per recorded step)."""
-    def label(v: bool | None) -> str:
-        return "?" if v is None else ("dynamic" if v else "static")
+def _label(v: bool | None) -> str:
+    return "?" if v is None else ("dynamic" if v else "static")
 
-    lines = [f"pixel ({h['x']}, {h['y']}): {len(h['decisions'])} recorded decisions, "
-             f"{len(h['replacements'])} replacements, {len(h['covered_by'])} overlapping "
-             f"patch writes, {len(h['updates'])} correspondence updates; final L = "
-             f"{label(h['final_dynamic'])}" +
-             (f", ground truth = {label(h['gt'])}" if h.get("gt") is not None else "")]
-    if h.get("stages"):
-        lines.append("  L after each step: " + " → ".join(
-            f"{k} {label(v)}" for k, v in h["stages"].items()))
-    if not h["decisions"]:
-        lines.append("  (no decision recorded here: static pixels are only recorded when "
-                     "probed (--probe x,y) or sampled)")
-    by_step: dict[int, list[str]] = {}
+
+def _src_name(h: dict[str, Any], s: int) -> str:
+    names = h.get("source_names", [])
+    return names[s] if 0 <= s < len(names) else f"source {s}"
+
+
+def _winning(d: dict[str, Any]) -> tuple[list[dict], list[str]]:
+    win = [c for c in d["candidates"] if c["cluster"] == d["win_cluster"] and c["cluster"] >= 0]
+    return win, sorted({c["src_name"] for c in win})
+
+
+_STAGE_WORDS = {"clean": "the L clean-up", "votes": "the border votes",
+                "snap": "GrabCut (snap to edges)", "select": "the fill by selection"}
+
+
+def verdict_lines(h: dict[str, Any]) -> list[str]:
+    """At most five lines, in words: why the pixel ended up as it did.
+
+    1. the scans' verdict with M vs t_r and what neighbouring patch writes had
+       done to it before its turn; 2. the winning cluster (when recorded);
+    3. what the post-scan steps did; 4. the fill (which source, or the reference
+    kept); 5. ground truth, when recorded.
+    """
+    x, y, t_r = h["x"], h["y"], h["t_r"]
+    dec = {d["scan"]: d for d in h["decisions"]}
+    scans = h.get("scans") or [dict(scan=d["scan"], step=d["step"], M=d["M"],
+                                    verdict="dynamic" if d["dynamic"] else "static",
+                                    overwritten_before=None, first_overwritten=None,
+                                    chosen_source=d["chosen_src"])
+                               for d in h["decisions"]]
+    lines = []
+    dyn = [sc for sc in scans if sc["verdict"] == "dynamic"]
+    key = dyn[0] if dyn else (scans[0] if scans else None)
+    if key is None:
+        lines.append(f"pixel ({x}, {y}): no scan of this recording reached it")
+    else:
+        M = key["M"]
+        if M != M:
+            why = "no cluster of candidates formed (undecided)"
+        else:
+            why = f"M = {M:.2f} {'≤' if M <= t_r else '>'} t_r {t_r:.2f}"
+        if dyn:
+            head = f"dynamic in scan {key['scan']} (step {key['step']}): {why}"
+            others = [sc["scan"] for sc in scans if sc is not key]
+            if others:
+                head += f"; scans {', '.join(map(str, others))}: " + ", ".join(
+                    f"{sc['verdict']}" + (f" M {sc['M']:.2f}" if sc["M"] == sc["M"] else "")
+                    for sc in scans if sc is not key)
+        else:
+            head = (f"{key['verdict']} in every scan: scan {key['scan']} (step "
+                    f"{key['step']}) {why}" if len(scans) > 1 else
+                    f"{key['verdict']} in scan {key['scan']} (step {key['step']}): {why}")
+            if len(scans) > 1:
+                head += "; then " + ", ".join(
+                    f"scan {sc['scan']} M {sc['M']:.2f}" for sc in scans[1:])
+        n = key.get("overwritten_before")
+        if n:
+            head += (f"; its content had been overwritten by {n} neighbouring "
+                     f"patch{'es' if n > 1 else ''} before its turn (first at step "
+                     f"{key['first_overwritten']})")
+        elif n == 0:
+            head += "; no neighbouring patch had overwritten it before its turn"
+        lines.append(head)
+        d = dec.get(key["scan"])
+        if d is not None and d["n_clusters"] > 0:
+            win, srcs = _winning(d)
+            all_src = sorted({c["src_name"] for c in d["candidates"]})
+            lines.append(f"winning cluster {d['win_cluster']}: {len(win)} of "
+                         f"{len(d['candidates'])} candidates, from {len(srcs)} of "
+                         f"{len(h['source_names'])} sources ({', '.join(srcs)}); weight "
+                         f"b_m = Σ B_l = {d['win_weight']:.2f}; {d['n_clusters']} clusters "
+                         f"(candidates from {len(all_src)} sources)")
+        elif d is not None:
+            lines.append(f"no cluster: {len(d['candidates'])} candidates, all DBSCAN noise")
+        else:
+            lines.append("candidates and clusters were not recorded at this pixel "
+                         f"(static pixels are recorded when probed): re-run with --probe "
+                         f"{x},{y} to see them")
+    st = h.get("stages") or {}
+    if len(st) > 1:
+        names = list(st)
+        changes = [f"{'added' if st[b] else 'dropped'} by {_STAGE_WORDS.get(b, b)}"
+                   for a, b in zip(names, names[1:]) if st[a] != st[b] and b != "select"]
+        if changes:
+            lines.append("after the scans: " + "; ".join(changes) +
+                         f"; in the final mask: {'yes' if st[names[-1]] else 'no'}")
+        else:
+            kept = ", ".join(_STAGE_WORDS.get(b, b) for b in names[1:] if b != "select")
+            lines.append(f"after the scans: kept {_label(st[names[0]])} by {kept}")
+    sel = h.get("selection") or {}
+    if "source" in sel:
+        k = sel["source"]
+        if k > 0:
+            lines.append(f"fill: filled from source {_src_name(h, k - 1)}")
+        elif sel.get("explained"):
+            lines.append("fill: reference kept, explained as static 3-D structure "
+                         "(parallax, not a mover)")
+        else:
+            lines.append("fill: reference kept" + (" (not in the final mask)"
+                                                     if not h.get("final_dynamic") else ""))
+    elif h["replacements"]:
+        r = h["replacements"][-1]
+        lines.append(f"fill: patch from {r['src_name']} written at step {r['step']}")
+    if h.get("gt") is not None:
+        fin, gt = h.get("final_dynamic"), h["gt"]
+        kind = ("correct" if fin == gt else "FALSE NEGATIVE (a mover left in)" if gt
+                else "FALSE POSITIVE (static pixel replaced)")
+        lines.append(f"final L {_label(fin)}, ground truth {_label(gt)}: {kind}")
+    if len(lines) > 5:  # the fill and ground truth matter more than the clusters
+        lines = lines[:1] + lines[-4:]
+    return lines
+
+
+def _fold(events: list[tuple[int, str]], max_lines: int) -> list[str]:
+    """Sort by step; print at most ``max_lines`` lines, eliding the middle."""
+    events.sort(key=lambda e: e[0])
+    lines = [t for _, t in events]
+    if len(lines) > max_lines:
+        k = max_lines // 2
+        lines = lines[:k] + [f"  … {len(lines) - 2 * k} more lines …"] + lines[-k:]
+    return lines
+
+
+def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
+    """The verdict in words (≤ 5 lines), then the steps that changed the pixel.
+
+    Runs of patch writes over the pixel are folded into one line per scan;
+    the whole text stays within ``max_lines`` lines.
+    """
+    lines = [f"pixel ({h['x']}, {h['y']}): " + verdict_lines(h)[0]]
+    lines += ["  " + v for v in verdict_lines(h)[1:]]
+    lines.append("history (jump to a step on the `step` timeline):")
+    ev: list[tuple[int, str]] = []
+    dec_scans = {d["scan"] for d in h["decisions"]}
+    for sc in h.get("scans", []):
+        if sc["scan"] in dec_scans:
+            continue
+        M = sc["M"]
+        mtxt = "no cluster" if M != M else f"M {M:.2f} {'≤' if M <= h['t_r'] else '>'} t_r"
+        ev.append((sc["step"], f"  scan {sc['scan']} step {sc['step']}: {sc['verdict']} "
+                               f"({mtxt}; from the per-scan maps)"))
     for d in h["decisions"]:
-        if np.isnan(d["M"]):
-            verdict = f"M=nan (no cluster) → {'DYNAMIC' if d['dynamic'] else 'undecided'}"
+        if d["M"] != d["M"]:
+            verdict = f"no cluster → {'DYNAMIC' if d['dynamic'] else 'undecided'}"
         else:
             op = "≤" if d["M"] <= d["t_r"] else ">"
-            verdict = (f"M={d['M']:.2f} {op} t_r={d['t_r']:.2f} → "
+            verdict = (f"M {d['M']:.2f} {op} t_r {d['t_r']:.2f} → "
                        f"{'DYNAMIC' if d['dynamic'] else 'static'}")
-        win = [c for c in d["candidates"] if c["cluster"] == d["win_cluster"]
-               and c["cluster"] >= 0]
-        wtxt = ", ".join(f"src {c['src']} ({c['x']},{c['y']}) B={c['B']:.2f}" for c in win)
-        others = [f"{cid} ({e['n']} cand, ΣB {e['sum_B']:.2f})" if cid >= 0
-                  else f"noise ({e['n']})" for cid, e in d["clusters"].items()
-                  if cid != d["win_cluster"]]
-        s = (f"scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
-             f"{len(d['candidates'])} candidates in {d['n_clusters']} clusters; winner "
-             f"cluster {d['win_cluster']} weight {d['win_weight']:.2f} "
-             f"({len(win)} candidates: {wtxt})")
-        if others:
-            s += "; other clusters: " + ", ".join(others)
-        s += f"; consensus distance {d['consensus_dist']:.3f}"
-        by_step.setdefault(d["step"], []).append(s)
+        win, srcs = _winning(d)
+        txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
+               f"{len(d['candidates'])} candidates in {d['n_clusters']} clusters; winner "
+               f"cluster {d['win_cluster']} b_m {d['win_weight']:.2f}: " + ", ".join(
+                   f"{c['src_name']} ({c['x']},{c['y']}) B_l {c['B']:.2f}" for c in win)
+               + f"; SIFT distance to the consensus {d['consensus_dist']:.3f}")
+        ev.append((d["step"], txt))
     for r in h["replacements"]:
-        by_step.setdefault(r["step"], []).append(
-            f"    replaced from source {r['src']} ({r['src_name']}) at ({r['src_x']},"
-            f"{r['src_y']}) score {r['score']:.2f}" + (" (tie-break)" if r["tie_break"]
-                                                       else "")
-            + f" among {r['n_patches']} patches")
+        ev.append((r["step"], f"  scan {r['scan']} step {r['step']}: replaced by the patch "
+                              f"of {r['src_name']} at ({r['src_x']},{r['src_y']}), score "
+                              f"{r['score']:.2f}" + (" (tie-break)" if r["tie_break"] else "")
+                              + f" among {r['n_patches']} patches"))
+    by_scan: dict[int, list[dict]] = {}
     for r in h["covered_by"]:
-        by_step.setdefault(r["step"], []).append(
-            f"scan {r['scan']} step {r['step']}: overwritten by the patch written at "
-            f"({r['x']},{r['y']}) from source {r['src']} ({r['src_name']}) "
-            f"score {r['score']:.2f}")
-    for u in h["updates"]:
-        by_step.setdefault(u["step"], []).append(
-            f"    N updated (case {u['case']}): source {u['src']} → ({u['new_x']},"
-            f"{u['new_y']}) C={u['new_C']:.2f}")
-    for step in sorted(by_step):
-        lines.extend(by_step[step])
+        by_scan.setdefault(r["scan"], []).append(r)
+    own = {sc["scan"]: sc["step"] for sc in h.get("scans", [])}
+    own.update({d["scan"]: d["step"] for d in h["decisions"]})
+    for scan, rs in by_scan.items():
+        steps = [r["step"] for r in rs]
+        srcs = sorted({r["src_name"] for r in rs})
+        n_before = sum(1 for st in steps if scan in own and st < own[scan])
+        ev.append((min(steps), f"  scan {scan} steps {min(steps)}–{max(steps)}: overwritten "
+                               f"by {len(rs)} patches centred nearby ({', '.join(srcs)})"
+                   + (f", {n_before} of them before its own step {own[scan]}"
+                      if scan in own else "")))
+    n_upd = len(h["updates"])
+    if n_upd:
+        u0 = h["updates"][0]
+        ev.append((u0["step"], f"  {n_upd} correspondence updates at this pixel (cases "
+                               + ", ".join(sorted({str(u['case']) for u in h['updates']}))
+                               + ")"))
+    st = h.get("stages") or {}
+    if st:
+        last = max([sc["step"] for sc in h.get("scans", [])] + [e for e, _ in ev] + [0])
+        n_scans = len(h.get("scans", [])) or (1 + max([d["scan"] for d in h["decisions"]],
+                                                       default=0))
+        H, W = h.get("size", (0, 0))
+        first_stage = n_scans * H * W if H and W else last + 1
+        ev.append((first_stage, "  L after each step: " + " → ".join(
+            f"{k} {_label(v)} (step {first_stage + i})" for i, (k, v) in enumerate(st.items()))))
+    lines += _fold(ev, max_lines - len(lines) - 1)
+    fin = f"final L = {_label(h['final_dynamic'])}"
+    if h.get("gt") is not None:
+        fin += f", ground truth = {_label(h['gt'])}"
+    lines.append("  " + fin)
     return "\n".join(lines)
 
 
@@ -378,6 +693,9 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     if L is None or gt is None:
         raise ValueError(f"{path}: needs a finished run recorded with a ground-truth mask")
     dec = read_events(path, "decisions", root=root)
+    H, W = L.shape
+    scan_dirs = [(m["scan"], m["direction"]) for m in read_scan_maps(path, root=root)] or \
+        [(int(s), 1 if s % 2 == 0 else -1) for s in np.unique(dec["scan"]).tolist()] or [(0, 1)]
     out = []
     for kind, mask in (("FP", L & ~gt), ("FN", ~L & gt)):
         n, lab, stats, cents = cv2.connectedComponentsWithStats(mask.astype(np.uint8), 8)
@@ -397,22 +715,31 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
                 worst = dict(x=int(finite[j]["x"]), y=int(finite[j]["y"]),
                              M=float(finite[j]["M"]), scan=int(finite[j]["scan"]),
                              step=int(finite[j]["step"]))
+            qx, qy = x0 + int(px), y0 + int(py)
             out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh),
                             centroid=(float(cents[i][0]), float(cents[i][1])),
-                            pixel=(x0 + int(px), y0 + int(py)), n_decisions=len(d_in),
-                            worst=worst))
+                            pixel=(qx, qy), n_decisions=len(d_in), worst=worst,
+                            steps=[visit_step(sc, qx, qy, H, W, direction=dr)
+                                   for sc, dr in scan_dirs]))
     out.sort(key=lambda e: -e["area"])
     return out[:top]
 
 
 def format_failures(items: list[dict[str, Any]]) -> str:
     """One line per failure region."""
-    lines = []
+    lines = ["region (kind, area, bbox), a pixel in it, the steps at which each scan "
+             "visited that pixel (jump to them on the `step` timeline):"]
     for e in items:
         x0, y0, w, h = e["bbox"]
-        s = (f"{e['kind']} {e['area']:6d} px  bbox ({x0},{y0}) {w}x{h}  probe "
-             f"{e['pixel'][0]},{e['pixel'][1]}  {e['n_decisions']} recorded decisions")
+        steps = ", ".join(str(s) for s in e.get("steps", []))
+        s = (f"{e['kind']} {e['area']:6d} px  ({x0},{y0}) {w}x{h}  pixel "
+             f"{e['pixel'][0]},{e['pixel'][1]}  steps {steps}; {e['n_decisions']} recorded "
+             f"decisions")
         if e["worst"]:
-            s += f"; worst M={e['worst']['M']:.2f} at ({e['worst']['x']},{e['worst']['y']})"
+            s += (f"; worst M {e['worst']['M']:.2f} at ({e['worst']['x']},{e['worst']['y']})"
+                  f" step {e['worst']['step']}")
         lines.append(s)
+    if items:
+        lines.append("explain one: dynremove inspect REC --pixel X,Y; in the viewer, type "
+                     "the step into the time panel's `step` field")
     return "\n".join(lines)

@@ -16,13 +16,26 @@ Layout::
     reference/dynamic        SegmentationImage: L (1 = dynamic)
     reference/M              colour-mapped M of the current scan, fixed range [0, 1]
     reference/scanline       the row being visited
-    reference/decisions      Points2D of the chunk's recorded decisions (+ AnyValues)
+    reference/M_legend       how to read M (static text; the colour bar is under the map)
+    reference/scanline       the row being visited
+    reference/decisions/scan<k>/rows_<a>_<b>
+                             Points2D of one chunk's recorded decisions (+ text
+                             AnyValues), logged ONCE at the chunk's last step and
+                             cleared when the next scan starts: an instance index
+                             always means the same decision, or nothing
     reference/current        the decision at this step (cleared on the next step)
+    reference/current_label  its verdict in words, on a box beside the pixel
     reference/chosen_patch   Boxes2D of the written patch at this step
     sources/<name>/image     static JPEG
     sources/<name>/candidates  candidates of the current decision, coloured by cluster
     sources/<name>/chosen_patch  Boxes2D of q* in that source
-    sources/<name>/matches   correspondences updated in this chunk
+    sources/<name>/chunk_matches  correspondences updated in the previous chunk (dim)
+    scan_maps/*              per scan, at its last step, lossless: M (uint16, M·10⁴,
+                             65535 = undecided), verdict, chosen_source,
+                             overwritten_before, first_overwritten (derived from the
+                             Replacement events in the sink)
+    errors/legend            class-coloured legend points under the errors map
+    probes/x<X>_y<Y>         TextLog: each probe pixel's decisions in words, per step
     similarity/<name>        colour-mapped C_s (start and after each scan)
     coverage                 colour-mapped coverage (in how many sources seen)
     stats/*                  scalars (per scan, per snapshot)
@@ -50,13 +63,26 @@ REFERENCE_SCANLINE = "reference/scanline"
 REFERENCE_DECISIONS = "reference/decisions"
 REFERENCE_CURRENT = "reference/current"
 REFERENCE_CHOSEN_PATCH = "reference/chosen_patch"
+REFERENCE_CURRENT_LABEL = "reference/current_label"
+REFERENCE_M_LEGEND = "reference/M_legend"
+
+
+def decisions_chunk(scan: int, rows: tuple[int, int]) -> str:
+    """Entity of one chunk's decisions: ``reference/decisions/scan<k>/rows_<a>_<b>``.
+
+    >>> decisions_chunk(1, (479, 470))
+    'reference/decisions/scan1/rows_0470_0479'
+    """
+    a, b = sorted(int(r) for r in rows)
+    return f"{REFERENCE_DECISIONS}/scan{int(scan)}/rows_{a:04d}_{b:04d}"
+
 
 # -- per source (leaf names under sources/<name>/) -----------------------------
 SOURCES = "sources"
 IMAGE = "image"
 CANDIDATES = "candidates"
 CHOSEN_PATCH = "chosen_patch"
-MATCHES = "matches"
+MATCHES = "chunk_matches"
 SIMILARITY = "similarity"
 
 # -- the rest ------------------------------------------------------------------
@@ -68,6 +94,13 @@ GT_BACKGROUND = "ground_truth/background"
 ERRORS = "errors"
 ERRORS_LABELS = "errors/labels"
 ERRORS_BACKGROUND = "errors/background"
+ERRORS_LEGEND = "errors/legend"
+SCAN_MAPS = "scan_maps"
+SCAN_MAP_NAMES = ("M", "verdict", "chosen_source", "overwritten_before",
+                  "first_overwritten")
+M_SCALE = 10000  # scan_maps/M holds round(M · M_SCALE) as uint16
+M_UNDECIDED = 65535
+STAGE_TIMELINE = "stage"
 RESULT_CLEAN = "result/clean"
 RESULT_CLEAN_SCAN = "result/clean_scan"  # as the scans left it (before fusion)
 RESULT_DYNAMIC = "result/dynamic"
@@ -92,6 +125,8 @@ CLASS_FN = 3
 CLASS_TP = 4
 CLASS_STATIC = 5  # a recorded decision that came out static
 CLASS_PROBE = 6  # a probe pixel's decision
+CLASS_UNDECIDED = 7
+CLASS_DECISION = 8  # carries the reasons (Decision["why"] bits) as keypoint names
 
 # Names of the stats/* scalar series.
 STAT_NAMES = ("n_dynamic", "n_replaced", "n_undecided", "seconds", "dynamic_px",
@@ -106,6 +141,11 @@ def stat(name: str) -> str:
 def source(name: str, leaf: str) -> str:
     """Path ``sources/<name>/<leaf>`` (``name`` as returned by :func:`entity_names`)."""
     return f"{SOURCES}/{name}/{leaf}"
+
+
+def scan_map(name: str) -> str:
+    """Path ``scan_maps/<name>`` of a per-scan map (one of :data:`SCAN_MAP_NAMES`)."""
+    return f"{SCAN_MAPS}/{name}"
 
 
 def similarity(name: str) -> str:

@@ -3,7 +3,10 @@
 Both start the real ``rerun`` binary shipped in the ``rerun_cli`` package, not
 the ``<venv>/bin/rerun`` Python wrapper (which runs the binary as a child, so
 killing the wrapper's PID would leave the viewer running; RERUN_NOTES.md §7).
-The web viewer is bound to 127.0.0.1 only (``rr.serve_web_viewer`` binds 0.0.0.0).
+Every server is bound to 127.0.0.1 only (``rr.serve_web_viewer`` binds 0.0.0.0):
+the web viewer's HTTP and gRPC ports, and the native viewer's gRPC port. Without a
+display (Linux, neither ``DISPLAY`` nor ``WAYLAND_DISPLAY`` set) the native viewer
+is not started: :func:`view` raises ``InputError`` that suggests ``--web``.
 """
 
 from __future__ import annotations
@@ -14,6 +17,8 @@ import subprocess
 import sys
 from pathlib import Path
 from urllib.parse import quote
+
+from dynremove.errors import InputError
 
 DEFAULT_GRPC_PORT = 9876
 DEFAULT_WEB_PORT = 9090
@@ -41,6 +46,14 @@ def web_url(*, port: int = DEFAULT_GRPC_PORT, web_port: int = DEFAULT_WEB_PORT) 
             + quote(f"rerun+http://127.0.0.1:{port}/proxy", safe=""))
 
 
+def has_display(env: dict[str, str] | None = None) -> bool:
+    """Whether a native window can open (always True off Linux)."""
+    env = os.environ if env is None else env
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"))
+
+
 def view_command(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRPC_PORT,
                  web_port: int = DEFAULT_WEB_PORT) -> list[str]:
     """The command line :func:`view` runs."""
@@ -48,7 +61,7 @@ def view_command(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRP
     if web:
         return [exe, "--web-viewer", "--bind", "127.0.0.1", "--port", str(port),
                 "--web-viewer-port", str(web_port), str(path)]
-    return [exe, "--port", str(port), str(path)]
+    return [exe, "--bind", "127.0.0.1", "--port", str(port), str(path)]
 
 
 def view(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRPC_PORT,
@@ -68,11 +81,17 @@ def view(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRPC_PORT,
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such recording: {path}")
+    if not web and not has_display(env):
+        raise InputError(f"no display here (DISPLAY and WAYLAND_DISPLAY are unset): run "
+                         f"`dynremove view {path} --web` and open the printed URL in a browser")
     cmd = view_command(path, web=web, port=port, web_port=web_port)
+    if web:  # rerun's own banner and URLs would confuse: print one URL, ours
+        popen_kwargs.setdefault("stdout", subprocess.DEVNULL)
+        popen_kwargs.setdefault("stderr", subprocess.DEVNULL)
     proc = subprocess.Popen(cmd, env=env, **popen_kwargs)
     if web:
-        print(f"serving {path} on 127.0.0.1 only; open {web_url(port=port, web_port=web_port)}",
-              file=sys.stderr)
+        print(web_url(port=port, web_port=web_port), flush=True)
+        print(f"serving {path} on 127.0.0.1 only; Ctrl-C stops it", file=sys.stderr)
     if not wait:
         return proc
     try:

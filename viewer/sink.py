@@ -29,10 +29,11 @@ import pyarrow as pa
 import rerun as rr
 
 from dynremove.evaluation.metrics import jaccard
-from dynremove.events import EventBatch, RunInfo, ScanState, WHY_PROBE
+from dynremove.events import WHY_PROBE, EventBatch, RunInfo, ScanState
 from viewer import paths as P
-from viewer._images import (CLASS_COLORS, cluster_colors, colormap, encode_jpeg,
-                            encode_png, error_labels)
+from viewer._images import (CLASS_COLORS, REASON_NAMES, VERDICT_COLORS, VERDICT_NAMES,
+                            cluster_colors, colormap, colormap_with_legend, encode_jpeg,
+                            encode_png, error_labels, overwritten_maps, visited_mask)
 from viewer.blueprint import make_blueprint, make_compare_blueprint
 
 _DIRECTION = {1: "top-left → bottom-right", -1: "bottom-right → top-left"}
@@ -54,8 +55,37 @@ def _list_column(values: np.ndarray, offsets: pa.Array) -> pa.ListArray:
     return pa.ListArray.from_arrays(offsets, pa.array(np.ascontiguousarray(values)))
 
 
+def _text_column(values: list[str], offsets: pa.Array) -> pa.ListArray:
+    return pa.ListArray.from_arrays(offsets, pa.array(list(values), pa.string()))
+
+
 def _summary_record(summary: np.ndarray) -> np.void:
     return np.asarray(summary).reshape(-1)[0]
+
+
+def _rounded(a: np.ndarray, digits: int = 3) -> np.ndarray:
+    """float64 copy rounded for display (no 0.300000011920929 in the Selection panel)."""
+    return np.round(np.asarray(a, np.float64), digits)
+
+
+def _reason_text(why: int) -> str:
+    return ", ".join(name for bit, name in REASON_NAMES.items() if why & bit) or "-"
+
+
+_M_DOC = """# How to read M
+
+M is the similarity of the reference pixel's features to the **winning cluster**
+of candidate matches (the cluster with the largest summed weight b_m = Σ B_l).
+
+* colour bar under the map: **M 0 (dark violet) → 1 (yellow)**, fixed range; the
+  white tick marks **t_r**; dark grey = undecided (no cluster formed).
+* **M ≤ t_r → dynamic** (the pixel disagrees with what the sources see there);
+  M > t_r → static.
+* B_l is a candidate's weight (the C value of the neighbour it came from);
+  𝓑 is the DBSCAN distance between two candidates.
+* Lossless per-scan values: `scan_maps/M` (M·10⁴), `scan_maps/verdict`;
+  `dynremove inspect REC --pixel X,Y` explains any pixel in words.
+"""
 
 
 class RerunSink:
@@ -137,15 +167,17 @@ class RerunSink:
         if self._owns_rec:
             self.rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id)
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.rec.save(self.path, default_blueprint=make_blueprint(self.src_names,
-                                                                      root=self.p.root))
+            self.rec.save(self.path, default_blueprint=make_blueprint(
+                self.src_names, root=self.p.root, size=(self.H, self.W)))
         self._scan = 0
+        self._direction = 1
         self._last_step = 0
         self._rows_done = 0
+        self._scan_reps: list[np.ndarray] = []
+        self._chosen: list[np.ndarray] = []
         self._snap_step = -1
         self._last_L: np.ndarray | None = None
         self._image_dirty = False
-        self._decisions_shown = False
         self._matches_shown = [False] * self.S
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._pending_n = 0
@@ -156,13 +188,21 @@ class RerunSink:
     def scan_started(self, scan: int, direction: int, state: ScanState) -> None:
         t0 = time.perf_counter()
         self._scan = int(scan)
+        self._direction = 1 if int(direction) >= 0 else -1
         self._rows_done = 0
+        self._scan_reps = []
+        self._chosen = []
         step = self._scan * self.H * self.W
         self._set_time(self._scan, step)
         self.rec.log(self.p(P.LOG), rr.TextLog(
-            f"scan {scan} started ({_DIRECTION.get(int(direction), direction)})",
-            level=rr.TextLogLevel.INFO))
-        self.rec.log(self.p(P.REFERENCE_M), self._jpeg(colormap(state.M)))
+            f"scan {scan} started ({_DIRECTION.get(int(direction), direction)}) at step "
+            f"{step}", level=rr.TextLogLevel.INFO))
+        if self._scan > 0:  # the previous scan's decisions: cleared, never re-targeted
+            self.rec.log(self.p(P.REFERENCE_DECISIONS), rr.Clear(recursive=True))
+        self.rec.log(self.p(P.REFERENCE_M), self._m_image(state.M))
+        if self.gt_mask is not None:  # nothing visited yet in this scan: no errors
+            self.rec.log(self.p(P.ERRORS_LABELS),
+                         rr.SegmentationImage(np.zeros((self.H, self.W), np.uint8)))
         self._tick("scan_started", t0)
 
     def chunk(self, events: EventBatch, state: ScanState) -> None:
@@ -182,13 +222,20 @@ class RerunSink:
             self._pending.append((d.copy(), r.copy(), u.copy()))
             self._pending_n += len(d) + len(r) + len(u)
             self._pending_scan = scan
+        if len(r):
+            self._scan_reps.append(r[["x", "y", "step"]].copy())
+            self._chosen.append(r[["x", "y", "src"]].copy())
         self._set_time(scan, last)
-        self._log_decisions(d)
-        self._log_matches(u)
-        y = float(events.rows[1]) + 0.5
+        vrows = (int(events.rows[0]), int(events.rows[1]))  # visiting order
+        img_rows = tuple(v if self._direction > 0 else self.H - 1 - v for v in vrows)
+        self._log_decisions(d, scan, img_rows)
+        self._log_matches(u, img_rows)
+        # the scan line sits on the edge between visited and not yet visited rows
+        y = float(img_rows[1] + 1) if self._direction > 0 else float(img_rows[1])
         self.rec.log(self.p(P.REFERENCE_SCANLINE), rr.LineStrips2D(
-            [[[0.0, y], [float(self.W), y]]], colors=[(255, 255, 0)],
-            radii=rr.Radius.ui_points(1.0)))
+            [[[0.0, y], [float(self.W), y]]], colors=[(255, 255, 255)],
+            radii=rr.Radius.ui_points(1.5), labels=[f"scan {scan}, row {img_rows[1]}"],
+            show_labels=False))
         rows = abs(int(events.rows[1]) - int(events.rows[0])) + 1
         before = self._rows_done // self.every
         self._rows_done += rows
@@ -206,9 +253,11 @@ class RerunSink:
         step = max(self._last_step, (scan + 1) * self.H * self.W - 1)
         self._last_step = step
         self._flush_pending()
+        self._rows_done = self.H
         if self._snap_step != step:
             self._snapshot(state, scan, step)
         self._set_time(scan, step)
+        self._log_scan_maps(state, scan)
         for s_i, name in enumerate(self.src_names):
             self.rec.log(self.p(P.similarity(name)), self._jpeg(colormap(state.C[s_i])))
         for name in ("n_dynamic", "n_replaced", "n_undecided", "seconds"):
@@ -222,12 +271,10 @@ class RerunSink:
 
     def finish(self, result: Any) -> None:
         t0 = time.perf_counter()
-        step = self._last_step + 1
-        self._set_time(self._scan, step)
         clean = np.asarray(result.clean)
         L = np.asarray(result.dynamic, bool)
-        self.rec.log(self.p(P.REFERENCE_IMAGE), self._jpeg(clean))
-        self.rec.log(self.p(P.REFERENCE_DYNAMIC), rr.SegmentationImage(L.astype(np.uint8)))
+        step = self._log_stages(result, clean, L)
+        self._set_time(self._scan, step)
         self.rec.log(self.p(P.RESULT_CLEAN), rr.EncodedImage(
             contents=encode_png(clean), media_type="image/png"), static=True)
         self.rec.log(self.p(P.RESULT_DYNAMIC), rr.SegmentationImage(L.astype(np.uint8)),
@@ -238,7 +285,11 @@ class RerunSink:
         sel = getattr(result, "selection", None)
         if sel is not None:  # the fill by selection (default preset)
             src_names = list(getattr(self, "src_names", []))
-            self.rec.log(self.p(P.RESULT_SOURCE), rr.SegmentationImage(
+            self.rec.log(self.p(P.RESULT_SOURCE), rr.AnnotationContext(
+                [(0, "reference kept", (0, 0, 0, 0))]
+                + [(k + 1, f"filled from {n}", tuple(int(v) for v in cluster_colors(
+                    np.array([k]))[0]) + (150,)) for k, n in enumerate(src_names)]),
+                rr.SegmentationImage(
                 np.clip(np.asarray(sel.label, np.int32), 0, 255).astype(np.uint8)), static=True)
             self.rec.log(self.p(P.RESULT_SEAMS), rr.SegmentationImage(
                 np.asarray(sel.seams, np.uint8)), static=True)
@@ -256,8 +307,6 @@ class RerunSink:
         lines = [f"finished: |L| = {int(L.sum())} px"]
         self.rec.log(self.p(P.stat("dynamic_px")), rr.Scalars(float(L.sum())))
         if self.gt_mask is not None:
-            self.rec.log(self.p(P.ERRORS_LABELS),
-                         rr.SegmentationImage(error_labels(L, self.gt_mask)))
             j = jaccard(L, self.gt_mask)
             self.rec.log(self.p(P.stat("jaccard")), rr.Scalars(j))
             lines.append(f"Jaccard {j:.3f}")
@@ -276,6 +325,7 @@ class RerunSink:
         sink_s = sum(v[1] for v in self.timing.values())
         lines.append(f"recording: {self.snapshots} snapshots, {sink_s:.2f} s in the sink")
         self.rec.log(self.p(P.LOG), rr.TextLog("; ".join(lines), level=rr.TextLogLevel.INFO))
+        self.rec.disable_timeline(P.STAGE_TIMELINE)
         self._tick("finish", t0)
         self.close()
 
@@ -301,7 +351,29 @@ class RerunSink:
     def _log_static(self, info: RunInfo, params: dict) -> None:
         rec, p = self.rec, self.p
         rec.log(p(), rr.AnnotationContext(
-            [(i, label, color) for i, (label, color) in CLASS_COLORS.items()]), static=True)
+            [rr.ClassDescription(info=(i, label, color)) for i, (label, color)
+             in CLASS_COLORS.items()]
+            + [rr.ClassDescription(info=(P.CLASS_DECISION, "decision reason"),
+                                   keypoint_annotations=[(bit, name) for bit, name
+                                                         in REASON_NAMES.items()])]),
+            static=True)
+        rec.log(p(P.scan_map("verdict")), rr.AnnotationContext(
+            [(i, VERDICT_NAMES[i], VERDICT_COLORS[i]) for i in VERDICT_NAMES]), static=True)
+        rec.log(p(P.scan_map("chosen_source")), rr.AnnotationContext(
+            [(0, "not replaced", (0, 0, 0, 0))]
+            + [(k + 1, f"patch from {n}", tuple(int(v) for v in cluster_colors(
+                np.array([k]))[0]) + (200,)) for k, n in enumerate(self.src_names)]),
+            static=True)
+        rec.log(p(P.REFERENCE_M_LEGEND), rr.TextDocument(_M_DOC, media_type="text/markdown"),
+                static=True)
+        legend = [(P.CLASS_FP, "false positive: called dynamic, static in ground truth"),
+                  (P.CLASS_FN, "false negative: missed mover"),
+                  (P.CLASS_TP, "true positive")]
+        if self.gt_mask is not None:  # a legend under the errors map, in its own space
+            rec.log(p(P.ERRORS_LEGEND), rr.Points2D(
+                [[4.0 + i * self.W / 3.0, self.H + 8.0] for i in range(len(legend))],
+                class_ids=[c for c, _ in legend], labels=[t for _, t in legend],
+                radii=rr.Radius.ui_points(6.0), show_labels=True), static=True)
         ref = info.images[info.ref_index]
         md = [f"# dynremove run `{self.recording_id}`", "",
               f"* preset: **{info.preset}**, size {self.W}×{self.H}, seed {params.get('seed')}",
@@ -375,6 +447,32 @@ class RerunSink:
         self._log_table(P.EVENTS_REPLACEMENTS, r, scan)
         self._log_table(P.EVENTS_UPDATES, u, scan)
         self._log_per_step(d, r, scan)
+        self._log_probe_stories(d, r, scan)
+
+    def _log_probe_stories(self, d: np.ndarray, r: np.ndarray, scan: int) -> None:
+        """``probes/x<X>_y<Y>``: each probe pixel's decisions as text, one per step."""
+        pr = d[(d["why"] & WHY_PROBE) != 0]
+        if len(pr) == 0:
+            return
+        attrs = self._decision_attrs(pr)
+        for (x, y) in {(int(a), int(b)) for a, b in zip(pr["x"], pr["y"])}:
+            m = (pr["x"] == x) & (pr["y"] == y)
+            texts = []
+            for i in np.nonzero(m)[0].tolist():
+                t = (f"({x},{y}) scan {scan} step {int(pr['step'][i])}: "
+                     f"{attrs['verdict'][i]}; winning cluster "
+                     f"{int(attrs['winning_cluster_size'][i])} of "
+                     f"{int(attrs['n_candidates'][i])} candidates from "
+                     f"{attrs['winning_cluster_sources'][i]}; b_m {attrs['b_m'][i]:.2f}")
+                if pr["dynamic"][i]:
+                    t += f"; patch from {attrs['chosen_source'][i]}"
+                texts.append(t)
+            steps = pr["step"][m].astype(np.int64)
+            self.rec.send_columns(
+                self.p(f"probes/x{x}_y{y}"),
+                indexes=[rr.TimeColumn("scan", sequence=np.full(len(steps), scan, np.int64)),
+                         rr.TimeColumn("step", sequence=steps.copy())],
+                columns=rr.TextLog.columns(text=texts, level=["INFO"] * len(texts)))
 
     def _log_table(self, rel: str, arr: np.ndarray, scan: int) -> None:
         """Log structured records losslessly: one row per step, a list per field."""
@@ -393,35 +491,61 @@ class RerunSink:
                      rr.TimeColumn("step", sequence=steps.astype(np.int64))],
             columns=rr.AnyValues.columns(**cols))
 
-    def _log_decisions(self, d: np.ndarray) -> None:
-        """All recorded decisions of the chunk, one log call (at the chunk's last step)."""
-        path = self.p(P.REFERENCE_DECISIONS)
+    def _decision_attrs(self, d: np.ndarray) -> dict[str, Any]:
+        """Per-decision attributes in words and rounded values (Selection panel)."""
+        cl, src = d["cand_cluster"], d["cand_src"]
+        in_win = (cl == d["win_cluster"][:, None]) & (cl >= 0) & (src >= 0)
+        n_win = in_win.sum(1)
+        names = self.src_names
+
+        def name_of(s: int) -> str:
+            return names[s] if 0 <= s < len(names) else "-"
+
+        win_src = [", ".join(sorted({name_of(int(v)) for v in row[m]})) or "-"
+                   for row, m in zip(src, in_win)]
+        verdict = []
+        for m, dy in zip(d["M"].tolist(), d["dynamic"].tolist()):
+            if m != m:
+                verdict.append("dynamic (no cluster)" if dy else "undecided (no cluster)")
+            else:
+                op = "≤" if m <= self.t_r else ">"
+                verdict.append(f"{'dynamic' if dy else 'static'}: M {m:.2f} {op} t_r "
+                               f"{self.t_r:.2f}")
+        return dict(verdict=verdict, reason=[_reason_text(int(w)) for w in d["why"]],
+                    M=_rounded(d["M"]), t_r=np.full(len(d), round(self.t_r, 3)),
+                    b_m=_rounded(d["win_weight"]), winning_cluster_size=n_win.astype(np.int32),
+                    winning_cluster_sources=win_src, n_clusters=d["n_clusters"].astype(np.int32),
+                    n_candidates=d["n_cand"].astype(np.int32),
+                    chosen_source=[name_of(int(c)) for c in d["chosen_src"]],
+                    step=d["step"].astype(np.int64), x=d["x"].astype(np.int32),
+                    y=d["y"].astype(np.int32))
+
+    def _log_decisions(self, d: np.ndarray, scan: int, img_rows: tuple[int, int]) -> None:
+        """The chunk's recorded decisions, logged ONCE on an entity of their own.
+
+        ``reference/decisions/scan<k>/rows_<a>_<b>`` is written at the chunk's last
+        step and cleared (recursively, with the whole scan) when the next scan
+        starts, so an instance index keeps meaning the same decision for as long as
+        it is shown: a selection is never silently re-targeted by a time change.
+        """
         if len(d) == 0:
-            if self._decisions_shown:
-                self.rec.log(path, rr.Clear(recursive=False))
-                self._decisions_shown = False
             return
-        cls = np.where(d["dynamic"], P.CLASS_DYNAMIC,
-                       np.where(d["why"] & WHY_PROBE, P.CLASS_PROBE, P.CLASS_STATIC))
-        self.rec.log(path,
+        cls = np.where(np.isnan(d["M"]) & ~d["dynamic"], P.CLASS_UNDECIDED,
+                       np.where(d["dynamic"], P.CLASS_DYNAMIC,
+                                np.where(d["why"] & WHY_PROBE, P.CLASS_PROBE, P.CLASS_STATIC)))
+        attrs = self._decision_attrs(d)
+        self.rec.log(self.p(P.decisions_chunk(scan, img_rows)),
                      rr.Points2D(np.stack([d["x"], d["y"]], 1).astype(np.float32) + 0.5,
-                                 class_ids=cls.astype(np.uint16), show_labels=False,
-                                 radii=rr.Radius.ui_points(2.5)),
-                     rr.AnyValues(M=d["M"].copy(), t_r=np.full(len(d), self.t_r, np.float32),
-                                  step=d["step"].copy(), win_cluster=d["win_cluster"].copy(),
-                                  win_weight=d["win_weight"].copy(),
-                                  chosen_src=d["chosen_src"].copy(),
-                                  n_clusters=d["n_clusters"].copy(),
-                                  n_cand=d["n_cand"].copy(), dynamic=d["dynamic"].copy(),
-                                  why=d["why"].copy()))
-        self._decisions_shown = True
+                                 class_ids=cls.astype(np.uint16), labels=attrs["verdict"],
+                                 show_labels=False, radii=rr.Radius.ui_points(2.5)),
+                     rr.AnyValues(**attrs))
 
     def _log_per_step(self, d: np.ndarray, r: np.ndarray, scan: int) -> None:
         """Overlays that explain one step: current decision, candidates, chosen patch.
 
         Logged partitioned by step; an empty partition at ``step + 1`` clears them.
         """
-        shown = d[d["dynamic"] | ((d["why"] & WHY_PROBE) != 0)]
+        shown = d  # every recorded decision gets its marker: dynamic, probe, sampled
         if len(shown) == 0 and len(r) == 0:
             return
         ev = np.unique(np.concatenate([shown["step"], r["step"]]).astype(np.int64))
@@ -438,20 +562,28 @@ class RerunSink:
 
         if len(shown):
             c = ordered(shown)
-            lab = [f"M={m:.2f} → {'DYNAMIC' if dy else 'static'}"
-                   for m, dy in zip(c["M"].tolist(), c["dynamic"].tolist())]
+            attrs = self._decision_attrs(c)
             lens = lengths_of(c["step"])
             off = _offsets(lens)
+            xy = np.stack([c["x"], c["y"]], 1).astype(np.float32) + 0.5
             self.rec.send_columns(self.p(P.REFERENCE_CURRENT), indexes=idx, columns=[
                 *rr.Points2D.columns(
-                    positions=np.stack([c["x"], c["y"]], 1).astype(np.float32) + 0.5,
-                    labels=lab, colors=np.tile(np.array([[255, 0, 255]], np.uint8),
-                                               (len(c), 1)),
+                    positions=xy, colors=np.tile(np.array([[255, 0, 255]], np.uint8),
+                                                 (len(c), 1)),
                     radii=np.full(len(c), -6.0, np.float32)).partition(lens),
-                *rr.AnyValues.columns(M=_list_column(c["M"], off),
-                                      dynamic=_list_column(c["dynamic"], off),
-                                      n_clusters=_list_column(c["n_clusters"], off),
-                                      win_weight=_list_column(c["win_weight"], off))])
+                *rr.AnyValues.columns(**{k: _list_column(v, off) if isinstance(v, np.ndarray)
+                                         else _text_column(v, off)
+                                         for k, v in attrs.items()})])
+            # the verdict in words on a box around the pixel: the label sits above
+            # the box, beside the pixel, never on it
+            half = np.full((len(c), 2), max(self.patch_size / 2, 3.0) + 1, np.float32)
+            self.rec.send_columns(self.p(P.REFERENCE_CURRENT_LABEL), indexes=idx, columns=[
+                *rr.Boxes2D.columns(
+                    centers=xy, half_sizes=half,
+                    colors=np.tile(np.array([[255, 0, 255]], np.uint8), (len(c), 1)),
+                    labels=[f"({x},{y}) {v}" for x, y, v in zip(
+                        c["x"].tolist(), c["y"].tolist(), attrs["verdict"])]
+                ).partition(lens)])
             # candidates, per source: flatten the K slots
             src = c["cand_src"].reshape(-1)
             cxy = c["cand_xy"].reshape(-1, 2)
@@ -475,8 +607,9 @@ class RerunSink:
                         radii=np.where(win[m], -5.0, -3.0).astype(np.float32)
                     ).partition(lens),
                     *rr.AnyValues.columns(cluster=_list_column(ccl[m], off),
-                                          B=_list_column(cB[m], off),
+                                          B_l=_list_column(_rounded(cB[m]), off),
                                           winner=_list_column(win[m], off),
+                                          source=_text_column([name] * int(m.sum()), off),
                                           ref_x=_list_column(rxy[m, 0], off),
                                           ref_y=_list_column(rxy[m, 1], off))])
         if len(r):
@@ -506,10 +639,18 @@ class RerunSink:
                             zip(cs["score"].tolist(), cs["tie_break"].tolist())]
                 ).partition(lengths_of(cs["step"]))])
 
-    def _log_matches(self, u: np.ndarray) -> None:
-        """Correspondences updated in this chunk, in each source's own image space."""
-        case_rgb = np.array([[0, 0, 0], [0, 200, 255], [255, 160, 0], [200, 0, 255]],
-                            np.uint8)
+    def _log_matches(self, u: np.ndarray, img_rows: tuple[int, int]) -> None:
+        """Correspondences updated in this chunk, dim, in each source's own image space.
+
+        Logged at the chunk's last step on ``sources/<name>/chunk_matches``, a layer
+        apart from the current step's candidates (shown while the next chunk runs).
+        """
+        case_rgba = np.array([[0, 0, 0, 0], [0, 200, 255, 90], [255, 160, 0, 90],
+                              [200, 0, 255, 90]], np.uint8)
+        case_name = np.array(["-", "case 1: one candidate in the cluster",
+                              "case 2: both candidates in the cluster",
+                              "case 3: geometry (epipolar line)"], object)
+        a, b = sorted(img_rows)
         for s, name in enumerate(self.src_names):
             path = self.p(P.source(name, P.MATCHES))
             m = u["src"] == s if len(u) else np.zeros(0, bool)
@@ -519,10 +660,12 @@ class RerunSink:
                     self._matches_shown[s] = False
                 continue
             us = u[m]
+            case = np.clip(us["case"], 0, 3)
             self.rec.log(path, rr.Points2D(
                 np.stack([us["new_x"], us["new_y"]], 1).astype(np.float32) + 0.5,
-                colors=case_rgb[np.clip(us["case"], 0, 3)], radii=rr.Radius.ui_points(2.0)),
-                rr.AnyValues(case=us["case"].copy(), new_C=us["new_C"].copy(),
+                colors=case_rgba[case], radii=rr.Radius.ui_points(1.5),
+                labels=[f"rows {a}-{b}"] * len(us), show_labels=False),
+                rr.AnyValues(case=case_name[case].tolist(), new_C=_rounded(us["new_C"]),
                              ref_x=us["x"].copy(), ref_y=us["y"].copy(),
                              step=us["step"].copy()))
             self._matches_shown[s] = True
@@ -538,14 +681,93 @@ class RerunSink:
         if self._last_L is None or not np.array_equal(L, self._last_L):
             self._last_L = L.copy()
             rec.log(p(P.REFERENCE_DYNAMIC), rr.SegmentationImage(L.astype(np.uint8)))
-            if self.gt_mask is not None:
-                rec.log(p(P.ERRORS_LABELS), rr.SegmentationImage(error_labels(L, self.gt_mask)))
-        rec.log(p(P.REFERENCE_M), self._jpeg(colormap(state.M)))
+        if self.gt_mask is not None:  # only where this scan has already been
+            err = error_labels(L, self.gt_mask)
+            err[~visited_mask(self.H, self.W, self._rows_done, self._direction)] = 0
+            rec.log(p(P.ERRORS_LABELS), rr.SegmentationImage(err))
+        rec.log(p(P.REFERENCE_M), self._m_image(state.M))
         rec.log(p(P.stat("dynamic_px")), rr.Scalars(float(np.count_nonzero(L))))
         if self.gt_mask is not None:
             rec.log(p(P.stat("jaccard")), rr.Scalars(jaccard(L, self.gt_mask)))
         self._snap_step = step
         self.snapshots += 1
+
+    def _log_scan_maps(self, state: ScanState, scan: int) -> None:
+        """Per-pixel maps of the scan just finished, lossless, at its last step.
+
+        ``M`` comes from the core (M·10⁴ as uint16, 65535 = undecided); the rest is
+        derived here from the scan's Replacement events: ``verdict`` (1 static,
+        2 dynamic, 3 undecided), ``chosen_source`` (k + 1 = patch from source k),
+        ``overwritten_before`` (patches centred elsewhere that overwrote the pixel
+        before the scan reached it) and ``first_overwritten`` (step of the first
+        of them − the scan's first step + 1; 0 = never).
+        """
+        H, W = self.H, self.W
+        M = np.asarray(state.M, np.float32)
+        nan = np.isnan(M)
+        Mq = np.where(nan, P.M_UNDECIDED,
+                      np.clip(np.rint(np.nan_to_num(M) * P.M_SCALE), 0, P.M_UNDECIDED - 1)
+                      ).astype(np.uint16)
+        verdict = np.where(nan, 3, np.where(M <= self.t_r, 2, 1)).astype(np.uint8)
+        reps = (np.concatenate(self._scan_reps) if self._scan_reps
+                else np.zeros(0, [("x", np.int32), ("y", np.int32), ("step", np.int64)]))
+        half = self.patch_size // 2 if self.write == "patch" else 0
+        before, first = overwritten_maps(H, W, reps, scan=scan, direction=self._direction,
+                                         half=half)
+        chosen = np.zeros((H, W), np.uint8)
+        for part in self._chosen:
+            chosen[part["y"], part["x"]] = np.clip(part["src"] + 1, 0, 255)
+        base = scan * H * W
+        first_rel = np.where(first >= 0, first - base + 1, 0).astype(np.uint32)
+        rec, p = self.rec, self.p
+        rec.log(p(P.scan_map("M")), rr.DepthImage(Mq, meter=float(P.M_SCALE),
+                                                  colormap="viridis",
+                                                  depth_range=(0.0, float(P.M_SCALE))),
+                rr.AnyValues(scan=scan, direction=self._direction, t_r=round(self.t_r, 3),
+                             scale=P.M_SCALE, undecided=P.M_UNDECIDED))
+        rec.log(p(P.scan_map("verdict")), rr.SegmentationImage(verdict))
+        rec.log(p(P.scan_map("chosen_source")), rr.SegmentationImage(chosen))
+        rec.log(p(P.scan_map("overwritten_before")), rr.DepthImage(
+            before, meter=1.0, colormap="magma",
+            depth_range=(0.0, float(max(1, (2 * half + 1) ** 2 - 1)))))
+        rec.log(p(P.scan_map("first_overwritten")), rr.DepthImage(
+            first_rel, meter=1.0, colormap="turbo", depth_range=(0.0, float(H * W))))
+        self._chosen = []
+
+    def _log_stages(self, result: Any, clean: np.ndarray, L: np.ndarray) -> int:
+        """The post-scan steps on the timeline, after the last scan step.
+
+        Stage i (``scan``, ``clean``, ``votes``, ``snap``, ``select`` …) takes step
+        ``last + 1 + i`` and ``stage`` = i; ``reference/dynamic`` shows its map.
+        Returns the step of the final image (the written ``clean.png``).
+        """
+        step = self._last_step + 1
+        stages = dict(getattr(result, "stages", None) or {})
+        rec, p = self.rec, self.p
+        for i, (name, stage) in enumerate(stages.items()):
+            self._set_time(self._scan, step)
+            rec.set_time(P.STAGE_TIMELINE, sequence=i)
+            Ls = np.asarray(stage, bool)
+            rec.log(p(P.REFERENCE_DYNAMIC), rr.SegmentationImage(Ls.astype(np.uint8)))
+            if self.gt_mask is not None:
+                rec.log(p(P.ERRORS_LABELS), rr.SegmentationImage(error_labels(Ls, self.gt_mask)))
+            rec.log(p(P.LOG), rr.TextLog(f"stage {i} '{name}' at step {step}: |L| = "
+                                         f"{int(Ls.sum())} px", level=rr.TextLogLevel.INFO))
+            step += 1
+        self._set_time(self._scan, step)
+        rec.set_time(P.STAGE_TIMELINE, sequence=len(stages))
+        rec.log(p(P.REFERENCE_IMAGE), self._jpeg(clean))
+        rec.log(p(P.REFERENCE_DYNAMIC), rr.SegmentationImage(L.astype(np.uint8)))
+        if self.gt_mask is not None:
+            rec.log(p(P.ERRORS_LABELS), rr.SegmentationImage(error_labels(L, self.gt_mask)))
+        rec.log(p(P.LOG), rr.TextLog(f"stage {len(stages)} 'output' at step {step}: the "
+                                     "written clean image", level=rr.TextLogLevel.INFO))
+        self._last_step = step
+        return step
+
+    def _m_image(self, M: np.ndarray) -> rr.EncodedImage:
+        """Colour-mapped M (fixed range [0, 1]) with its colour bar and t_r below."""
+        return self._jpeg(colormap_with_legend(M, marks=((self.t_r, "t_r"),)))
 
     # -- helpers ---------------------------------------------------------------
     def _set_time(self, scan: int, step: int) -> None:

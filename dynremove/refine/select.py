@@ -36,7 +36,7 @@ that the scan flagged with doubled content.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -68,6 +68,10 @@ class Selection:
     seams: npt.NDArray[np.bool_]  # boundaries between labels inside the region
     parallax_px: float  # median measured parallax of the set (px)
     consensus_mode: str  # "scan" (trust L) or "parallax" (colour consensus inside L)
+    # for the full-resolution output (refine.upsample): each source's field, and per
+    # replaced pixel which sources' samples were combined (S, H, W)
+    fields: list = field(default_factory=list)
+    members: npt.NDArray[np.bool_] | None = None
 
 
 def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
@@ -113,12 +117,19 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     if S < 2 or not near.any():
         return np.zeros(mask.shape, bool)
     ys, xs = np.nonzero(near)
+    ring = dilate_disc(mask, 2 * P.select_grow_px) & ~mask
     labs, ok = [], []
     for k in range(S):
         warped, ins = sample_bilinear(sources[k], base[k])
         if valid is not None:
             ins &= _valid_at(valid[k], base[k])
-        labs.append(blurred_lab(warped, 1.0)[ys, xs])
+        lab_k = blurred_lab(warped, 1.0)
+        # exposure and white balance: the source's median Lab offset to the
+        # reference around L, so a darker reference is not a "difference"
+        around = ring & ins
+        if around.sum() > 50:
+            lab_k = lab_k + np.median(lab_r[around] - lab_k[around], axis=0)
+        labs.append(lab_k[ys, xs])
         ok.append(ins[ys, xs])
     labs, ok = np.stack(labs), np.stack(ok)  # (S, n, 3), (S, n)
     tau = P.select_tau
@@ -152,7 +163,9 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     vals = np.where(member[..., None], cand_img[1:, ys, xs].astype(np.float32), np.nan)
     med = np.nanmedian(vals, axis=0)
     out[chosen, ys, xs] = np.clip(med + 0.5, 0, 255).astype(np.uint8)
-    return out
+    members = np.zeros((len(cand_img) - 1,) + rep.shape, bool)
+    members[:, ys, xs] = member
+    return out, members
 
 
 def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
@@ -303,13 +316,19 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     free = usable[1:] & ~mv
     no_src = rep & in_core & ~free.any(0)
     clean = reference.copy()
+    members = np.zeros((S, H, W), bool)
     if rep.any():
         d_ref = np.linalg.norm(labs - labs[0][None], axis=-1)
         if P.select_cluster_median:
             # where the scan is trusted, every free source is a witness of the
             # hidden background, not only those agreeing with the chosen one
-            cand_img = _cluster_median(cand_img, labs, lab, rep, free,
-                                       np.where(in_core, np.inf, tau) if mode == "scan" else tau)
+            cand_img, mem = _cluster_median(
+                cand_img, labs, lab, rep, free,
+                np.where(in_core, np.inf, tau) if mode == "scan" else tau)
+            members[:, y0:y1, x0:x1] = mem
+        else:
+            ly, lx = np.nonzero(rep)
+            members[lab[ly, lx] - 1, ly + y0, lx + x0] = True
         clean[roi] = offset_blend(reference[roi], cand_img, lab, rep, usable, d_ref)
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
@@ -328,7 +347,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     nos[roi] = no_src
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
-                     consensus_mode=mode)
+                     consensus_mode=mode, fields=fields, members=members)
 
 
 __all__ = ["Selection", "select_fill"]

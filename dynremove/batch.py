@@ -1,0 +1,334 @@
+"""Many sets at once: ``dynremove batch ROOT --out DIR [--jobs N]``.
+
+A *set* below ROOT is a folder holding images directly, a folder with a
+``frames/`` sub-folder (the ``eval`` layout; ``masks/<ref stem>.png`` there, if
+present, gives the Jaccard of the result), or a video file. ROOT itself may be a
+set. Each set's outputs are those of ``dynremove run`` (:func:`write_outputs`)
+in ``DIR/<set>/``; ``DIR/summary.json`` and ``DIR/summary.csv`` list every set
+with its status (``ok``, ``skipped``, ``error``), figures and error message.
+
+Resume: a set whose ``report.json`` carries the same *batch key* (a hash of the
+parameters, the options and the bytes of every input file) and whose images
+exist is skipped. A failing set does not stop the others; the command exits 1
+at the end.
+
+Sets run in parallel with joblib (``--jobs``; each worker runs OpenCV
+single-threaded), or on a Dask cluster (``--scheduler tcp://host:port``, extra
+``dynremove[dask]``) through joblib's ``dask`` backend.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io as _pyio
+import json
+import os
+import sys
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import cv2
+import numpy as np
+
+from dynremove import io
+from dynremove.errors import InputError
+from dynremove.evaluation.metrics import jaccard
+from dynremove.params import Params
+from dynremove.pipeline import remove_dynamic
+
+OUTPUT_FILES = ("clean.png", "dynamic_mask.png", "coverage.png", "report.json")
+SUMMARY_FIELDS = ("set", "status", "n_images", "reference", "dynamic_fraction",
+                  "jaccard_vs_gt", "seconds", "error", "inputs", "out")
+SKIP_DIRS = {"masks", "gt", "groundtruth", "ground_truth"}  # beside frames/: not sets
+
+
+# --- outputs of one run (shared with ``dynremove run``) ---------------------------------
+def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
+                  gt: np.ndarray | None = None, record: str | None = None,
+                  reference: dict | None = None, extra: dict | None = None) -> dict:
+    """clean.png, dynamic_mask.png (0/255), coverage.png and report.json, atomically.
+
+    ``reference``: how the reference was chosen (merged into ``report["reference"]``);
+    ``extra``: more top-level report entries.
+    """
+    io.write_image(out / "clean.png", res.clean)
+    io.write_image(out / "dynamic_mask.png", res.dynamic.astype(np.uint8) * 255)
+    n_src = max(1, len(iset.images) - 1)
+    io.write_image(out / "coverage.png",
+                   (res.coverage.astype(np.float32) * (255.0 / n_src)).astype(np.uint8))
+    H, W = res.clean.shape[:2]
+    report = {
+        "inputs": [str(p) for p in iset.paths],
+        "reference": {"index": ref, "name": iset.names[ref], **(reference or {})},
+        "size": {"width": W, "height": H, "original_width": iset.original_size[0],
+                 "original_height": iset.original_size[1], "scale": iset.scale},
+        "preset": preset_name,
+        "params": res.params,
+        "scans": [{"scan": int(s["scan"]), "direction": int(s["direction"]),
+                   "dynamic_px": int(s["n_dynamic"]), "replaced_px": int(s["n_replaced"]),
+                   "undecided_px": int(s["n_undecided"]), "seconds": float(s["seconds"])}
+                  for s in res.scans],
+        "dynamic_fraction": float(res.dynamic.mean()),
+        "uncovered_dynamic_px": int((res.dynamic & (res.coverage == 0)).sum()),
+        "geometry": res.geometry,
+        "seconds": {k: round(float(v), 4) for k, v in res.timings.items()},
+        "notes": list(iset.notes) + list(res.warnings),
+        "recording": str(record) if record else None,
+    }
+    video = getattr(iset, "video", None)
+    if video:
+        report["video"] = video
+    valid = getattr(iset, "valid", None) or []
+    if any(v is not None for v in valid):
+        report["no_content_fraction"] = {
+            n: (0.0 if v is None else round(float(1 - v.mean()), 5))
+            for n, v in zip(iset.names, valid)}
+    if gt is not None:
+        report["jaccard_vs_gt"] = jaccard(res.dynamic, gt)
+    report.update(extra or {})
+    io.write_json(out / "report.json", report)
+    return report
+
+
+def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dict, list[str]]:
+    """The reference index, how it was chosen (for the report) and notes.
+
+    ``ref`` is an index, a file name, ``"auto"`` (:func:`io.auto_reference`) or
+    None (the middle image; a note suggests ``--ref auto`` when it is much
+    blurrier than the others).
+    """
+    valid = getattr(iset, "valid", None)
+    if isinstance(ref, str) and ref.strip().lower() == "auto":
+        i, note, info = io.auto_reference(iset.images, iset.names, valid)
+        return i, {"chosen_by": "auto", **info}, [note]
+    i = io.resolve_ref(ref, iset.names)
+    if ref is None or ref == "":
+        note = io.blurry_reference_note(iset.images, i, iset.names, valid)
+        return i, {"chosen_by": "middle"}, [note] if note else []
+    return i, {"chosen_by": "given"}, []
+
+
+# --- finding sets ---------------------------------------------------------------------
+@dataclass(frozen=True)
+class BatchSet:
+    name: str  # relative to ROOT, posix ("davis/camel"); ROOT's own name for ROOT
+    inputs: tuple[Path, ...]  # image files, or one video
+    gt: Path | None = None  # masks/ folder of the eval layout (reference mask by stem)
+
+
+def _images_in(folder: Path) -> list[Path]:
+    try:
+        files = sorted(q for q in folder.iterdir() if q.is_file() and not q.name.startswith("."))
+    except OSError:
+        return []
+    return [q for q in files if q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q)]
+
+
+def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = ()) -> list[BatchSet]:
+    """Every set below ``root`` (itself included), sorted by name; see the module doc."""
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(f"{root}: no such folder")
+    skip = {p.resolve() for p in exclude}
+    found: list[BatchSet] = []
+
+    def name_of(d: Path) -> str:
+        return d.relative_to(root).as_posix() if d != root else root.resolve().name
+
+    def walk(d: Path) -> None:
+        if d.resolve() in skip:
+            return
+        fr = d / "frames"
+        if fr.is_dir():
+            imgs = _images_in(fr)
+            if len(imgs) >= 2:
+                gt = d / "masks"
+                found.append(BatchSet(name_of(d), tuple(imgs), gt if gt.is_dir() else None))
+                return
+        imgs = _images_in(d)
+        if len(imgs) >= 2:
+            found.append(BatchSet(name_of(d), tuple(imgs)))
+            return
+        try:
+            entries = sorted(q for q in d.iterdir() if not q.name.startswith("."))
+        except OSError:
+            return
+        for q in entries:
+            if q.is_dir() and q.name.lower() not in SKIP_DIRS:
+                walk(q)
+            elif q.is_file() and io.is_video_file(q):
+                rel = q.relative_to(root)
+                found.append(BatchSet(rel.with_suffix("").as_posix(), (q,)))
+
+    walk(root)
+    return sorted(found, key=lambda s: s.name)
+
+
+# --- one set ----------------------------------------------------------------------------
+def batch_key(bs: BatchSet, options: dict) -> str:
+    """Hash of the options (parameters, preset, size, reference, ...) and the inputs' bytes."""
+    h = hashlib.sha256(json.dumps(options, sort_keys=True, default=str).encode())
+    for p in bs.inputs:
+        h.update(p.name.encode() + b"\0")
+        with open(p, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()[:32]
+
+
+def _is_done(out: Path, key: str) -> dict | None:
+    try:
+        report = json.loads((out / "report.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if report.get("batch_key") != key or not all((out / f).is_file() for f in OUTPUT_FILES):
+        return None
+    return report
+
+
+def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool = False
+            ) -> dict:
+    """Run one set into ``out_root/<set>``; never raises (errors go into the row)."""
+    if single_thread:
+        cv2.setNumThreads(1)  # in a worker: parallelism comes from joblib
+    t0 = time.perf_counter()
+    out = out_root / bs.name
+    row: dict[str, Any] = dict.fromkeys(SUMMARY_FIELDS)
+    row.update({"set": bs.name, "inputs": len(bs.inputs), "out": str(out)})
+    try:
+        key = batch_key(bs, options)
+        done = _is_done(out, key)
+        if done is not None:
+            row.update(_row_from_report(done), status="skipped",
+                       seconds=round(time.perf_counter() - t0, 3))
+            return row
+        params = Params(**options["params"])
+        iset = io.load_image_set(list(bs.inputs), max_side=options.get("max_side"),
+                                 frames=options.get("frames"), span=options.get("span"),
+                                 pick=options.get("pick") or "sharpest")
+        ref, ref_info, notes = choose_reference(options.get("ref"), iset)
+        iset.notes.extend(notes)
+        gt = None
+        if bs.gt is not None:
+            mp = bs.gt / (Path(iset.names[ref]).stem + ".png")
+            if mp.is_file():
+                H, W = iset.images[0].shape[:2]
+                gt = io.read_mask(mp, (W, H))
+        with warnings.catch_warnings():  # the run's warnings are in res.warnings
+            warnings.simplefilter("ignore")
+            res = remove_dynamic(iset.images, ref=ref, params=params, names=iset.names,
+                                 preset_name=options["preset"], valid_masks=iset.valid_masks)
+        out.mkdir(parents=True, exist_ok=True)
+        report = write_outputs(out, res, iset=iset, ref=ref, preset_name=options["preset"],
+                               gt=gt, reference=ref_info, extra={"batch_key": key})
+        row.update(_row_from_report(report), status="ok")
+    except Exception as e:  # noqa: BLE001 - recorded in the summary, the batch goes on
+        msg = " ".join(str(e).split()) or type(e).__name__
+        row.update(status="error", error=msg if isinstance(e, InputError)
+                   else f"{type(e).__name__}: {msg}")
+    row["seconds"] = round(time.perf_counter() - t0, 3)
+    return row
+
+
+def _row_from_report(report: dict) -> dict:
+    return {"n_images": len(report.get("inputs", [])),
+            "reference": report.get("reference", {}).get("name"),
+            "dynamic_fraction": round(float(report.get("dynamic_fraction", 0.0)), 5),
+            "jaccard_vs_gt": (round(report["jaccard_vs_gt"], 4)
+                              if report.get("jaccard_vs_gt") is not None else None)}
+
+
+# --- the batch --------------------------------------------------------------------------
+def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params,
+              preset_name: str, jobs: int = 1, max_side: int | None = None,
+              ref: str | None = None, frames: int | None = None, span: str | None = None,
+              pick: str = "sharpest", scheduler: str | None = None,
+              on_done: Callable[[int, int, dict], None] | None = None) -> dict:
+    """Run every set below ``root`` into ``out``; write and return the summary.
+
+    Returns ``{"root", "out", "sets": [row, ...], "n_ok", "n_skipped", "n_failed",
+    "wall_s", "jobs", "scheduler"}``; rows in set-name order (see SUMMARY_FIELDS).
+    """
+    out = io.prepare_out_dir(out)
+    sets = find_sets(root, exclude=[out])
+    if not sets:
+        raise InputError(f"{root}: no sets found (a set is a folder of at least 2 images, "
+                         "a folder with frames/, or a video)")
+    options = {"params": params.to_dict(), "preset": preset_name, "max_side": max_side,
+               "ref": ref, "frames": frames, "span": span, "pick": pick}
+    t0 = time.perf_counter()
+    rows = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler, on_done=on_done)
+    summary = {"root": str(root), "out": str(out), "sets": rows,
+               "n_ok": sum(r["status"] == "ok" for r in rows),
+               "n_skipped": sum(r["status"] == "skipped" for r in rows),
+               "n_failed": sum(r["status"] == "error" for r in rows),
+               "wall_s": round(time.perf_counter() - t0, 3), "jobs": jobs,
+               "scheduler": scheduler, "preset": preset_name, "options": options}
+    io.write_json(out / "summary.json", summary)
+    buf = _pyio.StringIO()
+    w = csv.DictWriter(buf, fieldnames=SUMMARY_FIELDS, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: r.get(k) for k in SUMMARY_FIELDS})
+    io._atomic_write_bytes(out / "summary.csv", buf.getvalue().encode())
+    return summary
+
+
+def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
+             scheduler: str | None, on_done: Callable[[int, int, dict], None] | None
+             ) -> list[dict]:
+    from joblib import Parallel, delayed, parallel_config
+
+    results: dict[str, dict] = {}
+    gen: Iterable[dict]
+    client = None
+    if scheduler:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise InputError("--scheduler needs the optional extra: "
+                             "pip install 'dynremove[dask]'") from None
+        try:
+            client = Client(scheduler, timeout=30)
+        except (OSError, TimeoutError, ValueError) as e:
+            raise InputError(f"--scheduler {scheduler}: cannot connect ({e})") from None
+    try:
+        if scheduler:
+            with parallel_config(backend="dask"):
+                gen = Parallel(n_jobs=-1, return_as="generator_unordered")(
+                    delayed(run_set)(bs, out, options, single_thread=True) for bs in sets)
+                gen = list(_collect(gen, sets, on_done, results))
+        elif jobs == 1:
+            _collect((run_set(bs, out, options) for bs in sets), sets, on_done, results)
+        else:
+            gen = Parallel(n_jobs=jobs, return_as="generator_unordered")(
+                delayed(run_set)(bs, out, options, single_thread=True) for bs in sets)
+            _collect(gen, sets, on_done, results)
+    finally:
+        if client is not None:
+            client.close()
+    return [results[bs.name] for bs in sets]
+
+
+def _collect(gen: Iterable[dict], sets: Sequence[BatchSet],
+             on_done: Callable[[int, int, dict], None] | None, results: dict) -> list[dict]:
+    for k, row in enumerate(gen, 1):
+        results[row["set"]] = row
+        if on_done:
+            on_done(k, len(sets), row)
+    return list(results.values())
+
+
+def stderr_progress(k: int, n: int, row: dict) -> None:
+    """One line per finished set on stderr."""
+    what = {"ok": f"ok, {100 * (row['dynamic_fraction'] or 0):.1f} % dynamic"
+                  + (f", J {row['jaccard_vs_gt']:.3f}" if row.get("jaccard_vs_gt")
+                     is not None else ""),
+            "skipped": "skipped (outputs exist, same parameters and inputs)",
+            "error": f"error: {row.get('error')}"}[row["status"]]
+    print(f"[{k}/{n}] {row['set']}: {what} ({row['seconds']:.1f} s)", file=sys.stderr,
+          flush=True)

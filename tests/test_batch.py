@@ -1,0 +1,142 @@
+"""``dynremove batch``: every set below a folder, resumable, parallel, failures kept."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dynremove import batch
+from dynremove.cli import main
+from dynremove.evaluation import synth
+
+FAST = ["--max-scans", "1", "--quiet"]
+
+
+def write_set(folder: Path, images) -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for i, im in enumerate(images):
+        p = folder / f"view{i}.png"
+        assert cv2.imwrite(str(p), im)
+        out.append(p)
+    return out
+
+
+@pytest.fixture(scope="module")
+def root(tmp_path_factory):
+    """a/ (images directly), davis/b/frames + masks/ (eval layout), bad/ (sizes differ)."""
+    r = tmp_path_factory.mktemp("root")
+    s1 = synth.make_scene(seed=1, n_views=4, size=(64, 80), n_objects=1)
+    s2 = synth.make_scene(seed=2, n_views=4, size=(64, 80), n_objects=1)
+    write_set(r / "a", s1.images)
+    write_set(r / "davis" / "b" / "frames", s2.images)
+    m = r / "davis" / "b" / "masks"
+    m.mkdir()
+    for i, mk in enumerate(s2.masks):
+        cv2.imwrite(str(m / f"view{i}.png"), mk.astype(np.uint8) * 255)
+    write_set(r / "bad", [s1.images[0], cv2.resize(s1.images[1], (40, 32))])
+    (r / "README.txt").write_text("not a set")
+    return r
+
+
+def summary_rows(out: Path) -> dict[str, dict]:
+    with open(out / "summary.csv") as f:
+        return {r["set"]: r for r in csv.DictReader(f)}
+
+
+def test_find_sets(root):
+    sets = batch.find_sets(root)
+    assert [s.name for s in sets] == ["a", "bad", "davis/b"]
+    b = sets[2]
+    assert b.gt == root / "davis" / "b" / "masks" and len(b.inputs) == 4
+    assert batch.find_sets(root / "a")[0].inputs == sets[0].inputs  # ROOT itself a set
+
+
+def test_batch_runs_resumes_and_reports_failures(tmp_path, root, capsys):
+    out = tmp_path / "out"
+    rc = main(["batch", str(root), "--out", str(out), *FAST])
+    cap = capsys.readouterr()
+    assert rc == 1  # one set failed: exit 1 at the end, after the others ran
+    assert "Traceback" not in cap.err
+    rows = summary_rows(out)
+    assert {k: r["status"] for k, r in rows.items()} == {"a": "ok", "bad": "error",
+                                                        "davis/b": "ok"}
+    assert "same size" in rows["bad"]["error"]
+    assert float(rows["davis/b"]["jaccard_vs_gt"]) > 0.3  # masks/ found and used
+    for s in ("a", "davis/b"):
+        for f in batch.OUTPUT_FILES:
+            assert (out / s / f).is_file()
+    js = json.loads((out / "summary.json").read_text())
+    assert (js["n_ok"], js["n_failed"], js["n_skipped"]) == (2, 1, 0)
+    mask_a = (out / "a" / "dynamic_mask.png").read_bytes()
+
+    # same parameters and inputs: skipped; the failing set is tried again
+    rc = main(["batch", str(root), "--out", str(out), *FAST])
+    capsys.readouterr()
+    rows = summary_rows(out)
+    assert rc == 1
+    assert rows["a"]["status"] == rows["davis/b"]["status"] == "skipped"
+    assert rows["a"]["dynamic_fraction"] not in ("", None)
+    assert (out / "a" / "dynamic_mask.png").read_bytes() == mask_a
+
+    # other parameters: run again
+    rc = main(["batch", str(root), "--out", str(out), "--max-scans", "1", "--t-r", "0.35",
+               "--quiet"])
+    capsys.readouterr()
+    assert summary_rows(out)["a"]["status"] == "ok"
+
+
+def test_changed_input_is_run_again(tmp_path, root, capsys):
+    r = tmp_path / "r"
+    paths = write_set(r / "x", [cv2.imread(str(p)) for p in sorted((root / "a").iterdir())])
+    out = tmp_path / "out"
+    assert main(["batch", str(r), "--out", str(out), *FAST]) == 0
+    img = cv2.imread(str(paths[0]))
+    img[:4, :4] = 0
+    cv2.imwrite(str(paths[0]), img)
+    assert main(["batch", str(r), "--out", str(out), *FAST]) == 0
+    capsys.readouterr()
+    assert summary_rows(out)["x"]["status"] == "ok"
+
+
+def test_jobs_2_gives_the_same_masks_as_jobs_1(tmp_path, root, capsys):
+    o1, o2 = tmp_path / "j1", tmp_path / "j2"
+    main(["batch", str(root), "--out", str(o1), *FAST])
+    main(["batch", str(root), "--out", str(o2), "--jobs", "2", *FAST])
+    capsys.readouterr()
+    for s in ("a", "davis/b"):
+        m1 = cv2.imread(str(o1 / s / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE)
+        m2 = cv2.imread(str(o2 / s / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE)
+        np.testing.assert_array_equal(m1, m2)
+
+
+def test_no_sets_is_an_input_error(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    for arg in (tmp_path / "empty", tmp_path / "missing"):
+        rc = main(["batch", str(arg), "--out", str(tmp_path / "o"), "--quiet"])
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("dynremove: error:") == 1 and "Traceback" not in err
+
+
+def test_out_inside_root_is_not_a_set(tmp_path, root, capsys):
+    r = tmp_path / "r"
+    write_set(r / "x", [cv2.imread(str(p)) for p in sorted((root / "a").iterdir())])
+    assert main(["batch", str(r), "--out", str(r / "results"), *FAST]) == 0
+    assert main(["batch", str(r), "--out", str(r / "results"), *FAST]) == 0
+    capsys.readouterr()
+    assert list(summary_rows(r / "results")) == ["x"]
+
+
+def test_dask_scheduler_without_the_extra_or_cluster(tmp_path, root, capsys, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    rc = main(["batch", str(root), "--out", str(tmp_path / "o"), "--scheduler",
+               "tcp://127.0.0.1:1", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "dynremove[dask]" in err and "Traceback" not in err

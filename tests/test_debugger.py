@@ -1,0 +1,306 @@
+"""The debugger's promises (issue 13), checked by reading recordings back.
+
+* ``inspect --pixel`` answers "why?" for any pixel, probed or not, in at most five
+  lines of words, with values equal to what the core emitted (MemorySink);
+* a decision instance keeps meaning the same pixel at every step, or is cleared;
+* the errors overlay never marks a pixel the current scan has not visited yet;
+* classes, reasons and sources have names, values are rounded.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("rerun")
+
+from rerun.chunk import RrdReader  # noqa: E402
+from test_viewer_e2e import Tee  # noqa: E402
+from test_viewer_fixtures import fabricate_run, gt_for  # noqa: E402
+
+from dynremove import MemorySink, preset, remove_dynamic  # noqa: E402
+from dynremove.cli import main  # noqa: E402
+from dynremove.errors import InputError  # noqa: E402
+from dynremove.evaluation import synth  # noqa: E402
+from viewer import RerunSink  # noqa: E402
+from viewer import inspect as vi  # noqa: E402
+from viewer import paths as P  # noqa: E402
+from viewer._images import REASON_NAMES, visit_step  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("DYNREMOVE_DATA", REPO.parent / "shared" / "data"))
+H, W, S = 48, 64, 3
+
+
+def _table(path, contents, index="step"):
+    return RrdReader(str(path)).stream().collect().reader(
+        index=index, contents=contents).to_arrow_table()
+
+
+# -- runs ------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def fabricated(tmp_path_factory):
+    """3 scans (top-down, bottom-up, top-down) with ground truth, every 5 rows."""
+    path = tmp_path_factory.mktemp("fab") / "run.rrd"
+    gt, bg = gt_for(H, W, S)
+    sink = RerunSink(path, record_every_rows=5, gt_mask=gt, gt_background=bg)
+    info, result, truth = fabricate_run([sink], H=H, W=W, S=S, n_scans=3)
+    return dict(path=path, truth=truth, gt=gt, info=info)
+
+
+def _camel(scale: int = 4):
+    """The camel set of ../shared/data at 1/scale, or None."""
+    root = DATA / "davis" / "camel"
+    frames = sorted((root / "frames").glob("*.jpg"))
+    if len(frames) < 3:
+        return None
+    imgs = [cv2.imread(str(f)) for f in frames]
+    h, w = imgs[0].shape[:2]
+    size = (w // scale, h // scale)
+    imgs = [cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in imgs]
+    ref = len(imgs) // 2
+    mask = cv2.imread(str(root / "masks" / (frames[ref].stem + ".png")), cv2.IMREAD_GRAYSCALE)
+    gt = cv2.resize(mask, size, interpolation=cv2.INTER_NEAREST) > 127
+    return imgs, ref, gt
+
+
+@pytest.fixture(scope="module", params=["real", "synthetic"])
+def method_run(request, tmp_path_factory):
+    """A run of the method (default preset) recorded with ground truth, plus the
+    MemorySink that saw the same events. ``real``: camel from DYNREMOVE_DATA."""
+    if request.param == "real":
+        got = _camel()
+        if got is None:
+            pytest.skip(f"no real set: {DATA}/davis/camel is absent (set DYNREMOVE_DATA)")
+        imgs, ref, gt = got
+    else:
+        scene = synth.make_scene(seed=2, n_views=5, size=(96, 128), n_objects=1)
+        imgs, ref, gt = scene.images, scene.ref_index, scene.masks[scene.ref_index]
+    params = preset("default")
+    path = tmp_path_factory.mktemp(request.param) / "run.rrd"
+    mem = MemorySink()
+    rsink = RerunSink(path, gt_mask=gt)
+    res = remove_dynamic(imgs, ref=ref, params=params, sink=Tee(mem, rsink))
+    return dict(path=path, mem=mem, res=res, gt=np.asarray(gt, bool), params=params)
+
+
+def _naive_overwritten(mem, scan, x, y, half, H, W):
+    """Patches centred elsewhere covering (x, y) written before the scan reached it."""
+    own = visit_step(scan, x, y, H, W, direction=mem.scans_started[scan][1])
+    r = mem.replacements
+    r = r[r["scan"] == scan]
+    near = (np.abs(r["x"] - x) <= half) & (np.abs(r["y"] - y) <= half)
+    near &= ~((r["x"] == x) & (r["y"] == y))
+    return int((near & (r["step"] < own)).sum())
+
+
+# -- 1. every pixel explainable --------------------------------------------------------
+@pytest.mark.parametrize("kind", ["FN", "FP"])
+def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
+    res, gt, mem = method_run["res"], method_run["gt"], method_run["mem"]
+    L = np.asarray(res.dynamic, bool)
+    mask = (gt & ~L) if kind == "FN" else (~gt & L)
+    if not mask.any():
+        pytest.skip(f"this run has no {kind} pixel")
+    y, x = map(int, np.argwhere(mask)[len(np.argwhere(mask)) // 2])
+    h = vi.pixel_history(method_run["path"], x, y)
+    Hh, Ww = L.shape
+    assert len(h["scans"]) == len(mem.M_maps)
+    half = method_run["params"].patch_size // 2 if method_run["params"].write == "patch" else 0
+    for sc, M in zip(h["scans"], mem.M_maps):
+        want = float(M[y, x])
+        if np.isnan(want):
+            assert np.isnan(sc["M"]) and sc["verdict"] == "undecided"
+        else:
+            assert sc["M"] == pytest.approx(want, abs=1e-4)
+            t_r = method_run["params"].t_r
+            assert sc["verdict"] == ("dynamic" if want <= t_r else "static")
+        assert sc["overwritten_before"] == _naive_overwritten(mem, sc["scan"], x, y, half,
+                                                              Hh, Ww)
+    assert h["final_dynamic"] is bool(L[y, x]) and h["gt"] is bool(gt[y, x])
+    verdict = vi.verdict_lines(h)
+    assert 1 <= len(verdict) <= 5
+    words = " ".join(verdict)
+    assert "t_r" in words and ("FALSE NEGATIVE" if kind == "FN" else "FALSE POSITIVE") in words
+    m0 = h["scans"][0]["M"]
+    if m0 == m0:
+        assert f"{m0:.2f}" in words
+    if h["scans"][0]["overwritten_before"]:
+        assert f"overwritten by {h['scans'][0]['overwritten_before']} neighbouring" in words
+    text = vi.format_pixel_history(h)
+    assert len(text.splitlines()) <= 30
+    assert text.splitlines()[0].startswith(f"pixel ({x}, {y}): ")
+    if kind == "FP":  # dynamic decisions are always recorded: the cluster is told
+        assert "winning cluster" in words or "fill" in words
+
+
+def test_the_fill_is_told(method_run):
+    sel = vi.read_selection(method_run["path"])
+    if "source" not in sel:
+        pytest.skip("no fill by selection in this run")
+    ys, xs = np.nonzero(sel["source"] > 0)
+    if len(xs):
+        h = vi.pixel_history(method_run["path"], int(xs[0]), int(ys[0]))
+        k = int(sel["source"][ys[0], xs[0]])
+        assert f"filled from source {h['source_names'][k - 1]}" in " ".join(vi.verdict_lines(h))
+
+
+def test_pixel_outside_the_image(fabricated, capsys):
+    with pytest.raises(InputError, match="outside"):
+        vi.pixel_history(fabricated["path"], 9999, 9999)
+    assert main(["inspect", str(fabricated["path"]), "--pixel", "9999,9999"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "outside the 64x48 image" in err[0]
+
+
+# -- 2. stable identity ----------------------------------------------------------------
+def test_decision_instances_never_retarget(fabricated):
+    t = _table(fabricated["path"], "/reference/decisions/**")
+    steps = t.column("step").to_pylist()
+    ents = sorted({n.split(":")[0] for n in t.column_names if n.startswith("/reference/")})
+    assert len(ents) > 3
+    truth = fabricated["truth"].decisions
+    for e in ents:
+        xs, ys, st = (t.column(f"{e}:{k}").to_pylist() for k in ("x", "y", "step"))
+        first = None
+        for s, x, y, dstep in zip(steps, xs, ys, st):
+            if x is None:
+                continue  # nothing logged at this step: latest-at keeps the same batch
+            triple = list(zip(x, y, dstep))
+            if first is None:
+                if triple:  # (a scan-start clear may come before the batch)
+                    first = triple
+                continue
+            assert triple in (first, []), f"{e} re-targeted at step {s}"
+        # every instance is the core's decision at that (x, y, step)
+        for x, y, dstep in first:
+            row = truth[truth["step"] == dstep]
+            assert len(row) == 1 and (int(row["x"][0]), int(row["y"][0])) == (x, y)
+    # the previous scan's decisions are cleared when the next scan starts
+    scan0 = [e for e in ents if "/scan0/" in e]
+    cleared = [s for s, v in zip(steps, t.column(f"{scan0[0]}:x").to_pylist()) if v == []]
+    assert H * W in cleared
+
+
+# -- 3. overlays true at every step ----------------------------------------------------
+@pytest.mark.parametrize("scan", [0, 1], ids=["top-down", "bottom-up"])
+def test_errors_only_where_the_scan_has_been(fabricated, scan):
+    rows = vi._image_rows(vi.load_store(fabricated["path"]), "/errors/labels",
+                          "SegmentationImage")
+    lo, hi = scan * H * W, (scan + 1) * H * W
+    mid = [(s, a) for s, a in rows if lo <= s < hi - 1]
+    assert len(mid) >= 3
+    yy, xx = np.mgrid[0:H, 0:W]
+    idx = (yy * W + xx) if scan % 2 == 0 else ((H - 1 - yy) * W + (W - 1 - xx))
+    marked_any = False
+    for s, a in mid:
+        unvisited = (lo + idx) > s
+        assert not a[unvisited].any(), f"scan {scan} step {s}: errors on unvisited pixels"
+        marked_any |= bool(a.any())
+    assert marked_any  # the overlay does show errors where the scan has been
+
+
+def test_current_marker_for_every_recorded_decision(fabricated):
+    t = _table(fabricated["path"], "/reference/current")
+    pos = dict(zip(t.column("step").to_pylist(),
+                   t.column("/reference/current:Points2D:positions").to_pylist()))
+    d = fabricated["truth"].decisions
+    static = d[~d["dynamic"]]
+    assert len(static)
+    for dstep in static["step"][:50].tolist():
+        assert pos.get(dstep), f"no current marker for the static decision at step {dstep}"
+
+
+def test_stages_follow_the_last_scan_step(method_run):
+    res, path = method_run["res"], method_run["path"]
+    t = _table(path, "/reference/dynamic", index="stage")
+    stages = [s for s in t.column("stage").to_pylist() if s is not None]
+    assert stages == list(range(len(res.stages) + 1))  # each stage, then the output
+    t = _table(path, "/log")
+    text = " ".join(v[0] for v in t.column("/log:TextLog:text").to_pylist() if v)
+    last = len(res.scans) * res.dynamic.size - 1
+    for i, name in enumerate(res.stages):
+        assert f"stage {i} '{name}' at step {last + 1 + i}" in text
+
+
+# -- 4. words and legends --------------------------------------------------------------
+def test_annotation_context_names_and_text_attributes(fabricated):
+    t = _table(fabricated["path"], "/**", index=None)
+    ctx = t.column("/:AnnotationContext:context")[0].as_py()[0]
+    labels = {c["class_description"]["info"]["label"] for c in ctx}
+    assert {"dynamic", "false positive", "false negative", "true positive"} <= labels
+    keypoints = {k["label"] for c in ctx for k in c["class_description"]["keypoint_annotations"]}
+    assert set(REASON_NAMES.values()) <= keypoints
+    t = _table(fabricated["path"], "/reference/decisions/**")
+    names = set(fabricated["info"].names) | set(P.entity_names(
+        [fabricated["info"].names[i] for i in fabricated["info"].source_indices])) | {"-"}
+    e = next(n.split(":")[0] for n in t.column_names if n.endswith(":verdict"))
+    verdicts = next(v for v in t.column(f"{e}:verdict").to_pylist() if v)
+    assert all(isinstance(v, str) and ("dynamic" in v or "static" in v) for v in verdicts)
+    chosen = next(v for v in t.column(f"{e}:chosen_source").to_pylist() if v)
+    assert all(c in names for c in chosen)
+    reasons = next(v for v in t.column(f"{e}:reason").to_pylist() if v)
+    assert all(isinstance(r, str) and r for r in reasons)
+    m = next(v for v in t.column(f"{e}:M").to_pylist() if v)
+    assert all(v != v or round(v, 3) == v for v in m)  # rounded, no float32 noise
+    t_r = next(v for v in t.column(f"{e}:t_r").to_pylist() if v)
+    assert t_r[0] == 0.3
+
+
+# -- 5. command-line edges ---------------------------------------------------------------
+def test_view_without_display_says_so(fabricated, monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr("sys.platform", "linux")
+    assert main(["view", str(fabricated["path"])]) == 2
+    err = capsys.readouterr().err
+    assert "--web" in err and len(err.strip().splitlines()) == 1
+
+
+def test_export_refuses_other_suffixes(fabricated, tmp_path, capsys):
+    assert main(["export", str(fabricated["path"]), "--gif", str(tmp_path / "x.txt")]) == 2
+    assert not (tmp_path / "x.txt").exists()
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_failures_print_steps_to_jump_to(fabricated):
+    items = vi.failures(fabricated["path"], top=3)
+    assert items and all(len(e["steps"]) == 3 for e in items)
+    x, y = items[0]["pixel"]
+    assert items[0]["steps"][1] == visit_step(1, x, y, H, W)
+    assert "steps " in vi.format_failures(items)
+
+
+def test_web_prints_one_url_and_binds_loopback(fabricated, tmp_path, capsys):
+    from test_viewer import _free_port, cli_env
+
+    from viewer import serve
+
+    port, web_port = _free_port(), _free_port()
+    assert serve.view_command("x.rrd", port=port)[1:3] == ["--bind", "127.0.0.1"]
+    proc = serve.view(fabricated["path"], web=True, port=port, web_port=web_port,
+                      wait=False, env=cli_env(tmp_path))
+    try:
+        out = capsys.readouterr().out.strip().splitlines()
+        assert out == [serve.web_url(port=port, web_port=web_port)]
+    finally:
+        serve.stop(proc)
+
+
+def test_help_describes_view_and_export(capsys):
+    for cmd in ("view", "export"):
+        with pytest.raises(SystemExit):
+            main([cmd, "--help"])
+        text = capsys.readouterr().out
+        assert "127.0.0.1" in text if cmd == "view" else "GIF" in text
+
+
+def test_probe_pixel_has_a_scrubbable_story(fabricated):
+    t = _table(fabricated["path"], "/probes/**")
+    col = next(n for n in t.column_names if n.endswith("TextLog:text"))
+    texts = [v[0] for v in t.column(col).to_pylist() if v]
+    assert len(texts) == 3 and all(s.startswith("(10,7) scan") for s in texts)

@@ -1,0 +1,330 @@
+"""Inputs as users have them (issue 12): formats by content, HEIC, video clips,
+validity masks (alpha, black borders, --valid-mask), the reference choice, and
+damaged recordings. Bad input: exit 2 and one line, never a traceback."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from dynremove import io
+from dynremove.cli import main
+from dynremove.errors import InputError
+from dynremove.evaluation import synth
+from dynremove.evaluation.metrics import jaccard
+
+FAST = ["--max-scans", "1", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return synth.make_scene(seed=1, n_views=5, size=(72, 96), n_objects=1)
+
+
+def run_cli(capsys, *argv) -> tuple[int, str, str]:
+    rc = main([str(a) for a in argv])
+    cap = capsys.readouterr()
+    return rc, cap.out, cap.err
+
+
+def one_error_line(err: str, *words: str) -> str:
+    lines = [ln for ln in err.splitlines() if ln.startswith("dynremove: error:")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    return lines[0]
+
+
+def write_set(folder: Path, images, ext: str = ".png") -> list[Path]:
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i, im in enumerate(images):
+        p = folder / f"view{i}{ext}"
+        assert cv2.imwrite(str(p), im)
+        paths.append(p)
+    return paths
+
+
+# --- formats by content -------------------------------------------------------------
+def test_avif_in_a_folder_is_read_by_content(tmp_path, scene):
+    if not cv2.haveImageWriter("x.avif"):
+        pytest.skip("this OpenCV has no AVIF codec")
+    d = tmp_path / "s"
+    paths = write_set(d, scene.images[:3], ".avif")
+    paths[2].rename(d / "view2.bin")  # the content decides, not the name
+    (d / "notes.txt").write_text("not an image")
+    iset = io.load_image_set([d])
+    assert iset.names == ["view0.avif", "view1.avif", "view2.bin"]
+    assert all(im.shape == scene.images[0].shape for im in iset.images)
+    (note,) = [n for n in iset.notes if "non-image" in n]
+    assert "notes.txt" in note and "skipped 1" in note
+
+
+def test_heic_with_the_extra(tmp_path, scene):
+    pillow_heif = pytest.importorskip("pillow_heif")
+    from PIL import Image
+
+    pillow_heif.register_heif_opener()
+    d = tmp_path / "s"
+    d.mkdir()
+    for i, im in enumerate(scene.images[:3]):
+        Image.fromarray(cv2.cvtColor(im, cv2.COLOR_BGR2RGB)).save(d / f"v{i}.heic",
+                                                                  quality=95)
+    iset = io.load_image_set([d])
+    assert len(iset.images) == 3
+    assert np.abs(iset.images[0].astype(int) - scene.images[0]).mean() < 8  # lossy
+
+
+def test_heic_without_the_extra_names_it(tmp_path, scene, capsys, monkeypatch):
+    d = tmp_path / "s"
+    write_set(d, scene.images[:2])
+    # an ISO-BMFF header with the 'heic' brand is enough to be told apart
+    (d / "photo.heic").write_bytes(b"\x00\x00\x00\x18ftypheic\x00\x00\x00\x00mif1heic"
+                                   + b"\x00" * 64)
+    monkeypatch.setitem(sys.modules, "pillow_heif", None)  # import fails
+    with pytest.raises(InputError, match=r"dynremove\[heic\]"):
+        io.read_image(d / "photo.heic")
+    rc, _, err = run_cli(capsys, "run", d, "--out", tmp_path / "o", *FAST)
+    assert rc == 2
+    one_error_line(err, "photo.heic", "pip install 'dynremove[heic]'")
+
+
+def test_video_in_a_folder_is_skipped_with_a_note(tmp_path, scene):
+    d = tmp_path / "s"
+    write_set(d, scene.images[:3])
+    write_clip(d / "clip.avi", scene.images)
+    iset = io.load_image_set([d])
+    assert len(iset.images) == 3
+    assert any("video" in n and "clip.avi" in n for n in iset.notes), iset.notes
+
+
+# --- video --------------------------------------------------------------------------
+def write_clip(path: Path, images, fps: float = 10) -> None:
+    H, W = images[0].shape[:2]
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), fps, (W, H))
+    assert vw.isOpened()
+    for im in images:
+        vw.write(im)
+    vw.release()
+
+
+@pytest.fixture(scope="module")
+def clip_scene():
+    return synth.make_scene(seed=0, n_views=21, size=(240, 432))
+
+
+def test_video_frames_as_photos(tmp_path, capsys, clip_scene):
+    """21-frame MJPG clip, --frames 7: the report lists the chosen frames, and J is
+    within 0.05 of the same 7 frames given as photos."""
+    sc = clip_scene
+    clip = tmp_path / "clip.avi"
+    write_clip(clip, sc.images)
+    rc, _, err = run_cli(capsys, "run", clip, "--frames", "7", "--out", tmp_path / "v",
+                         "--quiet")
+    assert rc == 0, err
+    rep = json.loads((tmp_path / "v" / "report.json").read_text())
+    idx = rep["video"]["frames"]
+    assert len(idx) == 7 and idx == sorted(idx) and 0 <= idx[0] and idx[-1] <= 20
+    assert all(k * 3 <= i < (k + 1) * 3 for k, i in enumerate(idx))  # one per window
+    ref_frame = idx[rep["reference"]["index"]]
+    assert rep["reference"]["index"] == 3 and rep["reference"]["name"].endswith(
+        f"#{ref_frame}")
+    gt = sc.masks[ref_frame]
+    dyn_v = cv2.imread(str(tmp_path / "v" / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+    photos = write_set(tmp_path / "p", [sc.images[i] for i in idx])
+    rc, _, err = run_cli(capsys, "run", *photos, "--out", tmp_path / "o", "--quiet")
+    assert rc == 0, err
+    dyn_p = cv2.imread(str(tmp_path / "o" / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+    jv, jp = jaccard(dyn_v, gt), jaccard(dyn_p, gt)
+    assert jp > 0.3, jp  # the method works on this scene at all
+    assert abs(jv - jp) <= 0.05, (jv, jp)
+
+
+def test_video_pick_even_and_span(tmp_path, scene):
+    frames = [cv2.resize(scene.images[i % 5], (96, 72)) for i in range(20)]
+    clip = tmp_path / "c.avi"
+    write_clip(clip, frames)
+    imgs, idx, notes = io.read_video(clip, frames=4, span="4:16", pick="even")
+    assert idx == [5, 8, 11, 14] and len(imgs) == 4
+    # sharpest: a blurred frame is never taken when its window has a sharp one
+    frames = [scene.images[i % 5] if i % 2 else cv2.GaussianBlur(scene.images[i % 5],
+                                                                  (0, 0), 3)
+              for i in range(12)]
+    write_clip(clip, frames)
+    _, idx, _ = io.read_video(clip, frames=4)
+    assert all(i % 2 == 1 for i in idx), idx
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--span", "30:40"], ["--span 30:40", "no frames"]),
+    (["--span", "abc"], ["--span abc", "START:END"]),
+])
+def test_video_bad_options(tmp_path, capsys, scene, argv, words):
+    clip = tmp_path / "c.avi"
+    write_clip(clip, scene.images * 2)
+    rc, _, err = run_cli(capsys, "run", clip, *argv, "--out", tmp_path / "o", *FAST)
+    assert rc == 2
+    one_error_line(err, *words)
+
+
+def test_damaged_video_is_an_input_error(tmp_path, capsys, scene):
+    clip = tmp_path / "c.avi"
+    write_clip(clip, scene.images)
+    clip.write_bytes(clip.read_bytes()[:300])
+    rc, _, err = run_cli(capsys, "run", clip, "--out", tmp_path / "o", *FAST)
+    assert rc == 2
+    one_error_line(err, "c.avi")
+
+
+def test_frames_with_images_is_an_input_error(tmp_path, capsys, scene):
+    d = tmp_path / "s"
+    write_set(d, scene.images[:3])
+    rc, _, err = run_cli(capsys, "run", d, "--frames", "3", "--out", tmp_path / "o", *FAST)
+    assert rc == 2
+    one_error_line(err, "--frames")
+
+
+# --- validity masks ------------------------------------------------------------------
+def test_content_mask_finds_borders_not_dark_holes():
+    im = np.full((40, 50, 3), 90, np.uint8)
+    im[:, :6] = 0  # border band
+    im[15:20, 20:25] = 0  # black inside: content (a dark object)
+    v = io.content_mask(im)
+    assert not v[:, :6].any() and v[:, 6:].all()
+    alpha = np.full((40, 50), 255, np.uint8)
+    alpha[30:35, 30:35] = 0  # transparent anywhere: no content
+    v = io.content_mask(np.full_like(im, 90), alpha)
+    assert (~v).sum() == 25
+    assert io.content_mask(np.full_like(im, 90)) is None
+    tiny = np.full((100, 100, 3), 90, np.uint8)
+    tiny[0, :5] = 0  # 5 px < 0.1 %: a few clipped pixels are not a border
+    assert io.content_mask(tiny) is None
+
+
+def prealigned(scene, band: int = 14):
+    """RGBA frames with a transparent (alpha 0, black) band, a different side each."""
+    out = []
+    for i, im in enumerate(scene.images):
+        a = np.full(im.shape[:2], 255, np.uint8)
+        sl = [np.s_[:, :band], np.s_[:band, :], np.s_[:, -band:], np.s_[-band:, :],
+              np.s_[:, :band // 2]][i % 5]
+        a[sl] = 0
+        rgba = np.dstack([im, a])
+        rgba[a == 0] = 0
+        out.append(rgba)
+    return out
+
+
+def test_transparent_borders_are_never_flagged_or_filled(tmp_path, capsys, scene):
+    d = tmp_path / "s"
+    frames = prealigned(scene)
+    paths = write_set(d, frames)
+    out = tmp_path / "o"
+    rc, _, err = run_cli(capsys, "run", d, "--out", out, "--quiet")
+    assert rc == 0, err
+    rep = json.loads((out / "report.json").read_text())
+    ref = rep["reference"]["index"]
+    invalid = frames[ref][:, :, 3] == 0
+    assert invalid.any()
+    dyn = cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+    clean = cv2.imread(str(out / "clean.png"))
+    assert not dyn[invalid].any()
+    np.testing.assert_array_equal(clean[invalid], frames[ref][:, :, :3][invalid])
+    assert rep["no_content_fraction"][paths[ref].name] == pytest.approx(invalid.mean(),
+                                                                       abs=1e-4)
+    assert any("without content" in n for n in rep["notes"])
+    # outside the bands the result is the one without them: J stays close
+    J = jaccard(dyn, scene.masks[ref])
+    rc, _, err = run_cli(capsys, "run", *write_set(tmp_path / "plain", scene.images),
+                         "--out", tmp_path / "o2", "--quiet")
+    dyn2 = cv2.imread(str(tmp_path / "o2" / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+    assert J >= jaccard(dyn2, scene.masks[ref]) - 0.1, J
+
+
+def test_black_borders_and_valid_mask_flag(tmp_path, scene):
+    d = tmp_path / "s"
+    imgs = [im.copy() for im in scene.images[:3]]
+    imgs[0][:, :10] = 0  # a black border as alignment tools leave it
+    write_set(d, imgs)
+    m = tmp_path / "masks"
+    m.mkdir()
+    vm = np.full(imgs[0].shape[:2], 255, np.uint8)
+    vm[:8] = 0
+    cv2.imwrite(str(m / "view1.png"), vm)
+    iset = io.load_image_set([d], valid_mask=m)
+    assert not iset.valid[0][:, :10].any() and iset.valid[0][:, 10:].all()
+    assert not iset.valid[1][:8].any() and iset.valid[1][8:].all()
+    assert iset.valid[2] is None
+    assert len(iset.valid_masks) == 3 and iset.valid_masks[2].all()
+    # one file for all images; a wrong size is an input error
+    cv2.imwrite(str(tmp_path / "all.png"), vm)
+    iset = io.load_image_set([d], valid_mask=tmp_path / "all.png")
+    assert all(not v[:8].any() for v in iset.valid)
+    cv2.imwrite(str(tmp_path / "small.png"), vm[:10, :10])
+    with pytest.raises(InputError, match="--valid-mask"):
+        io.load_image_set([d], valid_mask=tmp_path / "small.png")
+
+
+# --- the reference ---------------------------------------------------------------------
+def test_blurry_middle_reference_note_and_ref_auto(tmp_path, capsys, scene):
+    imgs = [im.copy() for im in scene.images]
+    imgs[2] = cv2.GaussianBlur(imgs[2], (0, 0), 2.5)  # the default reference
+    d = tmp_path / "s"
+    write_set(d, imgs)
+    rc, _, err = run_cli(capsys, "run", d, "--out", tmp_path / "o", "--max-scans", "1")
+    assert rc == 0, err
+    assert any("--ref auto" in ln and "blurrier" in ln for ln in err.splitlines()), err
+    rc, _, err = run_cli(capsys, "run", d, "--ref", "auto", "--out", tmp_path / "a",
+                         "--max-scans", "1")
+    assert rc == 0, err
+    rep = json.loads((tmp_path / "a" / "report.json").read_text())
+    assert rep["reference"]["chosen_by"] == "auto" and rep["reference"]["index"] != 2
+    assert any(n.startswith("--ref auto:") for n in rep["notes"])
+    assert "blurrier" not in err
+    # a sharp middle frame: no note
+    rc, _, err = run_cli(capsys, "run", *write_set(tmp_path / "ok", scene.images),
+                         "--out", tmp_path / "o3", "--max-scans", "1")
+    assert rc == 0 and "blurrier" not in err
+
+
+# --- recordings --------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    pytest.importorskip("rerun")
+    d = tmp_path_factory.mktemp("rec")
+    sc = synth.make_scene(seed=3, n_views=4, size=(64, 80), n_objects=1)
+    paths = write_set(d / "s", sc.images)
+    rc = main(["run", *map(str, paths), "--out", str(d / "o"), "--record", str(d / "r.rrd"),
+               "--quiet", "--max-scans", "1"])
+    assert rc == 0
+    return d / "r.rrd"
+
+
+@pytest.mark.parametrize("cut", ["text", "empty", "header"])
+def test_unreadable_recording_is_an_input_error(tmp_path, capsys, recording, cut):
+    bad = tmp_path / "bad.rrd"
+    data = recording.read_bytes()
+    bad.write_bytes({"text": b"hello, not a recording\n", "empty": b"",
+                     "header": data[:100]}[cut])
+    for cmd in (["inspect", bad, "--pixel", "3,3"], ["export", bad, "--out",
+                                                     tmp_path / "x.gif"]):
+        rc, _, err = run_cli(capsys, *cmd)
+        assert rc == 2, err
+        one_error_line(err, "bad.rrd")
+        assert "Warning" not in err
+
+
+def test_truncated_recording_is_read_up_to_the_damage(tmp_path, capsys, recording):
+    cut = tmp_path / "cut.rrd"
+    data = recording.read_bytes()
+    cut.write_bytes(data[: int(len(data) * 0.9)])
+    rc, out, err = run_cli(capsys, "inspect", cut, "--pixel", "3,3")
+    assert rc == 0, err
+    assert "Warning" not in err and "Traceback" not in err
+    (note,) = [ln for ln in err.splitlines() if "cut.rrd" in ln]
+    assert note.startswith("dynremove: note:") and "damaged or cut short" in note
