@@ -20,6 +20,7 @@ single-threaded), or on a Dask cluster (``--scheduler tcp://host:port``, extra
 from __future__ import annotations
 
 import csv
+import dataclasses
 import hashlib
 import io as _pyio
 import json
@@ -38,7 +39,7 @@ from dynremove import io
 from dynremove.errors import InputError
 from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
-from dynremove.pipeline import remove_dynamic
+from dynremove.pipeline import full_resolution_output, remove_dynamic
 
 OUTPUT_FILES = ("clean.png", "dynamic_mask.png", "coverage.png", "report.json")
 SUMMARY_FIELDS = ("set", "status", "n_images", "reference", "dynamic_fraction",
@@ -47,15 +48,36 @@ SKIP_DIRS = {"masks", "gt", "groundtruth", "ground_truth"}  # beside frames/: no
 
 
 # --- outputs of one run (shared with ``dynremove run``) ---------------------------------
+def at_output_size(res: Any, iset: Any, output_size: str = "full") -> Any:
+    """``res`` with clean, dynamic and coverage at the input's full resolution.
+
+    Only when ``output_size`` is ``"full"`` and the run worked on downscaled
+    photos (not video frames): the originals are read again and
+    ``pipeline.full_resolution_output`` recomputes the replaced pixels; the
+    others are the input's, byte for byte.
+    """
+    if output_size != "full" or iset.scale >= 1.0 or getattr(iset, "video", None):
+        return res
+    full = [io.read_image(p)[0] for p in iset.paths]
+    t = time.perf_counter()
+    clean, dyn = full_resolution_output(res, full)
+    Hf, Wf = clean.shape[:2]
+    cov = cv2.resize(res.coverage, (Wf, Hf), interpolation=cv2.INTER_NEAREST)
+    timings = dict(res.timings, full_resolution=time.perf_counter() - t)
+    return dataclasses.replace(res, clean=clean, dynamic=dyn, coverage=cov, timings=timings)
+
+
 def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
                   gt: np.ndarray | None = None, record: str | None = None,
                   reference: dict | None = None, extra: dict | None = None) -> dict:
     """clean.png, dynamic_mask.png (0/255), coverage.png and report.json, atomically.
 
-    ``reference``: how the reference was chosen (merged into ``report["reference"]``);
-    ``extra``: more top-level report entries.
+    ``clean.png`` carries the reference photo's EXIF (orientation reset) and ICC
+    profile where it had them. ``reference``: how the reference was chosen
+    (merged into ``report["reference"]``); ``extra``: more top-level report entries.
     """
-    io.write_image(out / "clean.png", res.clean)
+    like = iset.paths[ref] if not getattr(iset, "video", None) else None
+    io.write_photo(out / "clean.png", res.clean, like=like)
     io.write_image(out / "dynamic_mask.png", res.dynamic.astype(np.uint8) * 255)
     n_src = max(1, len(iset.images) - 1)
     io.write_image(out / "coverage.png",
@@ -65,7 +87,9 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
         "inputs": [str(p) for p in iset.paths],
         "reference": {"index": ref, "name": iset.names[ref], **(reference or {})},
         "size": {"width": W, "height": H, "original_width": iset.original_size[0],
-                 "original_height": iset.original_size[1], "scale": iset.scale},
+                 "original_height": iset.original_size[1], "scale": iset.scale,
+                 "working_width": iset.images[0].shape[1],
+                 "working_height": iset.images[0].shape[0]},
         "preset": preset_name,
         "params": res.params,
         "scans": [{"scan": int(s["scan"]), "direction": int(s["direction"]),
@@ -88,6 +112,9 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
             n: (0.0 if v is None else round(float(1 - v.mean()), 5))
             for n, v in zip(iset.names, valid)}
     if gt is not None:
+        if gt.shape != res.dynamic.shape:  # the output is larger than the analysis
+            gt = cv2.resize(gt.astype(np.uint8), res.dynamic.shape[::-1],
+                            interpolation=cv2.INTER_NEAREST).astype(bool)
         report["jaccard_vs_gt"] = jaccard(res.dynamic, gt)
     report.update(extra or {})
     io.write_json(out / "report.json", report)
@@ -222,6 +249,7 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
             warnings.simplefilter("ignore")
             res = remove_dynamic(iset.images, ref=ref, params=params, names=iset.names,
                                  preset_name=options["preset"], valid_masks=iset.valid_masks)
+            res = at_output_size(res, iset, options.get("output_size", "full"))
         out.mkdir(parents=True, exist_ok=True)
         report = write_outputs(out, res, iset=iset, ref=ref, preset_name=options["preset"],
                                gt=gt, reference=ref_info, extra={"batch_key": key})

@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from dynremove import io
-from dynremove.batch import choose_reference, write_outputs
+from dynremove.batch import at_output_size, choose_reference, write_outputs
 from dynremove.errors import InputError
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.bench import run_bench
@@ -152,6 +152,9 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.flush()
             rec.disconnect()
     res.timings["load"] = t_load
+    res = at_output_size(res, iset, args.output_size)
+    if gt is not None and gt.shape != res.dynamic.shape:
+        gt = io.read_mask(args.gt, res.dynamic.shape[::-1])
     write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
                   record=args.record, reference=ref_info)
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
@@ -450,6 +453,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--max-side", type=int, default=None, metavar="PX",
                    help="downscale so the longer side is at most PX (default: only above "
                         "1280 px; 0 = never)")
+    r.add_argument("--output-size", choices=("full", "working"), default="full",
+                   help="clean.png at the input's full resolution (default; only the "
+                        "replaced pixels are recomputed) or at the analysis size")
     r.add_argument("--record", default=None, metavar="FILE.rrd",
                    help="write a Rerun recording of the scans")
     r.add_argument("--record-every-rows", type=int, default=None, metavar="N",

@@ -652,6 +652,49 @@ def write_image(path: str | os.PathLike, img: np.ndarray) -> None:
     _atomic_write_bytes(p, buf.tobytes())
 
 
+def photo_metadata(path: str | os.PathLike) -> dict:
+    """EXIF (orientation reset to 1: pixels are read upright) and ICC profile of a photo.
+
+    Returns the keyword arguments for Pillow's ``Image.save`` (``exif``,
+    ``icc_profile``), empty when the file has neither or Pillow cannot open it.
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            out: dict = {}
+            exif = im.getexif()
+            if exif:
+                exif[0x0112] = 1  # Orientation: the written pixels are already upright
+                out["exif"] = exif.tobytes()
+            icc = im.info.get("icc_profile")
+            if icc:
+                out["icc_profile"] = icc
+            return out
+    except (OSError, UnidentifiedImageError, ValueError):
+        return {}
+
+
+def write_photo(path: str | os.PathLike, img: np.ndarray, *, like: str | os.PathLike | None
+                ) -> None:
+    """Write a BGR image atomically, carrying ``like``'s EXIF and ICC profile (Pillow)."""
+    meta = photo_metadata(like) if like is not None else {}
+    if not meta:
+        write_image(path, img)
+        return
+    import io as _io
+
+    from PIL import Image
+
+    p = Path(path)
+    buf = _io.BytesIO()
+    fmt = {".jpg": "JPEG", ".jpeg": "JPEG", ".png": "PNG", ".tif": "TIFF",
+           ".tiff": "TIFF"}.get(p.suffix.lower(), "PNG")
+    extra = {"quality": 95} if fmt == "JPEG" else {}
+    Image.fromarray(np.ascontiguousarray(img[..., ::-1])).save(buf, format=fmt, **meta, **extra)
+    _atomic_write_bytes(p, buf.getvalue())
+
+
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     """Write JSON atomically (numpy scalars and arrays converted)."""
     _atomic_write_bytes(Path(path), (json.dumps(obj, indent=2, default=_jsonable) + "\n").encode())

@@ -30,6 +30,7 @@ from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges
 from dynremove.refine.morphology import clean_mask
 from dynremove.refine.select import Selection, select_fill
+from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
 
@@ -58,6 +59,7 @@ class Result:
     warnings: list[str] = field(default_factory=list)
     # the fill by selection (default preset): per-pixel source, mover maps, seams
     selection: Selection | None = None
+    source_indices: list[int] = field(default_factory=list)  # images used as sources
 
 
 def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
@@ -289,9 +291,23 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
                    "parallax_px": (round(v.parallax_px, 2) if np.isfinite(v.parallax_px)
                                    else None)}
                   for k, v in enumerate(views)],
-        warnings=msgs, stages=stages, selection=selection)
+        warnings=msgs, stages=stages, selection=selection, source_indices=list(srcs))
     sink.finish(result)
     return result
+
+
+def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
+                           ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.bool_]]:
+    """The clean reference and dynamic map at the size of ``full_images``.
+
+    ``full_images``: every image of the set at full resolution, in the order the
+    run was given them (the run itself used smaller copies). Pixels outside the
+    replaced region are the full-resolution reference's, byte for byte
+    (``refine.upsample.full_resolution``).
+    """
+    ref = np.asarray(full_images[result.ref_index])
+    srcs = [np.asarray(full_images[i]) for i in result.source_indices]
+    return full_resolution(ref, srcs, result.clean, result.dynamic, result.selection)
 
 
 def _keep_sources(st: ScanInputs, keep: np.ndarray) -> ScanInputs:

@@ -394,7 +394,9 @@ def test_huge_images_are_downscaled(tmp_path, capsys):
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, d, "--out", out, "--max-side", "64", "--max-scans", "1")
     report = assert_ok_run(rc, err, out)
-    assert report["size"]["width"] == 64 and report["size"]["height"] == 48
+    # analysed at 64 px, written at the input's full size (--output-size full)
+    assert report["size"]["working_width"] == 64 and report["size"]["working_height"] == 48
+    assert report["size"]["width"] == 8000 and report["size"]["height"] == 6000
     assert report["size"]["original_width"] == 8000
     assert report["size"]["scale"] == pytest.approx(64 / 8000)
 
