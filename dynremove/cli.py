@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from dynremove import io
+from dynremove.method.scan import _kernels
 from dynremove.batch import at_output_size, choose_reference, write_outputs
 from dynremove.errors import InputError
 from dynremove.evaluation import composite, synth
@@ -31,7 +32,8 @@ from dynremove.evaluation.bench import run_bench
 from dynremove.evaluation.evaluate import (ABLATIONS, METHODS, format_ablation, format_table,
                                            run_ablation, run_eval)
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
-from dynremove.params import DEFAULT, PAPER, PRESETS, Params, preset
+from dynremove.params import (DEFAULT, FIELD_CHOICES, PAPER, PRESETS, Params, field_docs,
+                              preset)
 from dynremove.pipeline import remove_dynamic
 from dynremove.progress import ProgressBar
 
@@ -47,12 +49,17 @@ def add_param_flags(ap: argparse.ArgumentParser) -> None:
     g = ap.add_argument_group("method parameters (default: the chosen preset's values)")
     g.add_argument("--preset", choices=sorted(PRESETS), default="default",
                    help="'default' (best measured) or 'paper' (the method as written)")
+    docs = field_docs()
     for f in dataclasses.fields(Params):
         flag = "--" + f.name.replace("_", "-")
         d, pp = getattr(DEFAULT, f.name), getattr(PAPER, f.name)
-        help_ = f"(default {d})" if d == pp else f"(default {d}; paper {pp})"
+        used = f"(default {d})" if d == pp else f"(default {d}; paper {pp})"
+        help_ = (docs.get(f.name, "") + " " + used).strip().replace("%", "%%")
         if f.type in ("bool", bool):
             g.add_argument(flag, dest=f"p_{f.name}", action=argparse.BooleanOptionalAction,
+                           default=None, help=help_)
+        elif f.name in FIELD_CHOICES:
+            g.add_argument(flag, dest=f"p_{f.name}", choices=FIELD_CHOICES[f.name],
                            default=None, help=help_)
         else:
             typ = {"int": int, "float": float, "str": str}.get(str(f.type), str)
@@ -120,6 +127,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
     sink_b = None
     bar = _bar(args)
+    _note_compile(args)
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -180,6 +188,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         args.record_every_rows = None
     sink = _make_sink(args, iset, gt, gt_background=scene.background) if record else None
     bar = _bar(args)
+    _note_compile(args)
     try:
         res = remove_dynamic(scene.images, ref=scene.ref_index, params=params, sink=sink,
                              names=scene.names, preset_name=args.preset, progress=bar)
@@ -372,6 +381,20 @@ def _bar(args: argparse.Namespace):
 def _note(args: argparse.Namespace, msg: str) -> None:
     if not getattr(args, "quiet", False):
         print(f"dynremove: note: {msg}", file=sys.stderr)
+
+
+def kernels_cached() -> bool:
+    """Whether numba's on-disk cache of the scan kernels is newer than their source."""
+    src = Path(_kernels.__file__)
+    cache = list((src.parent / "__pycache__").glob(src.stem + ".*.nbi"))
+    return bool(cache) and max(c.stat().st_mtime for c in cache) >= src.stat().st_mtime
+
+
+def _note_compile(args: argparse.Namespace) -> None:
+    """Say so when this run will compile the kernels (a fresh install: ~35 s, once)."""
+    if not kernels_cached():
+        _note(args, "compiling the scan kernels (once per install, about 30-60 s; later "
+                    "runs reuse numba's cache)")
 
 
 def _say(args: argparse.Namespace, msg: str) -> None:

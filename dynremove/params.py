@@ -53,7 +53,7 @@ class Params:
     sigma_e: float = 0.17  # σ_e : squared Sampson distance (coord units)
 
     # --- decision, Eq. (DB_cost) and M --------------------------------------
-    dbscan_eps: float = 0.5  # ε of DBSCAN on the distance B
+    dbscan_eps: float = 0.5  # ε of DBSCAN on the distance 𝓑 (Eq. DB_cost; B_l is a candidate's weight)
     dbscan_min_pts: int = 2  # minPts of DBSCAN (the point itself counts)
     t_r: float = 0.3  # t_r : static if M(x) > t_r (paper: 0.15–0.8; measured; paper preset 0.4)
 
@@ -195,6 +195,26 @@ def preset(name: str) -> Params:
         return PRESETS[name]
     except KeyError:
         raise ValueError(f"unknown preset {name!r}; choose from {sorted(PRESETS)}") from None
+
+
+FIELD_CHOICES: dict[str, tuple[str, ...]] = {
+    "write": WRITE_MODES, "correspondence": CORRESPONDENCE_METHODS,
+    "flow_preset": ("fast", "medium", "ultrafast"), "fuse_combine": ("median", "medoid"),
+    "fill": FILL_MODES,
+}
+
+
+def field_docs() -> dict[str, str]:
+    """Each field's comment in this file (symbol, unit, meaning): the CLI's help."""
+    import re
+    from pathlib import Path
+
+    docs = {}
+    for line in Path(__file__).read_text(encoding="utf-8").splitlines():
+        m = re.match(r"^    (\w+): [^=]+=[^#]*#\s*(.+)$", line)
+        if m and m.group(1) not in docs:
+            docs[m.group(1)] = m.group(2).strip()
+    return docs
 
 
 def params_fields() -> list[dataclasses.Field]:

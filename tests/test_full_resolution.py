@@ -67,3 +67,20 @@ def test_orientation_exif_and_icc_are_carried(tmp_path):
         assert exif.get(0x0112) == 1  # orientation reset
         assert exif.get(0x010F) == "dynremove-test"  # the other fields carried
         assert im.info.get("icc_profile") == icc
+
+
+def test_run_help_shows_the_values_a_plain_run_uses(capsys):
+    import pytest
+
+    from dynremove.params import DEFAULT, PAPER
+
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert DEFAULT.patch_size != PAPER.patch_size
+    assert f"--patch-size V p : patch side" in out
+    assert f"(default {DEFAULT.patch_size}; paper {PAPER.patch_size})" in out
+    assert f"(default {DEFAULT.snap}; paper {PAPER.snap})" in out
+    assert "--write {patch,pixel}" in out
+    assert "--correspondence {homography+flow,homography,flow,gated}" in out
+    assert "λ8" in out and "σ_c" in out  # the paper's symbols
