@@ -3,19 +3,33 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test bench eval clean
+.PHONY: demo test lint test-nojit bench eval clean
 
 $(BIN)/dynremove: pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ".[test]"
+	$(BIN)/python -m pip install -q -e ".[test,heic,dask]"
 	touch $(BIN)/dynremove
 
-demo: $(BIN)/dynremove
-	$(BIN)/dynremove demo
+# the total time, install included (the first run also compiles the kernels, once)
+demo:
+	@start=$$(date +%s); \
+	$(MAKE) --no-print-directory $(BIN)/dynremove && $(BIN)/dynremove demo && \
+	echo "make demo: $$(( $$(date +%s) - start )) s in all, install included"
 
 test: $(BIN)/dynremove
 	$(BIN)/python -m pytest -q
+
+lint: $(BIN)/dynremove
+	$(BIN)/python -m ruff check .
+
+# The scan's kernels run as plain Python (numba off), as in stumpy's coverage run:
+# the equations, the hand-made cases and the kernel-vs-reference test.
+test-nojit: $(BIN)/dynremove
+	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -p no:cacheprovider \
+		tests/test_scan_cases.py tests/test_equations.py tests/test_dbscan.py \
+		"tests/test_kernel.py::test_kernel_equals_reference[paper]" \
+		tests/test_kernel.py::test_similarity_map_equals_reference
 
 bench: $(BIN)/dynremove
 	$(BIN)/dynremove bench

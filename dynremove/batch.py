@@ -67,6 +67,18 @@ def at_output_size(res: Any, iset: Any, output_size: str = "full") -> Any:
     return dataclasses.replace(res, clean=clean, dynamic=dyn, coverage=cov, timings=timings)
 
 
+def _throughput(res: Any, iset: Any) -> dict:
+    """Scan speed (reference pixels visited per second, all scans) and peak memory."""
+    import resource
+
+    h, w = iset.images[0].shape[:2]
+    n_scans = max(1, len(res.scans))
+    t_scan = float(res.timings.get("scans", 0.0))
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
+    return {"scan_mpx_per_s": round(h * w * n_scans / t_scan / 1e6, 3) if t_scan > 0 else None,
+            "working_mpx": round(h * w / 1e6, 3), "peak_rss_mb": round(rss, 1)}
+
+
 def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
                   gt: np.ndarray | None = None, record: str | None = None,
                   reference: dict | None = None, extra: dict | None = None) -> dict:
@@ -100,6 +112,7 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
         "uncovered_dynamic_px": int((res.dynamic & (res.coverage == 0)).sum()),
         "geometry": res.geometry,
         "seconds": {k: round(float(v), 4) for k, v in res.timings.items()},
+        "throughput": _throughput(res, iset),
         "notes": list(iset.notes) + list(res.warnings),
         "recording": str(record) if record else None,
     }

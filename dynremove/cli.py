@@ -58,9 +58,9 @@ def add_param_flags(ap: argparse.ArgumentParser) -> None:
         if f.type in ("bool", bool):
             g.add_argument(flag, dest=f"p_{f.name}", action=argparse.BooleanOptionalAction,
                            default=None, help=help_)
-        elif f.name in FIELD_CHOICES:
-            g.add_argument(flag, dest=f"p_{f.name}", choices=FIELD_CHOICES[f.name],
-                           default=None, help=help_)
+        elif f.name in FIELD_CHOICES:  # listed; checked by Params (one-line error, exit 2)
+            g.add_argument(flag, dest=f"p_{f.name}", default=None, help=help_,
+                           metavar="{" + ",".join(FIELD_CHOICES[f.name]) + "}")
         else:
             typ = {"int": int, "float": float, "str": str}.get(str(f.type), str)
             g.add_argument(flag, dest=f"p_{f.name}", type=typ, default=None, metavar="V",

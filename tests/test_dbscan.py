@@ -21,7 +21,8 @@ def test_dbscan_matches_sklearn(min_pts):
         eps = float(rng.uniform(0.1, 1.5))
         want = DBSCAN(eps=eps, min_samples=min_pts, metric="precomputed").fit(D).labels_
         labels = np.empty(n, np.int64)
-        k = _dbscan(D, n, eps, min_pts, labels, np.empty(n, np.bool_), np.empty(n * n + 1, np.int64))
+        k = _dbscan(D, n, eps, min_pts, labels, np.empty(n, np.bool_),
+                    np.empty(n * n + 1, np.int64))
         np.testing.assert_array_equal(labels, want)
         assert k == (want.max() + 1 if n else 0)
 

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import numpy.testing as npt
 import pytest
 
 from dynremove.method import geometry
-from dynremove.params import PAPER
 from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan import reference as R
 from dynremove.method.scan.driver import pack_params
+from dynremove.params import PAPER
 
 # F of a pure x-translation: epipolar lines are the rows, x_sᵀ F x_r = y_r − y_s
 F_TX = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -31,6 +32,27 @@ def test_sampson_hand_values():
     F = np.stack([F_TX])
     assert kn._sampson(F, 0, 10.0, 5.0, 20.0, 7.0) == pytest.approx(2.0)
     assert R.sampson_sq(F_TX, 10, 5, 20, 7) == pytest.approx(2.0)
+
+
+def test_sampson_convention_x_s_F_x_r_against_opencv(rng):
+    """A general (rank-2, non-symmetric) F pins x_sᵀ F x_r = 0: cv2.sampsonDistance
+    (pt1, pt2, F) is (pt2ᵀ F pt1)² / (…), so pt1 = x_r and pt2 = x_s. With F
+    transposed, or the points swapped, the values differ."""
+    U, _, Vt = np.linalg.svd(rng.normal(size=(3, 3)))
+    F = U @ np.diag([3.0, 1.0, 0.0]) @ Vt  # rank 2
+    F /= F[2, 2]
+    assert not np.allclose(F, F.T)
+    xr = rng.uniform(0, 100, size=(40, 2))
+    xs = xr + rng.normal(scale=3.0, size=(40, 2))
+    want = np.array([cv2.sampsonDistance(np.r_[a, 1.0], np.r_[b, 1.0], F)
+                     for a, b in zip(xr, xs)])
+    swapped = np.array([cv2.sampsonDistance(np.r_[b, 1.0], np.r_[a, 1.0], F)
+                        for a, b in zip(xr, xs)])
+    assert not np.allclose(want, swapped, rtol=1e-3)  # the test can tell the two apart
+    npt.assert_allclose(geometry.sampson_sq(F, xr, xs), want, rtol=1e-9)
+    npt.assert_allclose([kn._sampson(F[None], 0, *a, *b) for a, b in zip(xr, xs)], want,
+                        rtol=1e-9)
+    npt.assert_allclose([R.sampson_sq(F, *a, *b) for a, b in zip(xr, xs)], want, rtol=1e-9)
 
 
 def test_sampson_vectorised_matches_scalar(rng):
@@ -74,28 +96,46 @@ def test_C_s_equation_1():
     sc = math.exp(-(50 ** 2) / (2 * 4.8 ** 2))  # (2, 0) has Lab (0, 0, 0)
     sg = math.exp(-(10 * u) ** 2 / (2 * 0.25 ** 2))
     assert C[0, 1, 1] == pytest.approx(0.15 * sc + 0.40 * sg + 0.45 * sf, rel=1e-6)
+    Cr = R.similarity_map(N, fc_r, fg_r, fc_s, fg_s, F, hasF, p, u)  # Params by name
+    assert Cr[0, 1, 1] == pytest.approx(0.15 * sc + 0.40 * sg + 0.45 * sf, rel=1e-6)
     # a match outside the source gets C = 0
     N[0, 0, 0] = (-1, 0)
     assert kn._similarity_map(N, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi)[0, 0, 0] == 0.0
 
 
-def test_C_s_without_epipolar_keeps_total_weight():
-    p = PAPER.replace(use_epipolar=False)
-    pf, pi = pack_params(p, sift_unit=0.025)
+@pytest.mark.parametrize("use_epipolar, hasF", [(False, True), (True, False)])
+def test_C_s_without_epipolar_keeps_total_weight(use_epipolar, hasF):
+    """Epipolar term off, or no F for the source: λ1 and λ2 are scaled by
+    (λ1+λ2+λ3)/(λ1+λ2), so a perfect match still scores λ1+λ2+λ3 = 1."""
+    p = PAPER.replace(use_epipolar=use_epipolar)
+    u = 0.025
+    pf, pi = pack_params(p, sift_unit=u)
     fc_r, fg_r, fc_s, fg_s = _tiny_features()
-    fc_s[0, 1, 2] = fc_r[1, 1]
-    fg_s[0, 1, 2] = fg_r[1, 1]
-    got = kn._sim_H(fc_r, fg_r, 1, 1, fc_s, fg_s, 0, 2, 1, np.zeros((1, 3, 3)),
-                    np.array([False]), pf, pi)
+    F = np.stack([F_TX])
+    hasF = np.array([hasF])
+    # a perfect match, 2 rows off its epipolar line (S_f ≈ 0 if it were used)
+    fc_s[0, 2, 1] = fc_r[1, 1]
+    fg_s[0, 2, 1] = fg_r[1, 1]
+    N = np.zeros((1, 3, 3, 2), np.int32)
+    N[0, 1, 1] = (1, 2)
+    got = kn._similarity_map(N, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi)[0, 1, 1]
     assert got == pytest.approx(1.0)
+    assert R.similarity_map(N, fc_r, fg_r, fc_s, fg_s, F, hasF, p, u)[0, 1, 1] == \
+        pytest.approx(1.0)
+    # colour σ_c away: (λ1 e^-½ + λ2)·(λ1+λ2+λ3)/(λ1+λ2)
+    fc_s[0, 2, 1] = (50, 4.8, 0)
+    want = (0.15 * math.exp(-0.5) + 0.40) * 1.0 / 0.55
+    got = kn._similarity_map(N, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi)[0, 1, 1]
+    assert got == pytest.approx(want, rel=1e-6)
+    assert R.similarity_map(N, fc_r, fg_r, fc_s, fg_s, F, hasF, p, u)[0, 1, 1] == \
+        pytest.approx(want, rel=1e-6)
 
 
 def test_B_and_M_on_a_hand_made_pixel():
     """Three candidates: two agree (one cluster), one is far (noise / own cluster)."""
     p = PAPER.replace(dbscan_eps=0.5, dbscan_min_pts=1, sift_scale=1.0)
     u = 0.025
-    pf, pi = pack_params(p, sift_unit=u)
-    ctx = R._Ctx(pf, pi, np.zeros((1, 3, 3)), np.array([False]))
+    ctx = R._Ctx(p, u, np.zeros((1, 3, 3)), np.array([False]))
     fc_s = np.zeros((1, 1, 3, 3), np.float32)
     fg_s = np.zeros((1, 1, 3, 128), np.uint8)
     fc_s[0, 0, 0] = (40, 0, 0)

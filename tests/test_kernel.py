@@ -1,4 +1,13 @@
-"""The compiled scan equals the readable reference: labels, pixels, N, C, events."""
+"""The compiled scan equals the readable reference: labels, pixels, N, C, events.
+
+The reference reads its parameters from ``Params`` by name, the kernel from the
+arrays of ``driver.pack_params``, so a swapped index there fails here. The
+crop carries real fundamental matrices (those of the full scene, moved to the
+crop's coordinates) for all sources but one, so the epipolar branches (S_f in
+C, H and q*; the Sampson choice of update case 3) and their no-F fallbacks are
+compared on every variant. Every float parameter is distinct, so no swap of
+two of them can go unnoticed.
+"""
 
 from __future__ import annotations
 
@@ -7,35 +16,77 @@ import pytest
 
 from dynremove import MemorySink, preset
 from dynremove.events import replay_replacements
+from dynremove.method.scan import _kernels as kn
+from dynremove.method.scan import reference
+from dynremove.method.scan.driver import pack_params, run_scans
 from dynremove.pipeline import prepare
-from dynremove.method.scan.driver import run_scans
+
+Y0, Y1, X0, X1 = 8, 40, 10, 58  # the crop of the small scene
+NO_F = 1  # this source gets no F (a set with too few matches with it)
+
+# the paper preset with every float parameter distinct (a swap shows)
+DISTINCT = dict(lambda1=0.16, lambda2=0.41, lambda3=0.43, lambda6=0.11, lambda7=0.37,
+                lambda8=0.05, sigma_c=4.7, sigma_g=0.26, sigma_e=0.19, sigma_h=5.3,
+                hog_scale=9.0, coord_scale_px=7.0, tie_tol=2e-3, sift_scale=0.21,
+                dbscan_eps=0.52, t_r=0.45, max_scans=2)
 
 
-def _both(scene, params, **kw):
-    st, _ = prepare(scene.images, scene.ref_index, params)
+@pytest.fixture(scope="module")
+def crop_with_F(small_scene):
+    """ScanInputs of a 32×48 crop with the full scene's F (crop coordinates)."""
+    params = preset("paper").replace(**DISTINCT)
+    _, views = prepare(small_scene.images, small_scene.ref_index, params)
+    images = [im[Y0:Y1, X0:X1].copy() for im in small_scene.images]
+    st, _ = prepare(images, small_scene.ref_index, params)
+    T = np.array([[1.0, 0, X0], [0, 1, Y0], [0, 0, 1]])  # x_full = T x_crop, in both views
+    for k, v in enumerate(views):
+        assert v.F is not None, "the full scene has enough matches for every F"
+        st.F[k] = T.T @ v.F @ T
+        st.hasF[k] = k != NO_F
+    st.C = reference.similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F, st.hasF,
+                                    params, st.sift_unit)
+    return st
+
+
+def test_similarity_map_equals_reference(crop_with_F):
+    st = crop_with_F
+    for variant in ({}, {"use_epipolar": False}):
+        params = preset("paper").replace(**DISTINCT, **variant)
+        want = reference.similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F,
+                                        st.hasF, params, st.sift_unit)
+        pf, pi = pack_params(params, sift_unit=st.sift_unit)
+        got = kn._similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F, st.hasF,
+                                 pf, pi)
+        np.testing.assert_array_equal(got, want)
+    assert (want[NO_F] > 0).any()
+
+
+def _both(st0, params, **kw):
     out = {}
     for kernel in ("numba", "reference"):
-        s = st.copy()
+        s = st0.copy()
         sink = MemorySink()
         L, Ms, summ = run_scans(s, params, sink=sink, kernel=kernel, **kw)
         out[kernel] = (s, L, Ms, summ, sink)
-    return st, out
+    return out
 
 
 @pytest.mark.parametrize("variant", [
     {},
+    {"candidate_set": False},
     {"write": "pixel"},
-    {"update": False, "use_hog": False},
-    {"dbscan_min_pts": 3, "use_epipolar": False},
-])
-def test_kernel_equals_reference(small_scene, variant):
-    scene = small_scene
-    sub = type(scene)(**{**scene.__dict__,
-                         "images": [im[8:40, 10:58].copy() for im in scene.images]})
-    params = preset("paper").replace(max_scans=2, t_r=0.45, **variant)
-    probe = np.zeros(sub.images[0].shape[:2], bool)
+    {"update": False},
+    {"use_epipolar": False},
+    {"use_hog": False, "dbscan_min_pts": 3},
+    {"write": "pixel", "use_epipolar": False, "use_hog": False, "candidate_set": False},
+], ids=lambda v: ",".join(f"{k}={v[k]}" for k in v) or "paper")
+def test_kernel_equals_reference(crop_with_F, variant):
+    st0 = crop_with_F
+    params = preset("paper").replace(**DISTINCT, **variant)
+    H, W = st0.shape
+    probe = np.zeros((H, W), bool)
     probe[5, 7] = True
-    st0, out = _both(sub, params, probe=probe, sample_static=0.05, chunk_rows=7)
+    out = _both(st0, params, probe=probe, sample_static=0.05, chunk_rows=7)
     a, b = out["numba"], out["reference"]
     assert a[3][0]["n_dynamic"] > 0, "the scene must exercise the removal path"
     np.testing.assert_array_equal(a[1], b[1])  # L
@@ -51,6 +102,15 @@ def test_kernel_equals_reference(small_scene, variant):
         for f in ea.dtype.names:
             np.testing.assert_allclose(ea[f].astype(float), eb[f].astype(float), rtol=0,
                                        atol=1e-6, equal_nan=True, err_msg=f"{name}.{f}")
+    # the branches this test exists for were taken
+    rep, upd = a[4].replacements, a[4].updates
+    assert (rep["src"] != NO_F).any() and (rep["src"] == NO_F).any(), \
+        "patches from sources with and without F"
+    assert rep["tie_break"].any(), "some near-ties were broken by the consensus"
+    if params.update:
+        assert set(np.unique(upd["case"])) >= {1, 2, 3}, "all three update cases"
+        assert ((upd["case"] == 3) & (upd["src"] != NO_F)).any(), "case 3 with F (Sampson)"
+        assert ((upd["case"] == 3) & (upd["src"] == NO_F)).any(), "case 3 without F"
     dec = a[4].decisions
     assert ((dec["why"] & 2) != 0).sum() == len(a[3]), "the probe pixel is recorded in every scan"
     assert ((dec["why"] & 4) != 0).any(), "a sample of static decisions is recorded"
@@ -61,11 +121,23 @@ def test_kernel_equals_reference(small_scene, variant):
     np.testing.assert_array_equal(rebuilt, a[0].img)
 
 
+def test_candidate_set_changes_the_scan(crop_with_F):
+    """The switch is live: P as a set gives fewer candidates than the multiset."""
+    runs = {}
+    for as_set in (True, False):
+        params = preset("paper").replace(**{**DISTINCT, "max_scans": 1}, candidate_set=as_set)
+        sink = MemorySink()
+        run_scans(crop_with_F.copy(), params, sink=sink, sample_static=1.0)
+        runs[as_set] = sink.decisions
+    assert runs[True]["n_cand"].sum() < runs[False]["n_cand"].sum()
+
+
 def test_steps_are_unique_and_ordered(small_scene):
     params = preset("paper").replace(max_scans=2)
     st, _ = prepare(small_scene.images, small_scene.ref_index, params)
     sink = MemorySink()
     run_scans(st, params, sink=sink, sample_static=0.1)
     steps = sink.decisions["step"]
+    assert len(steps) > 0
     assert len(np.unique(steps)) == len(steps)
     assert np.all(np.diff(steps) > 0)

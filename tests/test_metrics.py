@@ -173,7 +173,8 @@ def test_psnr_never_nan(seed):
     mask[0, 0] = True
     v = metrics.psnr_in_mask(a, b, mask)
     assert not math.isnan(v)
-    assert v >= 0.0  # MSE <= 255^2
+    mse = ((a.astype(float) - b.astype(float))[mask] ** 2).mean()
+    assert v == pytest.approx(10 * math.log10(255.0 ** 2 / mse))
 
 
 # --------------------------------------------------------------------------- SSIM

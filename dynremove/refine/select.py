@@ -273,7 +273,6 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     cand_img = np.stack(cand)
     usable = np.stack(inside)
     labs = np.stack([blurred_lab(c, 1.0) for c in cand_img])
-    nl = S + 1
 
     # 3. weighted consensus
     p_mover = _mover_probability(lab_r, mask, labs)

@@ -6,6 +6,22 @@ written into preallocated struct-of-arrays buffers with counters that keep
 counting past capacity, so overflow is detectable (the driver sizes buffers
 for the worst case of a chunk, so it does not happen).
 
+One function per step of the paper, named like the readable reference
+(``reference.py``), which reads ``Params`` by name instead of ``pf``/``pi``:
+
+==============================  =====================================
+kernel                          reference
+==============================  =====================================
+``_sim_H``, ``_similarity_map``  ``_Ctx.H``, ``similarity_map`` (Eq. 1, H)
+``_candidates``                 ``candidates`` (P, B; Sec. 3.2.1)
+``_cluster``, ``_dbscan``       ``cluster`` (𝓑, Eq. DB_cost)
+``_decide``                     ``decide`` (b_k, f̂, M; Eq. decision)
+``_choose_patch``               ``choose_patch`` (q*, q̂; Sec. 3.2.2)
+``_write_patch``                ``write_patch``
+``_update_correspondences``     ``update_correspondences`` (Sec. 3.2.3)
+``_scan_rows``                  ``scan_rows`` (Algorithm 1)
+==============================  =====================================
+
 Shapes: reference (H, W); S sources of the same size; K = 2·S candidate slots.
 Points are (x, y); arrays are indexed [y, x].
 """
@@ -21,8 +37,8 @@ SIG_C, SIG_G, SIG_E, SIG_H, T_R, EPS, SIFT_UNIT = 8, 9, 10, 11, 12, 13, 14
 HOG_SCALE, COORD_SCALE, TIE_TOL, SAMPLE_RATE = 15, 16, 17, 18
 N_PF = 19
 # --- indices into pi (int64) ----------------------------------------------------
-P, MIN_PTS, HOG_BINS, WRITE_PATCH, UPDATE, USE_EPI, USE_HOG = 0, 1, 2, 3, 4, 5, 6
-N_PI = 7
+P, MIN_PTS, HOG_BINS, WRITE_PATCH, UPDATE, USE_EPI, USE_HOG, CAND_SET = range(8)
+N_PI = 8
 
 # columns of the integer event buffers
 D_SCAN, D_STEP, D_X, D_Y, D_WHY, D_NCAND, D_WIN, D_NCL, D_CHOSEN, D_DYN = range(10)
@@ -257,6 +273,340 @@ def _hog_finish(h, nb, scale):
         h[b] = tmp[b] / n * scale if n > 0.0 else 0.0
 
 
+# --- Sec. 3.2.1: candidates P, B ----------------------------------------------------
+
+
+@numba.njit(cache=True, nogil=True)
+def _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy, cB, slot,
+                nx_, ny_, ox_, oy_):
+    """P and B (Sec. 3.2.1) at x_r = (x, y); mirrors ``reference.candidates``.
+
+    Each source's matches of the two scan neighbours (x+ndx0, y+ndy0) and
+    (x+ndx1, y+ndy1), moved by one pixel towards x_r, with the neighbours'
+    confidences C as B_l. Neighbours outside the image are skipped; the first
+    pixel of a scan (no neighbour) uses its own match. Candidates outside the
+    source are dropped. With ``as_set`` a candidate equal in (s, x, y) to an
+    earlier one of the same source is dropped (P is a union of sets, the first
+    copy keeps its own C as B_l); otherwise P is a multiset.
+
+    Writes the n candidates into cs, cx, cy (int64), cB (float64), slot (int64,
+    2·s + a, the column in the decision events) and the nn existing neighbours
+    into nx_, ny_ (position) and ox_, oy_ (the shift towards x_r).
+    Returns (n, nn).
+    """
+    H, W = N.shape[1], N.shape[2]
+    S = N.shape[0]
+    nn = 0
+    xa, ya = x + ndx0, y + ndy0
+    if 0 <= xa < W and 0 <= ya < H:
+        nx_[nn] = xa
+        ny_[nn] = ya
+        ox_[nn] = -ndx0
+        oy_[nn] = -ndy0
+        nn += 1
+    xa, ya = x + ndx1, y + ndy1
+    if 0 <= xa < W and 0 <= ya < H:
+        nx_[nn] = xa
+        ny_[nn] = ya
+        ox_[nn] = -ndx1
+        oy_[nn] = -ndy1
+        nn += 1
+    n = 0
+    for s in range(S):
+        if nn == 0:  # first pixel of a scan: no neighbour, use its own match
+            mx = N[s, y, x, 0]
+            my = N[s, y, x, 1]
+            if 0 <= mx < W and 0 <= my < H:
+                cs[n] = s
+                cx[n] = mx
+                cy[n] = my
+                cB[n] = C[s, y, x]
+                slot[n] = 2 * s
+                n += 1
+        for a in range(nn):
+            mx = N[s, ny_[a], nx_[a], 0] + ox_[a]
+            my = N[s, ny_[a], nx_[a], 1] + oy_[a]
+            if not (0 <= mx < W and 0 <= my < H):
+                continue
+            if as_set and n > 0 and cs[n - 1] == s and cx[n - 1] == mx and cy[n - 1] == my:
+                continue  # same (s, x, y) as this source's previous candidate
+            cs[n] = s
+            cx[n] = mx
+            cy[n] = my
+            cB[n] = C[s, ny_[a], nx_[a]]
+            slot[n] = 2 * s + a
+            n += 1
+    return n, nn
+
+
+# --- Sec. 3.2.1: DBSCAN on 𝓑, b_k, consensus, M ------------------------------------
+
+
+@numba.njit(cache=True, nogil=True)
+def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack):
+    """DBSCAN of P on 𝓑(x1, x2) = 1 − λ4 S_e(f_c) − λ5 S_e(f_g), Eq. (DB_cost).
+
+    Mirrors ``reference.cluster``. Fills D (n × n) and labels (−1 = noise);
+    returns the number of clusters k.
+    """
+    if n == 0:
+        return 0
+    lam4, lam5 = pf[LAM4], pf[LAM5]
+    u = pf[SIFT_UNIT]
+    for i in range(n):
+        D[i, i] = 1.0 - lam4 - lam5
+        for j in range(i + 1, n):
+            dc = _lab_d2(fc_s[cs[i]], cy[i], cx[i], fc_s[cs[j]], cy[j], cx[j])
+            dg = float(_sift_d2(fg_s[cs[i]], cy[i], cx[i], fg_s[cs[j]], cy[j], cx[j]))
+            d = 1.0 - lam4 * _se(dc, pf[SIG_C]) - lam5 * _se(dg * u * u, pf[SIG_G])
+            D[i, j] = d
+            D[j, i] = d
+    return _dbscan(D, n, pf[EPS], pi[MIN_PTS], labels, is_core, stack)
+
+
+@numba.njit(cache=True, nogil=True)
+def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
+            fhat_c, fhat_g):
+    """Winning cluster A_m, consensus (f̂_c, f̂_g) and M(x_r) (Sec. 3.2.1).
+
+    Mirrors ``reference.decide``. b_k = Σ B_l over cluster k; m = argmax b_k
+    (first on ties); f̂ = Σ_{A_m} B_l f(x_l) / b_m (uniform if b_m = 0);
+    M = λ4 S_e(f_c(x_r), f̂_c) + λ5 S_e(f_g(x_r), f̂_g). Requires k > 0.
+    Fills fhat_c, fhat_g; returns (m, b_m, M, ‖f_g(x_r) − f̂_g‖²).
+    """
+    u = pf[SIFT_UNIT]
+    for c in range(k):
+        bk[c] = 0.0
+    for i in range(n):
+        if labels[i] >= 0:
+            bk[labels[i]] += cB[i]
+    m = 0
+    for c in range(1, k):
+        if bk[c] > bk[m]:
+            m = c
+    bm = bk[m]
+    cnt = 0
+    for i in range(n):
+        if labels[i] == m:
+            cnt += 1
+    for c in range(3):
+        fhat_c[c] = 0.0
+    for j in range(fhat_g.shape[0]):
+        fhat_g[j] = 0.0
+    for i in range(n):
+        if labels[i] != m:
+            continue
+        w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
+        for c in range(3):
+            fhat_c[c] += w * fc_s[cs[i], cy[i], cx[i], c]
+        for j in range(fhat_g.shape[0]):
+            fhat_g[j] += w * (fg_s[cs[i], cy[i], cx[i], j] * u)
+    dc = 0.0
+    for c in range(3):
+        t = fc_r[y, x, c] - fhat_c[c]
+        dc += t * t
+    dg = 0.0
+    for j in range(fhat_g.shape[0]):
+        t = fg_r[y, x, j] * u - fhat_g[j]
+        dg += t * t
+    M = pf[LAM4] * _se(dc, pf[SIG_C]) + pf[LAM5] * _se(dg, pf[SIG_G])
+    return m, bm, M, dg
+
+
+# --- Sec. 3.2.2: removal ----------------------------------------------------------
+
+
+@numba.njit(cache=True, nogil=True)
+def _choose_patch(lab, gray, src_lab, src_gray, fc_s, fg_s, F, hasF, pf, pi, x, y,
+                  ndx0, ndy0, ndx1, ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g,
+                  score, gc0, gc1, gh0, gh1):
+    """q* (Sec. 3.2.2) among the candidates of A_m; mirrors ``reference.choose_patch``.
+
+    score(q) = Σ_i [λ6 S_e(g_c(w_q^i), g_c(w_r^i), σ_c) + λ7 S_e(g_h(…), g_h(…), σ_h)]
+    + λ8 S_f(x_r, x_q, F_q), over the overlaps i with the existing left/up
+    (right/down) neighbour patches. Where S_f is unavailable (epipolar term off,
+    or no F for q's source) the appearance sum is rescaled by (W + λ8) / W,
+    W = its attainable maximum, as λ3 is in H: the top score stays the same.
+    Patches within ``tie_tol`` of the best tie; the tie goes to the smallest
+    λ4‖f̂_c − f_c‖² + λ5‖f̂_g − f_g‖² (q̂), first in candidate order.
+    Fills score[:n]; returns (index of q*, best score, number tied).
+    """
+    H, W = gray.shape
+    h = pi[P] // 2
+    nb = pi[HOG_BINS]
+    u = pf[SIFT_UNIT]
+    use_epi = pi[USE_EPI] != 0
+    use_hog = pi[USE_HOG] != 0
+    best = -1.0e300
+    for i in range(n):
+        score[i] = -1.0e300
+        if labels[i] != m:
+            continue
+        s = cs[i]
+        sc = 0.0
+        wsum = 0.0
+        for t in range(2):
+            dxn = ndx0 if t == 0 else ndx1
+            dyn = ndy0 if t == 0 else ndy1
+            if not (0 <= x + dxn < W and 0 <= y + dyn < H):
+                continue  # the neighbour patch does not exist at the border
+            ulo = max(-h, dxn - h)
+            uhi = min(h, dxn + h)
+            vlo = max(-h, dyn - h)
+            vhi = min(h, dyn + h)
+            cnt = _region_stats(src_lab[s], src_gray[s], cx[i], cy[i], lab, gray, x, y,
+                                ulo, uhi, vlo, vhi, nb, pf[HOG_SCALE], gc0, gh0, gc1, gh1)
+            if cnt == 0:
+                continue
+            d = 0.0
+            for c in range(3):
+                d += (gc0[c] - gc1[c]) ** 2
+            sc += pf[LAM6] * _se(d, pf[SIG_C])
+            wsum += pf[LAM6]
+            if use_hog:
+                d = 0.0
+                for b in range(nb):
+                    d += (gh0[b] - gh1[b]) ** 2
+                sc += pf[LAM7] * _se(d, pf[SIG_H])
+                wsum += pf[LAM7]
+        if use_epi and hasF[s]:
+            sc += pf[LAM8] * _sf(F, hasF, s, x, y, cx[i], cy[i], pf)
+        elif wsum > 0.0:
+            sc = sc * ((wsum + pf[LAM8]) / wsum)
+        score[i] = sc
+        if sc > best:
+            best = sc
+    ntie = 0
+    for i in range(n):
+        if labels[i] == m and score[i] >= best - pf[TIE_TOL]:
+            ntie += 1
+    ibest = -1
+    bestd = 1.0e300
+    for i in range(n):
+        if labels[i] != m or score[i] < best - pf[TIE_TOL]:
+            continue
+        if ntie == 1:
+            ibest = i
+            break
+        dc = 0.0
+        for c in range(3):
+            dc += (fhat_c[c] - fc_s[cs[i], cy[i], cx[i], c]) ** 2
+        dg = 0.0
+        for j in range(fhat_g.shape[0]):
+            dg += (fhat_g[j] - fg_s[cs[i], cy[i], cx[i], j] * u) ** 2
+        d = pf[LAM4] * dc + pf[LAM5] * dg
+        if d < bestd:
+            bestd = d
+            ibest = i
+    return ibest, best, ntie
+
+
+@numba.njit(cache=True, nogil=True)
+def _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y, half):
+    """Copy the (2·half+1)² window of source s at (qx, qy) onto the reference at (x, y).
+
+    Mirrors ``reference.write_patch``; half = p // 2 (patch write) or 0 (pixel).
+    Pixels outside either image are skipped.
+    """
+    H, W = gray.shape
+    for v in range(-half, half + 1):
+        ry = y + v
+        sy = qy + v
+        if ry < 0 or ry >= H or sy < 0 or sy >= H:
+            continue
+        for w_ in range(-half, half + 1):
+            rx = x + w_
+            sx = qx + w_
+            if rx < 0 or rx >= W or sx < 0 or sx >= W:
+                continue
+            for c in range(3):
+                img[ry, rx, c] = src_img[s, sy, sx, c]
+                lab[ry, rx, c] = src_lab[s, sy, sx, c]
+            gray[ry, rx] = src_gray[s, sy, sx]
+
+
+# --- Sec. 3.2.3: update of N and C ----------------------------------------------------
+
+
+@numba.njit(cache=True, nogil=True)
+def _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi, x, y, n, cs,
+                            cx, cy, labels, m, nx_, ny_, nn, scan, step, rec, upd_i,
+                            upd_f, counts):
+    """N_{r→s}(x_r) and C_s(x_r) for every source, the three cases of Sec. 3.2.3.
+
+    Mirrors ``reference.update_correspondences``. Case 1: one candidate of s in
+    A_m; case 2: several, the one with the largest H wins (first on ties);
+    case 3: none, x* = argmin of the squared Sampson distance (= argmax S_f)
+    over X = s's candidates + the neighbours' own matches. Without F_s there is
+    no geometry: case 3 takes the first of X (the first neighbour's match moved
+    by one pixel, plain propagation). C_s(x_r) = H(x_r, x*, F_s) in every case.
+    A source with no candidate and no in-image neighbour match is left as is.
+    Records one CorrespondenceUpdate per source changed (when ``rec``).
+    """
+    H, W = fc_r.shape[0], fc_r.shape[1]
+    S = N.shape[0]
+    for t in range(S):
+        nin = 0
+        bi = -1
+        bh = -1.0e300
+        for i in range(n):
+            if cs[i] == t and labels[i] == m:
+                nin += 1
+                hv = _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, t, cx[i], cy[i], F, hasF, pf, pi)
+                if hv > bh:
+                    bh = hv
+                    bi = i
+        if nin > 0:
+            nxs = cx[bi]
+            nys = cy[bi]
+            case = 1 if nin == 1 else 2
+        else:
+            # case 3: geometry only, over X = this source's candidates + the
+            # neighbours' matches; the smallest Sampson distance wins.
+            bd = 1.0e300
+            nxs = -1
+            nys = -1
+            for i in range(n):
+                if cs[i] == t:
+                    d = _sampson(F, t, x, y, cx[i], cy[i]) if hasF[t] else 0.0
+                    if d < bd:
+                        bd = d
+                        nxs = cx[i]
+                        nys = cy[i]
+            for a in range(nn):
+                mx = N[t, ny_[a], nx_[a], 0]
+                my = N[t, ny_[a], nx_[a], 1]
+                if 0 <= mx < W and 0 <= my < H:
+                    d = _sampson(F, t, x, y, mx, my) if hasF[t] else 0.0
+                    if d < bd:
+                        bd = d
+                        nxs = mx
+                        nys = my
+            if nxs < 0:
+                continue
+            case = 3
+            bh = _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, t, nxs, nys, F, hasF, pf, pi)
+        N[t, y, x, 0] = nxs
+        N[t, y, x, 1] = nys
+        C[t, y, x] = bh
+        if rec:
+            e = counts[2]
+            if e < upd_i.shape[0]:
+                upd_i[e, U_SCAN] = scan
+                upd_i[e, U_STEP] = step
+                upd_i[e, U_X] = x
+                upd_i[e, U_Y] = y
+                upd_i[e, U_SRC] = t
+                upd_i[e, U_CASE] = case
+                upd_i[e, U_NX] = nxs
+                upd_i[e, U_NY] = nys
+                upd_f[e] = bh
+            counts[2] = e + 1
+
+
+# --- Algorithm 1: one chunk of rows of a scan ------------------------------------------
+
+
 @numba.njit(cache=True, nogil=True)
 def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
                N, C, F, hasF, L, Mmap, probe, pf, pi, scan, direction, r0, r1, rec,
@@ -271,6 +621,10 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     L (H, W) uint8 (1 = dynamic in some scan); Mmap (H, W) float32 of this scan;
     probe (H, W) bool. direction +1: top-left → bottom-right, −1: the reverse.
 
+    Per pixel: ``_candidates`` → ``_cluster`` → ``_decide``; if dynamic,
+    ``_choose_patch`` → ``_write_patch`` (+ f_c, f_g of q*) →
+    ``_update_correspondences``. Mirrors ``reference.scan_rows``.
+
     Events (when ``rec``): decisions for dynamic, probe and sampled static pixels;
     every replacement; every correspondence update. ``counts`` = [decisions,
     replacements, updates] written (may exceed capacity: overflow). ``stats`` +=
@@ -279,12 +633,9 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     H, W = gray.shape
     S = N.shape[0]
     K = 2 * S
-    p = pi[P]
-    h = p // 2
     nb = pi[HOG_BINS]
-    eps = pf[EPS]
-    u = pf[SIFT_UNIT]
-    lam4, lam5 = pf[LAM4], pf[LAM5]
+    as_set = pi[CAND_SET] != 0
+    half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
     # per-pixel work arrays
     cs = np.empty(K, np.int64)
     cx = np.empty(K, np.int64)
@@ -307,7 +658,7 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     ny_ = np.empty(2, np.int64)
     ox_ = np.empty(2, np.int64)
     oy_ = np.empty(2, np.int64)
-    # neighbours (x + dx, y + dy) and the offset their match is moved by
+    # the two scan neighbours (x + dx, y + dy): left/up, or right/down
     if direction > 0:
         ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
     else:
@@ -317,97 +668,18 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
         for xi in range(W):
             x = xi if direction > 0 else W - 1 - xi
             step = np.int64(scan) * H * W + np.int64(vi) * W + xi
-            # ---- candidates P, B (Sec. 3.2.1) ---------------------------------
-            nn = 0
-            xa, ya = x + ndx0, y + ndy0
-            if 0 <= xa < W and 0 <= ya < H:
-                nx_[nn] = xa
-                ny_[nn] = ya
-                ox_[nn] = -ndx0
-                oy_[nn] = -ndy0
-                nn += 1
-            xa, ya = x + ndx1, y + ndy1
-            if 0 <= xa < W and 0 <= ya < H:
-                nx_[nn] = xa
-                ny_[nn] = ya
-                ox_[nn] = -ndx1
-                oy_[nn] = -ndy1
-                nn += 1
-            n = 0
-            for s in range(S):
-                if nn == 0:  # first pixel of a scan: no neighbour, use its own match
-                    mx = N[s, y, x, 0]
-                    my = N[s, y, x, 1]
-                    if 0 <= mx < W and 0 <= my < H:
-                        cs[n] = s
-                        cx[n] = mx
-                        cy[n] = my
-                        cB[n] = C[s, y, x]
-                        slot[n] = 2 * s
-                        n += 1
-                for a in range(nn):
-                    mx = N[s, ny_[a], nx_[a], 0] + ox_[a]
-                    my = N[s, ny_[a], nx_[a], 1] + oy_[a]
-                    if 0 <= mx < W and 0 <= my < H:
-                        cs[n] = s
-                        cx[n] = mx
-                        cy[n] = my
-                        cB[n] = C[s, ny_[a], nx_[a]]
-                        slot[n] = 2 * s + a
-                        n += 1
-            # ---- DBSCAN on B (Eq. DB_cost) -----------------------------------
-            for i in range(n):
-                D[i, i] = 1.0 - lam4 - lam5
-                for j in range(i + 1, n):
-                    dc = _lab_d2(fc_s[cs[i]], cy[i], cx[i], fc_s[cs[j]], cy[j], cx[j])
-                    dg = float(_sift_d2(fg_s[cs[i]], cy[i], cx[i], fg_s[cs[j]], cy[j], cx[j]))
-                    d = 1.0 - lam4 * _se(dc, pf[SIG_C]) - lam5 * _se(dg * u * u, pf[SIG_G])
-                    D[i, j] = d
-                    D[j, i] = d
-            k = _dbscan(D, n, eps, pi[MIN_PTS], labels, is_core, stack) if n > 0 else 0
+            # ---- decision (Sec. 3.2.1) --------------------------------------------
+            n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
+                                cB, slot, nx_, ny_, ox_, oy_)
+            k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack)
             M = np.nan
             m = -1
             bm = 0.0
             cdist = np.nan
             dynamic = False
             if k > 0:
-                for c in range(k):
-                    bk[c] = 0.0
-                for i in range(n):
-                    if labels[i] >= 0:
-                        bk[labels[i]] += cB[i]
-                m = 0
-                for c in range(1, k):
-                    if bk[c] > bk[m]:
-                        m = c
-                bm = bk[m]
-                # consensus features (f̂_c, f̂_g), weights B_l / b_m
-                cnt = 0
-                for i in range(n):
-                    if labels[i] == m:
-                        cnt += 1
-                for c in range(3):
-                    fhat_c[c] = 0.0
-                for j in range(fhat_g.shape[0]):
-                    fhat_g[j] = 0.0
-                for i in range(n):
-                    if labels[i] != m:
-                        continue
-                    w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
-                    for c in range(3):
-                        fhat_c[c] += w * fc_s[cs[i], cy[i], cx[i], c]
-                    for j in range(fhat_g.shape[0]):
-                        fhat_g[j] += w * (fg_s[cs[i], cy[i], cx[i], j] * u)
-                dc = 0.0
-                for c in range(3):
-                    t = fc_r[y, x, c] - fhat_c[c]
-                    dc += t * t
-                dg = 0.0
-                for j in range(fhat_g.shape[0]):
-                    t = fg_r[y, x, j] * u - fhat_g[j]
-                    dg += t * t
-                cdist = dg
-                M = lam4 * _se(dc, pf[SIG_C]) + lam5 * _se(dg, pf[SIG_G])
+                m, bm, M, cdist = _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB,
+                                          labels, k, pf, bk, fhat_c, fhat_g)
                 dynamic = M <= pf[T_R]
             else:
                 stats[2] += 1
@@ -416,13 +688,42 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
             if dynamic:
                 stats[0] += 1
                 L[y, x] = 1
-                chosen = _remove(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray,
-                                 fc_s, fg_s, N, C, F, hasF, pf, pi, x, y, ndx0, ndy0, ndx1,
-                                 ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g, score,
-                                 gc0, gc1, gh0, gh1, nx_, ny_, nn, scan, step, rec,
-                                 rep_i, rep_f, upd_i, upd_f, counts)
+                # ---- removal (Sec. 3.2.2) -----------------------------------------
+                ib, best, ntie = _choose_patch(lab, gray, src_lab, src_gray, fc_s, fg_s, F,
+                                               hasF, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1,
+                                               n, cs, cx, cy, labels, m, fhat_c, fhat_g,
+                                               score, gc0, gc1, gh0, gh1)
+                s = cs[ib]
+                qx = cx[ib]
+                qy = cy[ib]
+                _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y,
+                             half)
+                for c in range(3):
+                    fc_r[y, x, c] = fc_s[s, qy, qx, c]
+                for j in range(fg_r.shape[2]):
+                    fg_r[y, x, j] = fg_s[s, qy, qx, j]
+                chosen = s
                 stats[1] += 1
-            # ---- record the decision ------------------------------------------
+                if rec:
+                    e = counts[1]
+                    if e < rep_i.shape[0]:
+                        rep_i[e, R_SCAN] = scan
+                        rep_i[e, R_STEP] = step
+                        rep_i[e, R_X] = x
+                        rep_i[e, R_Y] = y
+                        rep_i[e, R_SRC] = s
+                        rep_i[e, R_SX] = qx
+                        rep_i[e, R_SY] = qy
+                        rep_i[e, R_TIE] = 1 if ntie > 1 else 0
+                        rep_i[e, R_NP] = ntie
+                        rep_f[e] = best
+                    counts[1] = e + 1
+                # ---- update (Sec. 3.2.3) ------------------------------------------
+                if pi[UPDATE] != 0:
+                    _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi,
+                                            x, y, n, cs, cx, cy, labels, m, nx_, ny_, nn,
+                                            scan, step, rec, upd_i, upd_f, counts)
+            # ---- record the decision ----------------------------------------------
             if rec:
                 why = 0
                 if dynamic:
@@ -465,173 +766,3 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                             dec_cB[e, q] = cB[i]
                             dec_ccl[e, q] = labels[i]
                     counts[0] = e + 1
-
-
-@numba.njit(cache=True, nogil=True)
-def _remove(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-            N, C, F, hasF, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1, n, cs, cx, cy, labels,
-            m, fhat_c, fhat_g, score, gc0, gc1, gh0, gh1, nx_, ny_, nn, scan, step, rec,
-            rep_i, rep_f, upd_i, upd_f, counts):
-    """Removal (Sec. 3.2.2) and update (Sec. 3.2.3) at a dynamic pixel. Returns s*."""
-    H, W = gray.shape
-    S = N.shape[0]
-    h = pi[P] // 2
-    nb = pi[HOG_BINS]
-    u = pf[SIFT_UNIT]
-    lam4, lam5 = pf[LAM4], pf[LAM5]
-    use_epi = pi[USE_EPI] != 0
-    # ---- q*: overlap Lab mean + rotation-invariant HoG + epipolar term -------------
-    best = -1.0e300
-    for i in range(n):
-        score[i] = -1.0e300
-        if labels[i] != m:
-            continue
-        s = cs[i]
-        sc = 0.0
-        for t in range(2):
-            dxn = ndx0 if t == 0 else ndx1
-            dyn = ndy0 if t == 0 else ndy1
-            if not (0 <= x + dxn < W and 0 <= y + dyn < H):
-                continue  # the neighbour patch does not exist at the border
-            ulo = max(-h, dxn - h)
-            uhi = min(h, dxn + h)
-            vlo = max(-h, dyn - h)
-            vhi = min(h, dyn + h)
-            cnt = _region_stats(src_lab[s], src_gray[s], cx[i], cy[i], lab, gray, x, y,
-                                ulo, uhi, vlo, vhi, nb, pf[HOG_SCALE], gc0, gh0, gc1, gh1)
-            if cnt == 0:
-                continue
-            d = 0.0
-            for c in range(3):
-                d += (gc0[c] - gc1[c]) ** 2
-            sc += pf[LAM6] * _se(d, pf[SIG_C])
-            if pi[USE_HOG] != 0:
-                d = 0.0
-                for b in range(nb):
-                    d += (gh0[b] - gh1[b]) ** 2
-                sc += pf[LAM7] * _se(d, pf[SIG_H])
-        if use_epi:
-            sc += pf[LAM8] * _sf(F, hasF, s, x, y, cx[i], cy[i], pf)
-        score[i] = sc
-        if sc > best:
-            best = sc
-    # tie-break: among near-best patches, the closest to the consensus features
-    ntie = 0
-    for i in range(n):
-        if labels[i] == m and score[i] >= best - pf[TIE_TOL]:
-            ntie += 1
-    ibest = -1
-    bestd = 1.0e300
-    for i in range(n):
-        if labels[i] != m or score[i] < best - pf[TIE_TOL]:
-            continue
-        if ntie == 1:
-            ibest = i
-            break
-        dc = 0.0
-        for c in range(3):
-            dc += (fhat_c[c] - fc_s[cs[i], cy[i], cx[i], c]) ** 2
-        dg = 0.0
-        for j in range(fhat_g.shape[0]):
-            dg += (fhat_g[j] - fg_s[cs[i], cy[i], cx[i], j] * u) ** 2
-        d = lam4 * dc + lam5 * dg
-        if d < bestd:
-            bestd = d
-            ibest = i
-    s = cs[ibest]
-    qx = cx[ibest]
-    qy = cy[ibest]
-    # ---- write -------------------------------------------------------------------
-    hw = h if pi[WRITE_PATCH] != 0 else 0
-    for v in range(-hw, hw + 1):
-        ry = y + v
-        sy = qy + v
-        if ry < 0 or ry >= H or sy < 0 or sy >= H:
-            continue
-        for w_ in range(-hw, hw + 1):
-            rx = x + w_
-            sx = qx + w_
-            if rx < 0 or rx >= W or sx < 0 or sx >= W:
-                continue
-            for c in range(3):
-                img[ry, rx, c] = src_img[s, sy, sx, c]
-                lab[ry, rx, c] = src_lab[s, sy, sx, c]
-            gray[ry, rx] = src_gray[s, sy, sx]
-    for c in range(3):
-        fc_r[y, x, c] = fc_s[s, qy, qx, c]
-    for j in range(fg_r.shape[2]):
-        fg_r[y, x, j] = fg_s[s, qy, qx, j]
-    if rec:
-        e = counts[1]
-        if e < rep_i.shape[0]:
-            rep_i[e, R_SCAN] = scan
-            rep_i[e, R_STEP] = step
-            rep_i[e, R_X] = x
-            rep_i[e, R_Y] = y
-            rep_i[e, R_SRC] = s
-            rep_i[e, R_SX] = qx
-            rep_i[e, R_SY] = qy
-            rep_i[e, R_TIE] = 1 if ntie > 1 else 0
-            rep_i[e, R_NP] = ntie
-            rep_f[e] = best
-        counts[1] = e + 1
-    # ---- update N and C (three cases) ----------------------------------------------
-    if pi[UPDATE] != 0:
-        for t in range(S):
-            nin = 0
-            bi = -1
-            bh = -1.0e300
-            for i in range(n):
-                if cs[i] == t and labels[i] == m:
-                    nin += 1
-                    hv = _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, t, cx[i], cy[i], F, hasF, pf, pi)
-                    if hv > bh:
-                        bh = hv
-                        bi = i
-            if nin > 0:
-                nxs = cx[bi]
-                nys = cy[bi]
-                case = 1 if nin == 1 else 2
-            else:
-                # case 3: geometry only, over X = this source's candidates + the
-                # neighbours' matches; the smallest Sampson distance wins.
-                bd = 1.0e300
-                nxs = -1
-                nys = -1
-                for i in range(n):
-                    if cs[i] == t:
-                        d = _sampson(F, t, x, y, cx[i], cy[i]) if hasF[t] else 0.0
-                        if d < bd:
-                            bd = d
-                            nxs = cx[i]
-                            nys = cy[i]
-                for a in range(nn):
-                    mx = N[t, ny_[a], nx_[a], 0]
-                    my = N[t, ny_[a], nx_[a], 1]
-                    if 0 <= mx < W and 0 <= my < H:
-                        d = _sampson(F, t, x, y, mx, my) if hasF[t] else 0.0
-                        if d < bd:
-                            bd = d
-                            nxs = mx
-                            nys = my
-                if nxs < 0:
-                    continue
-                case = 3
-                bh = _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, t, nxs, nys, F, hasF, pf, pi)
-            N[t, y, x, 0] = nxs
-            N[t, y, x, 1] = nys
-            C[t, y, x] = bh
-            if rec:
-                e = counts[2]
-                if e < upd_i.shape[0]:
-                    upd_i[e, U_SCAN] = scan
-                    upd_i[e, U_STEP] = step
-                    upd_i[e, U_X] = x
-                    upd_i[e, U_Y] = y
-                    upd_i[e, U_SRC] = t
-                    upd_i[e, U_CASE] = case
-                    upd_i[e, U_NX] = nxs
-                    upd_i[e, U_NY] = nys
-                    upd_f[e] = bh
-                counts[2] = e + 1
-    return s

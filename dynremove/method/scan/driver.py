@@ -23,8 +23,8 @@ from dynremove.events import (
     ScanState,
     decision_dtype,
 )
-from dynremove.params import Params
 from dynremove.method.scan import _kernels as kn
+from dynremove.params import Params
 
 
 @dataclass
@@ -63,7 +63,11 @@ class ScanInputs:
 
 
 def pack_params(params: Params, *, sift_unit: float, sample_rate: float = 0.0):
-    """Unpack Params to the kernel's scalar arrays (pf float64, pi int64)."""
+    """Unpack Params to the kernel's scalar arrays (pf float64, pi int64).
+
+    Only the compiled kernel reads these; the reference reads ``Params`` by name,
+    so a wrong index here makes the kernel-vs-reference test fail.
+    """
     pf = np.zeros(kn.N_PF, np.float64)
     pf[kn.LAM1], pf[kn.LAM2], pf[kn.LAM3] = params.lambda1, params.lambda2, params.lambda3
     pf[kn.LAM4], pf[kn.LAM5] = params.lambda4, params.lambda5
@@ -74,11 +78,13 @@ def pack_params(params: Params, *, sift_unit: float, sample_rate: float = 0.0):
     pf[kn.HOG_SCALE], pf[kn.COORD_SCALE] = params.hog_scale, params.coord_scale_px
     pf[kn.TIE_TOL], pf[kn.SAMPLE_RATE] = params.tie_tol, sample_rate
     pi = np.zeros(kn.N_PI, np.int64)
-    pi[kn.P], pi[kn.MIN_PTS], pi[kn.HOG_BINS] = params.patch_size, params.dbscan_min_pts, params.hog_bins
+    pi[kn.P], pi[kn.MIN_PTS] = params.patch_size, params.dbscan_min_pts
+    pi[kn.HOG_BINS] = params.hog_bins
     pi[kn.WRITE_PATCH] = params.write == "patch"
     pi[kn.UPDATE] = params.update
     pi[kn.USE_EPI] = params.use_epipolar
     pi[kn.USE_HOG] = params.use_hog
+    pi[kn.CAND_SET] = params.candidate_set
     return pf, pi
 
 
@@ -109,10 +115,12 @@ class _Buffers:
         """Copy the filled part of the buffers into owned structured arrays."""
         nd, nr, nu = (int(c) for c in self.counts)
         if nd > len(self.dec_i) or nr > len(self.rep_i) or nu > len(self.upd_i):
-            raise RuntimeError("event buffer overflow (a bug: buffers are sized for the worst case)")
+            raise RuntimeError("event buffer overflow "
+                               "(a bug: buffers are sized for the worst case)")
         d = np.zeros(nd, decision_dtype(self.K))
         di = self.dec_i[:nd]
-        d["scan"], d["step"], d["x"], d["y"] = di[:, kn.D_SCAN], di[:, kn.D_STEP], di[:, kn.D_X], di[:, kn.D_Y]
+        d["scan"], d["step"] = di[:, kn.D_SCAN], di[:, kn.D_STEP]
+        d["x"], d["y"] = di[:, kn.D_X], di[:, kn.D_Y]
         d["M"], d["win_weight"], d["consensus_dist"] = (self.dec_f[:nd, 0], self.dec_f[:nd, 1],
                                                         self.dec_f[:nd, 2])
         d["dynamic"] = di[:, kn.D_DYN] != 0
@@ -171,11 +179,17 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
     M_maps: list[np.ndarray] = []
     summaries: list[np.ndarray] = []
     if kernel == "numba":
-        scan_fn = kn._scan_rows
+        def scan_fn(*state, scan, direction, r0, r1, stats):
+            kn._scan_rows(*state, pf, pi, scan, direction, r0, r1, record, *bufs.args(), stats)
     elif kernel == "reference":
         # lazy on purpose: the reference scan needs sklearn.cluster (~1.5 s to import),
-        # and only tests and bench use it
-        from dynremove.method.scan.reference import scan_rows as scan_fn
+        # and only tests and bench use it. It reads Params by name, not pf/pi.
+        from dynremove.method.scan import reference
+
+        def scan_fn(*state, scan, direction, r0, r1, stats):
+            reference.scan_rows(*state, params, scan, direction, r0, r1, record,
+                                *bufs.args(), stats, sift_unit=st.sift_unit,
+                                sample_rate=sample_static)
     else:
         raise ValueError(f"kernel must be 'numba' or 'reference', got {kernel!r}")
     for scan in range(params.max_scans):
@@ -195,7 +209,7 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
             r1 = min(H, r0 + chunk_rows)
             scan_fn(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
                     st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L, Mmap,
-                    probe, pf, pi, scan, direction, r0, r1, record, *bufs.args(), stats)
+                    probe, scan=scan, direction=direction, r0=r0, r1=r1, stats=stats)
             if record:
                 base = scan * H * W
                 batch = bufs.take(scan, (r0, r1 - 1), (base + r0 * W, base + r1 * W))

@@ -1,0 +1,133 @@
+"""Dense correspondences N_{r→s} and the two-view geometry, on images with known motion."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from dynremove.method import correspondence as corr
+from dynremove.method import geometry
+
+H_, W_ = 96, 128
+T = (4.0, 3.0)  # background translation reference → source (px)
+# F = [t]_x of a camera translating along (4, 3, 0): the epipolar lines run along T
+F_T = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, -4.0], [-3.0, 4.0, 0.0]])
+
+
+def _texture(rng, h, w):
+    t = cv2.GaussianBlur(rng.uniform(0, 255, (h, w)).astype(np.float32), (0, 0), 2.0)
+    t = (t - t.min()) / (t.max() - t.min()) * 255
+    return t.astype(np.uint8)
+
+
+def _pair(rng, obj_shift):
+    """Reference and source: the background moves by T, a 24×24 object by T + obj_shift."""
+    bg = _texture(rng, H_ + 40, W_ + 40)
+    obj = 255 - _texture(rng, 24, 24)
+    ref = bg[20:20 + H_, 20:20 + W_].copy()
+    src = bg[20 - int(T[1]):20 - int(T[1]) + H_, 20 - int(T[0]):20 - int(T[0]) + W_].copy()
+    y0, x0 = 40, 50
+    ref[y0:y0 + 24, x0:x0 + 24] = obj
+    ys, xs = y0 + int(T[1] + obj_shift[1]), x0 + int(T[0] + obj_shift[0])
+    src[ys:ys + 24, xs:xs + 24] = obj
+    Hm = np.array([[1.0, 0, T[0]], [0, 1, T[1]], [0, 0, 1]])
+    obj_mask = np.zeros((H_, W_), bool)
+    obj_mask[y0 + 6:y0 + 18, x0 + 6:x0 + 18] = True  # the object's inside
+    bg_mask = np.ones((H_, W_), bool)
+    bg_mask[y0 - 16:y0 + 40, x0 - 16:x0 + 50] = False
+    bg_mask[:10], bg_mask[-10:], bg_mask[:, :10], bg_mask[:, -10:] = False, False, False, False
+    return ref, src, Hm, obj_mask, bg_mask
+
+
+def _err(N, mask, shift):
+    xs, ys = corr.pixel_grid(H_, W_)
+    return np.hypot(N[..., 0] - xs - shift[0], N[..., 1] - ys - shift[1])[mask]
+
+
+def test_homography_method_is_the_homography():
+    Hm = np.array([[1.01, 0.02, 3.0], [-0.01, 0.99, -2.0], [1e-4, 0, 1]])
+    g = np.zeros((H_, W_), np.uint8)
+    N = corr.dense_correspondence(g, g, Hm, method="homography")
+    xs, ys = corr.pixel_grid(H_, W_)
+    hx, hy = geometry.apply_homography(Hm, xs, ys)
+    np.testing.assert_array_equal(N[..., 0], hx)
+    np.testing.assert_array_equal(N[..., 1], hy)
+
+
+def test_flow_follows_the_object_and_gated_does_not(rng):
+    """Flow (after the pre-warp) tracks the moving object; "gated" replaces the
+    flow that strays more than gate_px from the homography by the homography."""
+    d = (0.0, 7.0)  # the object moves 7 px down, across the epipolar lines of F_T
+    ref, src, Hm, obj, bg = _pair(rng, d)
+    full = corr.dense_correspondence(ref, src, Hm, method="homography+flow")
+    gated = corr.dense_correspondence(ref, src, Hm, method="gated", gate_px=2.0)
+    obj_motion = (T[0] + d[0], T[1] + d[1])
+    assert np.median(_err(full, bg, T)) < 0.5  # background: the homography's match
+    assert np.median(_err(gated, bg, T)) < 0.5
+    assert np.median(_err(full, obj, obj_motion)) < 1.0  # flow follows the object …
+    assert np.median(_err(gated, obj, T)) < 1e-3  # … the gate puts it back on H
+    far = _err(full, np.ones_like(obj), T) > 2.0
+    assert far.sum() > 0.5 * obj.sum()
+    # with F, flow along an epipolar line is parallax and kept; across it, it is not
+    across = corr.dense_correspondence(ref, src, Hm, method="gated", gate_px=2.0, F=F_T,
+                                       epipolar_px=1.0)
+    assert np.median(_err(across, obj, T)) < 1e-3
+
+
+def test_gated_keeps_flow_along_the_epipolar_line(rng):
+    d = (8.0, 6.0)  # along T: on the epipolar lines of F_T
+    ref, src, Hm, obj, bg = _pair(rng, d)
+    along = corr.dense_correspondence(ref, src, Hm, method="gated", gate_px=2.0, F=F_T,
+                                      epipolar_px=1.0)
+    plain = corr.dense_correspondence(ref, src, Hm, method="gated", gate_px=2.0)
+    obj_motion = (T[0] + d[0], T[1] + d[1])
+    assert np.median(_err(along, obj, obj_motion)) < 1.0
+    assert np.median(_err(plain, obj, T)) < 1e-3
+
+
+def test_round_matches_is_the_nearest_pixel():
+    Nf = np.array([[[1.4, 2.6], [-0.6, 1e9]]], np.float32)
+    N = corr.round_matches(Nf)
+    assert N.dtype == np.int32
+    assert N.tolist() == [[[1, 3], [-1, 1 << 20]]]
+
+
+# ---- geometry ----------------------------------------------------------------------
+
+
+def test_too_few_matches_fall_back_to_no_F_and_the_identity(rng):
+    xy_r = rng.uniform(0, 100, (geometry.MIN_MATCHES - 1, 2)).astype(np.float32)
+    tv = geometry.estimate_two_view(xy_r, xy_r + 5, seed=0)
+    assert tv.F is None and tv.n_inliers_F == 0
+    np.testing.assert_array_equal(tv.H, np.eye(3))
+    assert tv.n_matches == geometry.MIN_MATCHES - 1
+    # a blank source: no keypoints at all
+    g = _texture(rng, H_, W_)
+    (tv,) = geometry.geometry_for_sources(g, [np.zeros_like(g)])
+    assert tv.F is None and tv.n_matches == 0
+    np.testing.assert_array_equal(tv.H, np.eye(3))
+
+
+def test_enough_matches_give_F_and_H(rng):
+    g = _texture(rng, 200, 260)
+    src = np.roll(g, (3, 4), axis=(0, 1))
+    (tv,) = geometry.geometry_for_sources(g, [src])
+    assert tv.n_matches >= geometry.MIN_MATCHES and tv.F is not None
+    np.testing.assert_allclose(tv.H / tv.H[2, 2], [[1, 0, 4], [0, 1, 3], [0, 0, 1]], atol=0.05)
+    pts = np.array([[50.0, 60.0], [120.0, 90.0]])
+    assert geometry.sampson_sq(tv.F, pts, pts + (4, 3)).max() < 0.5
+
+
+def test_prepare_without_F_for_one_source(small_scene):
+    """A blank source gets hasF False and the scan still has finite similarities."""
+    from dynremove import preset
+    from dynremove.pipeline import prepare
+
+    images = [im.copy() for im in small_scene.images]
+    blank = 0 if small_scene.ref_index != 0 else 1
+    images[blank][:] = 128
+    st, views = prepare(images, small_scene.ref_index, preset("paper"))
+    k = blank if blank < small_scene.ref_index else blank - 1
+    assert views[k].F is None and not st.hasF[k]
+    assert st.hasF.sum() == len(views) - 1
+    assert np.isfinite(st.C).all() and (st.C[k] <= 1.0 + 1e-6).all()
