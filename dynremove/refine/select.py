@@ -145,8 +145,13 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     hit[ys, xs] = (n_best >= need) & (d_ref >= tau)
     hit = cv2.morphologyEx(hit, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     n, lab = cv2.connectedComponents((hit | mask).astype(np.uint8), connectivity=8)
-    touching = np.unique(lab[mask])
-    return np.isin(lab, touching[touching > 0]) & (hit > 0)
+    # a component grows by at most its own detected area (a shadow is no larger
+    # than its mover; a small false alarm must not seed a large region)
+    a_mask = np.bincount(lab[mask], minlength=n)
+    a_hit = np.bincount(lab[(hit > 0) & ~mask], minlength=n)
+    ok = (a_mask > 0) & (a_hit <= a_mask)
+    ok[0] = False
+    return ok[lab] & (hit > 0)
 
 
 def _cluster_median(cand_img, labs, lab, rep, free, tau):
