@@ -120,6 +120,14 @@ def test_selection_is_recorded(three_views):
     far = ~dilate_disc(r.stages["snap"], preset("default").select_margin_px)
     np.testing.assert_array_equal(r.clean[far], sc.images[sc.ref_index][far])
     assert sel.movers.shape == (len(sc.images) - 1,) + r.dynamic.shape
+    # why each source did or did not fill: exactly one "chosen" (code 1) where a
+    # source filled, none where the reference was kept; a mover is never chosen
+    chosen = (sel.reasons == 1).sum(0)
+    filled = sel.label >= 1
+    assert (chosen[filled] == 1).all() and (chosen[~filled] == 0).all()
+    assert not ((sel.reasons == 1) & sel.movers).any()
+    fy, fx = np.nonzero(filled)
+    assert (sel.reasons[sel.label[fy, fx] - 1, fy, fx] == 1).all()
 
 
 def test_darker_reference_leaves_no_silhouette():

@@ -22,6 +22,7 @@ from rerun.chunk import RrdReader
 from dynremove.errors import InputError
 from dynremove.events import (CORRESPONDENCE_UPDATE_DTYPE, REPLACEMENT_DTYPE,
                               WHY_DYNAMIC, WHY_PROBE, WHY_SAMPLE, decision_dtype)
+from dynremove.refine.select import REASONS
 from viewer import paths as P
 from viewer._images import visit_step
 
@@ -372,6 +373,15 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
         rows = _image_rows(store, p(rel), "SegmentationImage", index=None)
         if rows:
             out[key] = rows[0][1]
+    reasons = {}
+    prefix = p(P.RESULT_REASONS).strip("/") + "/"
+    for ent in sorted(str(e).strip("/") for e in store.schema().entity_paths()):
+        if ent.startswith(prefix):
+            rows = _image_rows(store, "/" + ent, "SegmentationImage", index=None)
+            if rows:
+                reasons[ent.rsplit("/", 1)[1]] = rows[0][1]
+    if reasons:
+        out["reasons"] = reasons
     return out
 
 
@@ -461,8 +471,13 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             else int(m["overwritten_before"][y, x]),
             first_overwritten=None if m["first_overwritten"] is None
             else int(m["first_overwritten"][y, x])))
-    sel = {k: int(v[y, x]) for k, v in read_selection(path, root=root).items()} \
-        if inside else {}
+    sel = {}
+    for k, v in (read_selection(path, root=root).items() if inside else ()):
+        if k == "reasons":  # per source: why it did or did not fill this pixel
+            sel[k] = {n: REASONS.get(int(a[y, x]), "?") for n, a in v.items()
+                      if int(a[y, x]) > 0}
+        else:
+            sel[k] = int(v[y, x])
     return dict(
         x=int(x), y=int(y), source_names=names, t_r=t_r, size=(H, W), scans=scans,
         selection=sel, patch_size=p,
@@ -573,8 +588,11 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     sel = h.get("selection") or {}
     if "source" in sel:
         k = sel["source"]
+        others = "; ".join(f"{n}: {why}" for n, why in (sel.get("reasons") or {}).items()
+                           if why != "chosen")
         if k > 0:
-            lines.append(f"fill: filled from source {_src_name(h, k - 1)}")
+            lines.append(f"fill: filled from source {_src_name(h, k - 1)}"
+                         + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
             lines.append("fill: reference kept, explained as static 3-D structure "
                          "(parallax, not a mover)")

@@ -108,6 +108,7 @@ RESULT_STAGES = "result/stages"  # L after each post-scan step: result/stages/<n
 RESULT_SOURCE = "result/selection/source"  # which image filled each pixel (0 = reference)
 RESULT_SEAMS = "result/selection/seams"  # boundaries between the chosen images
 RESULT_MOVERS = "result/selection/movers"  # per source: where it shows a mover (rejected)
+RESULT_REASONS = "result/selection/reasons"  # per source: why it did or did not fill
 RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure
 EVENTS_DECISIONS = "events/decisions"
 EVENTS_REPLACEMENTS = "events/replacements"

@@ -30,11 +30,16 @@ import rerun as rr
 
 from dynremove.evaluation.metrics import jaccard
 from dynremove.events import WHY_PROBE, EventBatch, RunInfo, ScanState
+from dynremove.refine.select import REASONS
 from viewer import paths as P
 from viewer._images import (CLASS_COLORS, REASON_NAMES, VERDICT_COLORS, VERDICT_NAMES,
                             cluster_colors, colormap, colormap_with_legend, encode_jpeg,
                             encode_png, error_labels, overwritten_maps, visited_mask)
 from viewer.blueprint import make_blueprint, make_compare_blueprint
+
+_REASON_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 120),
+                   3: (230, 40, 40, 160), 4: (120, 120, 120, 120), 5: (240, 150, 30, 140),
+                   6: (60, 120, 230, 120)}
 
 _DIRECTION = {1: "top-left → bottom-right", -1: "bottom-right → top-left"}
 _STAT_STYLE = {  # name: (RGB, label)
@@ -299,6 +304,11 @@ class RerunSink:
                 name = src_names[k] if k < len(src_names) else f"source{k}"
                 self.rec.log(self.p(f"{P.RESULT_MOVERS}/{name}"),
                              rr.SegmentationImage(mv.astype(np.uint8)), static=True)
+                if getattr(sel, "reasons", None) is not None:
+                    self.rec.log(self.p(f"{P.RESULT_REASONS}/{name}"), rr.AnnotationContext(
+                        [(c, w, _REASON_COLOURS[c]) for c, w in REASONS.items()]),
+                        rr.SegmentationImage(np.asarray(sel.reasons[k], np.uint8)),
+                        static=True)
         clean_scan = getattr(result, "clean_scan", None)
         if clean_scan is not None:  # what the Replacement events rebuild
             self.rec.log(self.p(P.RESULT_CLEAN_SCAN), rr.EncodedImage(

@@ -72,6 +72,14 @@ class Selection:
     # replaced pixel which sources' samples were combined (S, H, W)
     fields: list = field(default_factory=list)
     members: npt.NDArray[np.bool_] | None = None
+    # (S, H, W) uint8, why each source did or did not fill each pixel of the region:
+    # REASONS[code]; 0 outside the region
+    reasons: npt.NDArray[np.uint8] | None = None
+
+
+REASONS = {0: "not considered", 1: "chosen", 2: "combined (agrees with the chosen one)",
+           3: "its own mover", 4: "outside its frame or no content",
+           5: "disagrees with the consensus", 6: "agrees, not chosen"}
 
 
 def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
@@ -337,6 +345,13 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    why = np.where(np.linalg.norm(labs[1:] - cons[None], axis=-1) < tau, 6, 5).astype(np.uint8)
+    why[members[:, y0:y1, x0:x1]] = 2
+    why[mv] = 3
+    why[~usable[1:]] = 4
+    why[lab[None] == np.arange(1, S + 1)[:, None, None]] = 1
+    reasons = np.zeros((S, H, W), np.uint8)
+    reasons[:, y0:y1, x0:x1] = np.where(reg[None], why, 0)
     label = np.full((H, W), -1, np.int16)
     label[roi] = np.where(reg, lab, -1)
     seams = np.zeros((H, W), bool)
@@ -351,7 +366,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     nos[roi] = no_src
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
-                     consensus_mode=mode, fields=fields, members=members)
+                     consensus_mode=mode, fields=fields, members=members, reasons=reasons)
 
 
-__all__ = ["Selection", "select_fill"]
+__all__ = ["REASONS", "Selection", "select_fill"]
