@@ -11,9 +11,9 @@ Public API::
 method as written in the paper is ``preset("paper")`` (``PAPER``).
 
 Layout (imports go one way down, ``tests/test_layers.py``): ``params``,
-``events``, ``errors``, ``io``, ``progress`` ← ``method/`` (the paper, Sec. 3)
-← ``refine/`` (the default's engineered steps) ← ``pipeline`` ←
-``evaluation/`` ← ``cli``.
+``events``, ``errors``, ``io`` (with ``video``, ``validity``), ``progress`` ←
+``method/`` (the paper, Sec. 3) ← ``refine/`` (the default's engineered steps)
+← ``pipeline`` ← ``evaluation/`` ← ``cli`` (with ``commands``).
 """
 
 from dynremove.errors import InputError

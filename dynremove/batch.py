@@ -40,6 +40,7 @@ from dynremove.errors import InputError
 from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
 from dynremove.pipeline import full_resolution_output, remove_dynamic
+from dynremove.video import auto_reference, blurry_reference_note
 
 OUTPUT_FILES = ("clean.png", "dynamic_mask.png", "coverage.png", "report.json")
 SUMMARY_FIELDS = ("set", "status", "n_images", "reference", "dynamic_fraction",
@@ -137,17 +138,17 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
 def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dict, list[str]]:
     """The reference index, how it was chosen (for the report) and notes.
 
-    ``ref`` is an index, a file name, ``"auto"`` (:func:`io.auto_reference`) or
+    ``ref`` is an index, a file name, ``"auto"`` (:func:`~dynremove.video.auto_reference`) or
     None (the middle image; a note suggests ``--ref auto`` when it is much
     blurrier than the others).
     """
     valid = getattr(iset, "valid", None)
     if isinstance(ref, str) and ref.strip().lower() == "auto":
-        i, note, info = io.auto_reference(iset.images, iset.names, valid)
+        i, note, info = auto_reference(iset.images, iset.names, valid)
         return i, {"chosen_by": "auto", **info}, [note]
     i = io.resolve_ref(ref, iset.names)
     if ref is None or ref == "":
-        note = io.blurry_reference_note(iset.images, i, iset.names, valid)
+        note = blurry_reference_note(iset.images, i, iset.names, valid)
         return i, {"chosen_by": "middle"}, [note] if note else []
     return i, {"chosen_by": "given"}, []
 

@@ -18,6 +18,8 @@ import cv2
 import numpy as np
 
 from dynremove.errors import InputError
+from dynremove.validity import content_mask, read_valid_masks
+from dynremove.video import read_video
 
 # Files with these suffixes are images (a file that then fails to decode is an
 # error); any other file is an image when OpenCV or Pillow recognise its content
@@ -30,8 +32,6 @@ MIN_MAX_SIDE = 16  # smallest --max-side accepted (dense flow needs a side of >=
 HEIF_BRANDS = {b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"mif1", b"msf1"}
 AVIF_BRANDS = {b"avif", b"avis"}
 HEIC_EXTRA = "pip install 'dynremove[heic]'"
-BORDER_MIN_FRACTION = 0.001  # black borders smaller than this (of the frame) are ignored
-VIDEO_FRAMES = 7  # frames taken from a video by default
 
 
 @dataclass
@@ -269,76 +269,10 @@ def _read_with_pillow(path: Path, head: bytes) -> np.ndarray:
     return np.ascontiguousarray(arr)
 
 
-def content_mask(img: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray | None:
-    """Where a frame has content: (H, W) bool, or None when it has content everywhere.
-
-    No content: alpha 0 anywhere, or exactly black (0, 0, 0, or alpha 0) in a
-    region connected to the frame's border -- the empty border that alignment
-    tools leave. Black borders smaller than ``BORDER_MIN_FRACTION`` of the frame
-    are ignored (a few clipped dark pixels are not a border).
-
-    Examples
-    --------
-    >>> im = np.full((5, 5, 3), 9, np.uint8); im[:, :2] = 0
-    >>> content_mask(im).sum(axis=1).tolist()
-    [3, 3, 3, 3, 3]
-    """
-    H, W = img.shape[:2]
-    empty = ~img.any(axis=2)
-    if alpha is not None:
-        empty |= alpha == 0
-    if not (empty[0].any() or empty[-1].any() or empty[:, 0].any() or empty[:, -1].any()):
-        border = np.zeros((H, W), bool)
-    else:
-        n, lab = cv2.connectedComponents(empty.astype(np.uint8), connectivity=4)
-        touch = np.unique(np.concatenate([lab[0], lab[-1], lab[:, 0], lab[:, -1]]))
-        touch = touch[touch > 0]
-        border = np.isin(lab, touch)
-    if border.sum() < BORDER_MIN_FRACTION * H * W:
-        border[:] = False
-    invalid = border if alpha is None else border | (alpha == 0)
-    return ~invalid if invalid.any() else None
-
-
 def _png_has_alpha(data: np.ndarray) -> bool:
     """PNG colour type 4 (grey + alpha) or 6 (RGBA), read from the IHDR chunk."""
     return (data.size > 25 and data[:8].tobytes() == b"\x89PNG\r\n\x1a\n"
             and data[12:16].tobytes() == b"IHDR" and int(data[25]) in (4, 6))
-
-
-def read_valid_masks(spec: str | os.PathLike, paths: Sequence[Path],
-                     sizes: Sequence[tuple[int, int]]) -> list[np.ndarray | None]:
-    """``--valid-mask``: one PNG for every image, or a folder of ``<image stem>.png``.
-
-    White (> 127) = content, black = no content. In a folder, an image without a
-    mask of its own has content everywhere. ``sizes`` are the images' (W, H).
-    """
-    p = Path(spec)
-    out: list[np.ndarray | None] = []
-    if p.is_dir():
-        for q, size in zip(paths, sizes):
-            m = p / (Path(q.name.split("#")[0]).stem + ".png")
-            out.append(_valid_mask_file(m, size) if m.is_file() else None)
-        if not any(m is not None for m in out):
-            raise InputError(f"--valid-mask {p}: holds no <image name>.png for any input "
-                             f"(e.g. {Path(paths[0].name).stem}.png)")
-        return out
-    if not p.is_file():
-        raise InputError(f"--valid-mask {p}: no such file or folder")
-    return [_valid_mask_file(p, size) for size in sizes]
-
-
-def _valid_mask_file(p: Path, size: tuple[int, int]) -> np.ndarray:
-    m = cv2.imdecode(np.fromfile(str(p), np.uint8), cv2.IMREAD_UNCHANGED) \
-        if p.stat().st_size else None
-    if m is None:
-        raise InputError(f"--valid-mask {p}: not a readable mask image")
-    if m.ndim == 3:
-        m = m[:, :, 3] if m.shape[2] == 4 else m.max(axis=2)
-    if (m.shape[1], m.shape[0]) != tuple(size):
-        raise InputError(f"--valid-mask {p}: is {m.shape[1]}x{m.shape[0]}, the image is "
-                         f"{size[0]}x{size[1]}")
-    return m > (127 if m.dtype == np.uint8 else 32767)
 
 
 def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = None,
@@ -406,176 +340,6 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
                              "the frame (alpha 0, black border or --valid-mask)")
     return ImageSet(paths=paths, images=images, original_size=(W0, H0), scale=scale,
                     notes=notes, valid=valids, video=video)
-
-
-# --- video --------------------------------------------------------------------------
-def parse_span(span: str | None, n_total: int) -> tuple[int, int]:
-    """``START:END`` frame numbers (END excluded; either may be empty) -> (start, end)."""
-    if not span:
-        return 0, n_total
-    a, sep, b = span.partition(":")
-    try:
-        start = int(a) if a.strip() else 0
-        end = int(b) if b.strip() else n_total
-    except ValueError:
-        start = end = -1
-    if not sep or start < 0 or end < 0:
-        raise InputError(f"--span {span}: expected START:END, frame numbers >= 0 "
-                         "(either may be empty)")
-    end = min(end, n_total)
-    if start >= end:
-        raise InputError(f"--span {span}: no frames (the clip has {n_total}: 0..{n_total - 1})")
-    return start, end
-
-
-def sharpness(img: np.ndarray, valid: np.ndarray | None = None) -> float:
-    """Variance of the Laplacian of the grey image (at most 640 px), over ``valid``."""
-    g = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-    f = min(1.0, 640.0 / max(g.shape))
-    if f < 1.0:
-        size = (max(1, round(g.shape[1] * f)), max(1, round(g.shape[0] * f)))
-        g = cv2.resize(g, size, interpolation=cv2.INTER_AREA)
-        if valid is not None:
-            valid = cv2.resize(valid.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
-    lap = cv2.Laplacian(g, cv2.CV_32F, ksize=3)
-    if valid is not None:
-        inner = cv2.erode(valid.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
-        lap = lap[inner] if inner.any() else lap
-    return float(lap.var())
-
-
-def read_video(path: str | os.PathLike, *, frames: int | None = None,
-               span: str | None = None, pick: str = "sharpest"
-               ) -> tuple[list[np.ndarray], list[int], list[str]]:
-    """Take ``frames`` frames (default 7) from a clip, one per even window of ``span``.
-
-    ``pick="sharpest"``: the frame of each window with the largest variance of the
-    Laplacian; ``"even"``: the window's centre. Returns images (BGR uint8), their
-    frame numbers (0-based) and notes. Read with OpenCV (FFmpeg) in one pass.
-    """
-    p = Path(path)
-    n_want = VIDEO_FRAMES if frames is None else int(frames)
-    if n_want < 2:
-        raise InputError(f"--frames {n_want}: need at least 2")
-    if pick not in ("sharpest", "even"):
-        raise InputError(f"--pick {pick}: expected 'sharpest' or 'even'")
-    cap = cv2.VideoCapture(str(p))
-    try:
-        if not cap.isOpened():
-            raise InputError(f"{p}: a video OpenCV cannot open (damaged, or a codec "
-                             "this OpenCV build lacks)")
-        n_total = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
-        if n_total <= 0:  # some containers do not say: count
-            n_total = 0
-            while cap.grab():
-                n_total += 1
-            cap.release()
-            cap = cv2.VideoCapture(str(p))
-        start, end = parse_span(span, n_total)
-        n = min(n_want, end - start)
-        if n < 2:
-            raise InputError(f"{p}: need at least 2 frames, the span has {end - start}")
-        notes = []
-        if n < n_want:
-            notes.append(f"{p.name}: only {n} frames in the span, all taken")
-        edges = [start + round(k * (end - start) / n) for k in range(n + 1)]
-        centres = [(edges[k] + edges[k + 1] - 1) // 2 for k in range(n)]
-        best: list[tuple[float, int, np.ndarray | None]] = [(-1.0, -1, None)] * n
-        if start:
-            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
-        i, k = start, 0
-        last = centres[-1] if pick == "even" else end - 1
-        while i <= last:
-            ok = cap.grab()
-            if not ok:
-                break
-            while k + 1 < n and i >= edges[k + 1]:
-                k += 1
-            if pick == "even":
-                if i == centres[k]:
-                    ok, fr = cap.retrieve()
-                    if ok:
-                        best[k] = (0.0, i, fr)
-            else:
-                ok, fr = cap.retrieve()
-                if ok:
-                    s = sharpness(fr)
-                    if s > best[k][0]:
-                        best[k] = (s, i, fr)
-            i += 1
-    finally:
-        cap.release()
-    got = [(idx, fr) for _, idx, fr in best if fr is not None]
-    if len(got) < 2:
-        raise InputError(f"{p}: could read {len(got)} frame(s) of the span "
-                         f"{start}:{end} (truncated or unsupported video)")
-    if len(got) < n:
-        notes.append(f"{p.name}: {n - len(got)} window(s) had no readable frame")
-    notes.append(f"{p.name}: {len(got)} frames of {n_total} taken ({pick}, span "
-                 f"{start}:{end}): " + ", ".join(str(idx) for idx, _ in got))
-    return [fr for _, fr in got], [idx for idx, _ in got], notes
-
-
-# --- the reference ------------------------------------------------------------------
-def keypoint_matches(images: Sequence[np.ndarray], *, max_side: int = 640,
-                     n_features: int = 1500) -> np.ndarray:
-    """(V, V) int: SIFT matches passing Lowe's ratio test (0.75) between every pair."""
-    sift = cv2.SIFT_create(nfeatures=n_features)
-    desc = []
-    for im in images:
-        g = cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)
-        f = min(1.0, max_side / max(g.shape))
-        if f < 1.0:
-            g = cv2.resize(g, None, fx=f, fy=f, interpolation=cv2.INTER_AREA)
-        desc.append(sift.detectAndCompute(g, None)[1])
-    V = len(images)
-    M = np.zeros((V, V), np.int64)
-    bf = cv2.BFMatcher(cv2.NORM_L2)
-    for i in range(V):
-        for j in range(i + 1, V):
-            if desc[i] is None or desc[j] is None or len(desc[i]) < 2 or len(desc[j]) < 2:
-                continue
-            pairs = bf.knnMatch(desc[i], desc[j], k=2)
-            M[i, j] = M[j, i] = sum(1 for m in pairs
-                                    if len(m) == 2 and m[0].distance < 0.75 * m[1].distance)
-    return M
-
-
-def auto_reference(images: Sequence[np.ndarray], names: Sequence[str],
-                   valid: Sequence[np.ndarray | None] | None = None
-                   ) -> tuple[int, str, dict]:
-    """``--ref auto``: the frame with the most keypoint matches among the sharp ones.
-
-    Sharp: variance of the Laplacian at least half the sharpest frame's. Returns
-    the index, a one-line note and the figures (for the report).
-    """
-    valid = list(valid) if valid else [None] * len(images)
-    sharp = [sharpness(im, v) for im, v in zip(images, valid)]
-    M = keypoint_matches(images)
-    matches = M.sum(axis=1)
-    cands = [i for i in range(len(images)) if sharp[i] >= 0.5 * max(sharp)]
-    best = max(cands, key=lambda i: (matches[i], sharp[i]))
-    mid = len(images) // 2
-    note = (f"--ref auto: {names[best]} (sharpness {sharp[best]:.0f}, {int(matches[best])} "
-            f"keypoint matches with the others; the middle frame {names[mid]}: "
-            f"{sharp[mid]:.0f}, {int(matches[mid])})")
-    info = {"sharpness": [round(s, 1) for s in sharp], "matches": matches.tolist()}
-    return best, note, info
-
-
-def blurry_reference_note(images: Sequence[np.ndarray], ref: int, names: Sequence[str],
-                          valid: Sequence[np.ndarray | None] | None = None,
-                          *, ratio: float = 0.5) -> str | None:
-    """A note suggesting ``--ref auto`` when the reference is much blurrier than the
-    others (variance of the Laplacian below ``ratio`` x the others' median)."""
-    valid = list(valid) if valid else [None] * len(images)
-    sharp = [sharpness(im, v) for im, v in zip(images, valid)]
-    others = [s for i, s in enumerate(sharp) if i != ref]
-    med = float(np.median(others)) if others else 0.0
-    if med <= 0 or sharp[ref] >= ratio * med:
-        return None
-    return (f"the reference {names[ref]} is much blurrier than the others (variance of "
-            f"the Laplacian {sharp[ref]:.0f} vs a median of {med:.0f}): try --ref auto")
 
 
 def resolve_ref(ref: str | int | None, names: Sequence[str]) -> int:

@@ -202,7 +202,8 @@ def test_unreadable_file_in_the_set(tmp_path, capsys, scene, kind):
 def test_corrupt_jpeg_body_does_not_crash(tmp_path, capsys, scene):
     """Damage inside the entropy-coded data decodes (libjpeg fills in); no traceback.
 
-    Questionable but documented: such a file is accepted (exit 0) or refused (exit 2)."""
+    The file decodes, so it is an image like any other: accepted (exit 0), the run
+    goes on (a damaged view may get a note, e.g. too few keypoint matches)."""
     paths = write_set(tmp_path / "s", scene.images[:3])
     b = bytearray(jpeg_bytes(scene.images[3]))
     mid = len(b) // 2
@@ -212,10 +213,7 @@ def test_corrupt_jpeg_body_does_not_crash(tmp_path, capsys, scene):
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, *paths, bad, "--out", out, *FAST)
     assert "Traceback" not in err
-    if rc == 2:
-        assert_input_error(rc, err, "corrupt.jpg", out=out)
-    else:
-        assert_ok_run(rc, err, out)
+    assert_ok_run(rc, err, out)
 
 
 def test_folder_in_a_list_of_files(tmp_path, capsys, scene):
@@ -423,18 +421,18 @@ def test_identical_images_cli(tmp_path, capsys):
 
 
 def test_textureless_scene(tmp_path, capsys):
-    """Flat grey: a clear error (exit 2) or a fallback with a note (exit 0), never a crash."""
+    """Flat grey: a fallback with a note (exit 0, nothing dynamic), never a crash.
+
+    Valid input with nothing to match: the epipolar terms are off (a note says so)
+    and nothing is flagged, so it is not an input error."""
     d = tmp_path / "flat"
     write_set(d, [np.full((H, W, 3), 128, np.uint8)] * 4)
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, d, "--out", out)
     assert "Traceback" not in err
-    if rc == 2:
-        assert_input_error(rc, err, out=out)
-    else:
-        assert_ok_run(rc, err, out)
-        assert notes_of(err), "a texture-less scene must come with a note"
-        assert not cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE).any()
+    assert_ok_run(rc, err, out)
+    assert notes_of(err), "a texture-less scene must come with a note"
+    assert not cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE).any()
 
 
 # --- output folder and parameters ------------------------------------------------------
@@ -526,12 +524,12 @@ def test_cli_bad_flags_exit_2_and_leave_no_folder(tmp_path, capsys):
 
 
 def test_cli_other_exceptions_are_internal_errors(tmp_path, monkeypatch, capsys):
-    import dynremove.cli as cli
+    import dynremove.commands as commands
 
     def broken(*a, **k):
         raise ValueError("a bug, not the user's input")
 
-    monkeypatch.setattr(cli, "remove_dynamic", broken)
+    monkeypatch.setattr(commands, "remove_dynamic", broken)
     monkeypatch.delenv("DYNREMOVE_DEBUG", raising=False)
     assert main(["demo", "--no-record", "--quiet", "--out", str(tmp_path / "d")]) == 1
     err = capsys.readouterr().err

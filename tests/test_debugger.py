@@ -28,6 +28,7 @@ from dynremove.errors import InputError  # noqa: E402
 from dynremove.evaluation import synth  # noqa: E402
 from viewer import RerunSink  # noqa: E402
 from viewer import inspect as vi  # noqa: E402
+from viewer import verdict as vd  # noqa: E402
 from viewer import paths as P  # noqa: E402
 from viewer._images import REASON_NAMES, visit_step  # noqa: E402
 
@@ -122,7 +123,7 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
         assert sc["overwritten_before"] == _naive_overwritten(mem, sc["scan"], x, y, half,
                                                               Hh, Ww)
     assert h["final_dynamic"] is bool(L[y, x]) and h["gt"] is bool(gt[y, x])
-    verdict = vi.verdict_lines(h)
+    verdict = vd.verdict_lines(h)
     assert 1 <= len(verdict) <= 5
     words = " ".join(verdict)
     assert "t_r" in words and ("FALSE NEGATIVE" if kind == "FN" else "FALSE POSITIVE") in words
@@ -131,7 +132,7 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
         assert f"{m0:.2f}" in words
     if h["scans"][0]["overwritten_before"]:
         assert f"overwritten by {h['scans'][0]['overwritten_before']} neighbouring" in words
-    text = vi.format_pixel_history(h)
+    text = vd.format_pixel_history(h)
     assert len(text.splitlines()) <= 30
     assert text.splitlines()[0].startswith(f"pixel ({x}, {y}): ")
     if kind == "FP":  # dynamic decisions are always recorded: the cluster is told
@@ -146,7 +147,7 @@ def test_the_fill_is_told(method_run):
     if len(xs):
         h = vi.pixel_history(method_run["path"], int(xs[0]), int(ys[0]))
         k = int(sel["source"][ys[0], xs[0]])
-        assert f"filled from source {h['source_names'][k - 1]}" in " ".join(vi.verdict_lines(h))
+        assert f"filled from source {h['source_names'][k - 1]}" in " ".join(vd.verdict_lines(h))
 
 
 def test_pixel_outside_the_image(fabricated, capsys):
@@ -272,7 +273,7 @@ def test_failures_print_steps_to_jump_to(fabricated):
     assert items and all(len(e["steps"]) == 3 for e in items)
     x, y = items[0]["pixel"]
     assert items[0]["steps"][1] == visit_step(1, x, y, H, W)
-    assert "steps " in vi.format_failures(items)
+    assert "steps " in vd.format_failures(items)
 
 
 def test_web_prints_one_url_and_binds_loopback(fabricated, tmp_path, capsys):

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dynremove import io
+from dynremove import io, validity, video
 from dynremove.cli import main
 from dynremove.errors import InputError
 from dynremove.evaluation import synth
@@ -149,14 +149,14 @@ def test_video_pick_even_and_span(tmp_path, scene):
     frames = [cv2.resize(scene.images[i % 5], (96, 72)) for i in range(20)]
     clip = tmp_path / "c.avi"
     write_clip(clip, frames)
-    imgs, idx, notes = io.read_video(clip, frames=4, span="4:16", pick="even")
+    imgs, idx, notes = video.read_video(clip, frames=4, span="4:16", pick="even")
     assert idx == [5, 8, 11, 14] and len(imgs) == 4
     # sharpest: a blurred frame is never taken when its window has a sharp one
     frames = [scene.images[i % 5] if i % 2 else cv2.GaussianBlur(scene.images[i % 5],
                                                                   (0, 0), 3)
               for i in range(12)]
     write_clip(clip, frames)
-    _, idx, _ = io.read_video(clip, frames=4)
+    _, idx, _ = video.read_video(clip, frames=4)
     assert all(i % 2 == 1 for i in idx), idx
 
 
@@ -194,16 +194,16 @@ def test_content_mask_finds_borders_not_dark_holes():
     im = np.full((40, 50, 3), 90, np.uint8)
     im[:, :6] = 0  # border band
     im[15:20, 20:25] = 0  # black inside: content (a dark object)
-    v = io.content_mask(im)
+    v = validity.content_mask(im)
     assert not v[:, :6].any() and v[:, 6:].all()
     alpha = np.full((40, 50), 255, np.uint8)
     alpha[30:35, 30:35] = 0  # transparent anywhere: no content
-    v = io.content_mask(np.full_like(im, 90), alpha)
+    v = validity.content_mask(np.full_like(im, 90), alpha)
     assert (~v).sum() == 25
-    assert io.content_mask(np.full_like(im, 90)) is None
+    assert validity.content_mask(np.full_like(im, 90)) is None
     tiny = np.full((100, 100, 3), 90, np.uint8)
     tiny[0, :5] = 0  # 5 px < 0.1 %: a few clipped pixels are not a border
-    assert io.content_mask(tiny) is None
+    assert validity.content_mask(tiny) is None
 
 
 def prealigned(scene, band: int = 14):

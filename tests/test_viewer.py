@@ -21,6 +21,7 @@ from dynremove import events as ev  # noqa: E402
 from viewer import RerunSink, make_blueprint, make_compare_blueprint  # noqa: E402
 from viewer import export, serve  # noqa: E402
 from viewer import inspect as vi  # noqa: E402
+from viewer import verdict as vd  # noqa: E402
 from viewer import paths as P  # noqa: E402
 
 H, W, S = 48, 64, 3
@@ -156,7 +157,7 @@ def test_pixel_history_of_dynamic_pixel(run):
     assert h["replacements"] and h["replacements"][0]["step"] == int(dyn["step"])
     assert len(h["updates"]) == S * len(h["replacements"])
     assert h["final_dynamic"] is True
-    text = vi.format_pixel_history(h)
+    text = vd.format_pixel_history(h)
     assert f"step {int(dyn['step'])}" in text and "→ DYNAMIC" in text
     assert "replaced by the patch of" in text and "winner cluster" in text
     assert text.splitlines()[0].startswith(f"pixel ({x}, {y}): dynamic in scan 0")
@@ -166,9 +167,9 @@ def test_pixel_history_of_probe(run):
     h = vi.pixel_history(run["path"], 10, 7)
     assert len(h["decisions"]) == 3  # one per scan
     assert all("probe" in e["why"] and not e["dynamic"] for e in h["decisions"])
-    assert "static" in vi.format_pixel_history(h)
+    assert "static" in vd.format_pixel_history(h)
     empty = vi.pixel_history(run["path"], 0, 1)
-    text = vi.format_pixel_history(empty)  # never recorded: answered from the scan maps
+    text = vd.format_pixel_history(empty)  # never recorded: answered from the scan maps
     assert "not recorded at this pixel" in text and "--probe 0,1" in text
     assert text.splitlines()[0].startswith("pixel (0, 1): static in every scan")
 
@@ -181,7 +182,7 @@ def test_failures_against_ground_truth(run):
     for e in items:
         x, y = e["pixel"]
         assert L[y, x] == (e["kind"] == "FP") and gt[y, x] == (e["kind"] == "FN")
-    assert "FP" in vi.format_failures(items)
+    assert "FP" in vd.format_failures(items)
 
 
 # -- robustness ----------------------------------------------------------------------
@@ -300,45 +301,48 @@ def test_export_gif_and_mp4(run, tmp_path):
     assert data[:6] == b"GIF89a" and data[-1:] == b";"
     frames = export.render_frames(run["path"], max_side=200)
     assert len(frames) >= 3 and max(frames[0].shape[:2]) <= 200
-    if hasattr(cv2, "imreadanimation"):
-        ok, anim = cv2.imreadanimation(str(gif))
-        assert ok and len(anim.frames) == len(frames)
-        err = np.abs(anim.frames[-1][..., :3].astype(int) - frames[-1]).mean()
-        assert err < 12  # palette quantization only
+    decoded = gif_frames(gif)
+    assert len(decoded) == len(frames)
+    err = np.abs(decoded[-1].astype(int) - frames[-1]).mean()
+    assert err < 12  # palette quantization only
     mp4 = export.export_gif(run["path"], tmp_path / "removal.mp4", fps=5, max_side=200)
     cap = cv2.VideoCapture(str(mp4))
     assert cap.isOpened() and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(frames)
     cap.release()
 
 
-def test_gif_is_lossless_on_palette_images(tmp_path):
-    import cv2
+def gif_frames(path) -> list[np.ndarray]:
+    """Every frame of a GIF as (H, W, 3) uint8 BGR, decoded by Pillow (a declared
+    dependency; not every OpenCV build reads GIF animations)."""
+    from PIL import Image, ImageSequence
 
-    if not hasattr(cv2, "imreadanimation"):
-        pytest.skip("this OpenCV has no GIF decoder")
+    with Image.open(path) as im:
+        return [np.ascontiguousarray(np.asarray(f.convert("RGB"))[..., ::-1])
+                for f in ImageSequence.Iterator(im)]
+
+
+def test_gif_is_lossless_on_palette_images(tmp_path):
     rng = np.random.default_rng(0)
     colours = rng.integers(0, 256, (200, 3), dtype=np.uint8)
     frames = [colours[rng.integers(0, 200, (130, 170))] for _ in range(3)]
     export.write_gif(frames, tmp_path / "noise.gif")
-    ok, anim = cv2.imreadanimation(str(tmp_path / "noise.gif"))
-    assert ok and len(anim.frames) == len(frames)
-    for f, g in zip(frames, anim.frames):
-        np.testing.assert_array_equal(g[..., :3], f)
+    decoded = gif_frames(tmp_path / "noise.gif")
+    assert len(decoded) == len(frames)
+    for f, g in zip(frames, decoded):
+        np.testing.assert_array_equal(g, f)
 
 
 def test_gif_of_many_colours_is_close(tmp_path):
     import cv2
 
-    if not hasattr(cv2, "imreadanimation"):
-        pytest.skip("this OpenCV has no GIF decoder")
     rng = np.random.default_rng(1)
     base = cv2.GaussianBlur(rng.integers(0, 256, (120, 160, 3), dtype=np.uint8), (0, 0), 3)
     frames = [np.roll(base, 7 * k, axis=1) for k in range(3)]
     export.write_gif(frames, tmp_path / "smooth.gif", fps=4)
-    ok, anim = cv2.imreadanimation(str(tmp_path / "smooth.gif"))
-    assert ok and len(anim.frames) == len(frames)
-    for f, g in zip(frames, anim.frames):
-        assert np.abs(g[..., :3].astype(int) - f).mean() < 6  # palette quantization only
+    decoded = gif_frames(tmp_path / "smooth.gif")
+    assert len(decoded) == len(frames)
+    for f, g in zip(frames, decoded):
+        assert np.abs(g.astype(int) - f).mean() < 6  # palette quantization only
 
 
 def test_web_url_and_command():

@@ -17,6 +17,7 @@ from dynremove.cli import main  # noqa: E402
 from dynremove.events import replay_replacements  # noqa: E402
 from viewer import RerunSink, serve  # noqa: E402
 from viewer import inspect as vi  # noqa: E402
+from viewer import verdict as vd  # noqa: E402
 
 
 class Tee:
@@ -66,7 +67,7 @@ def test_recording_replays_and_counts(scene, tmp_path, name):
     x, y = map(int, np.argwhere(res.dynamic)[0][::-1]) if res.dynamic.any() else (0, 0)
     hist = vi.pixel_history(path, x, y)
     assert hist["stages"] == {k: bool(v[y, x]) for k, v in res.stages.items()}
-    assert "L after each step: scan" in vi.format_pixel_history(hist)
+    assert "L after each step: scan" in vd.format_pixel_history(hist)
     # results do not depend on the sink
     null = remove_dynamic(scene.images, ref=scene.ref_index, params=params, sink=NullSink())
     np.testing.assert_array_equal(null.clean, res.clean)

@@ -24,8 +24,9 @@ import pytest
 
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.evaluate import SCORE_KEYS, find_sets, format_table, run_eval
-from dynremove.evaluation.metrics import (damage_percent, delta_e76, leftover_percent, psnr,
-                                          psnr_in_mask, ssim, ssim_in_mask)
+from dynremove.evaluation.metrics import psnr_in_mask, ssim_in_mask
+from dynremove.evaluation.whole_photo import (damage_percent, delta_e76, leftover_percent, psnr,
+                                              ssim)
 
 N = 200
 BG = (120, 130, 140)

@@ -85,8 +85,8 @@ from joblib import Parallel, delayed
 from dynremove import io
 from dynremove.errors import InputError
 from dynremove.evaluation import baselines
-from dynremove.evaluation.metrics import (damage_percent, jaccard, leftover_percent, psnr,
-                                          psnr_in_mask, ssim, ssim_in_mask)
+from dynremove.evaluation.metrics import jaccard, psnr_in_mask, ssim_in_mask
+from dynremove.evaluation.whole_photo import damage_percent, leftover_percent, psnr, ssim
 from dynremove.params import Params, preset
 from dynremove.pipeline import remove_dynamic
 

@@ -1,0 +1,365 @@
+"""The sub-commands of ``dynremove``: ``cmd_<name>(args) -> exit code``, one per command.
+
+``dynremove.cli`` builds the parser and dispatches here. ``viewer`` (Rerun) is
+imported lazily, only by the commands and options that need it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dynremove import io
+from dynremove.method.scan import _kernels
+from dynremove.batch import at_output_size, choose_reference, write_outputs
+from dynremove.errors import InputError
+from dynremove.evaluation import composite, synth
+from dynremove.evaluation.bench import run_bench
+from dynremove.evaluation.evaluate import format_ablation, format_table, run_ablation, run_eval
+from dynremove.evaluation.metrics import jaccard, psnr_in_mask
+from dynremove.params import PRESETS, Params, preset
+from dynremove.pipeline import remove_dynamic
+from dynremove.progress import ProgressBar
+
+EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread between chunks of work."""
+
+
+# --- parameters as flags -------------------------------------------------------------
+def params_from_args(args: argparse.Namespace) -> Params:
+    """The preset named by ``--preset`` with the flags' changes; InputError if rejected."""
+    base = preset(args.preset)
+    changes = {k[2:]: v for k, v in vars(args).items() if k.startswith("p_") and v is not None}
+    try:
+        return dataclasses.replace(base, **changes) if changes else base
+    except (TypeError, ValueError) as e:  # Params.__post_init__ validates the values
+        raise InputError(str(e)) from None
+
+
+# --- commands -----------------------------------------------------------------------------
+def cmd_run(args: argparse.Namespace) -> int:
+    params = params_from_args(args)
+    created = not Path(args.out).exists()
+    out = io.prepare_out_dir(args.out)
+    try:
+        return _run(args, params, out)
+    except BaseException:
+        if created:  # bad input or interrupted: leave no empty folder behind
+            try:
+                out.rmdir()  # only if still empty
+            except OSError:
+                pass
+        raise
+
+
+def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
+    t0 = time.perf_counter()
+    iset = io.load_image_set(args.images, max_side=args.max_side,
+                             valid_mask=args.valid_mask, frames=args.frames, span=args.span,
+                             pick=args.pick)
+    ref, ref_info, ref_notes = choose_reference(args.ref, iset)
+    iset.notes.extend(ref_notes)
+    t_load = time.perf_counter() - t0
+    for n in iset.notes:
+        _note(args, n)
+    gt = None
+    if args.gt:
+        H, W = iset.images[0].shape[:2]
+        gt = io.read_mask(args.gt, (W, H))
+    compare = parse_compare(args.compare, params) if args.compare else None
+    if compare is not None and not args.record:
+        raise InputError("--compare needs --record FILE.rrd (the two runs go into one recording)")
+    rec = None
+    if compare is not None:
+        from viewer.sink import open_compare_stream
+
+        rec = open_compare_stream(args.record, [n for i, n in enumerate(iset.names) if i != ref],
+                                  roots=["runs/main", "runs/compare"])
+    sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
+    sink_b = None
+    bar = _bar(args)
+    _note_compile(args)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = remove_dynamic(iset.images, ref=ref, params=params, sink=sink,
+                                 probes=args.probe or (), sample_static=args.sample_static,
+                                 names=iset.names, preset_name=args.preset, progress=bar,
+                                 valid_masks=iset.valid_masks)
+            if compare is not None:
+                sink_b = _make_sink(args, iset, gt, rec=rec, root="runs/compare")
+                res_b = remove_dynamic(iset.images, ref=ref, params=compare, sink=sink_b,
+                                       probes=args.probe or (),
+                                       sample_static=args.sample_static, names=iset.names,
+                                       preset_name="compare", progress=bar,
+                                       valid_masks=iset.valid_masks)
+                _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic "
+                     f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
+        for w in caught:
+            _note(args, str(w.message))
+    except (KeyboardInterrupt, Terminated):
+        # the sink (viewer.RerunSink) logs "interrupted at scan S, step N" when it can
+        for sk in (sink, sink_b):
+            if hasattr(sk, "interrupted"):
+                sk.interrupted()
+        raise
+    finally:
+        bar.close()
+        if hasattr(sink, "close"):
+            sink.close()
+        if rec is not None:
+            rec.flush()
+            rec.disconnect()
+    res.timings["load"] = t_load
+    res = at_output_size(res, iset, args.output_size)
+    if gt is not None and gt.shape != res.dynamic.shape:
+        gt = io.read_mask(args.gt, res.dynamic.shape[::-1])
+    write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
+                  record=args.record, reference=ref_info)
+    _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
+         + (f" and {args.record}" if args.record else "")
+         + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, "
+         f"{res.timings['total'] + t_load:.1f} s)")
+    return EXIT_OK
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    params = params_from_args(args)
+    if args.scene_seed < 0:
+        raise InputError(f"--scene-seed must be >= 0, got {args.scene_seed}")
+    out = io.prepare_out_dir(args.out)
+    scene = synth.make_scene(seed=args.scene_seed, n_views=6, size=(360, 640))
+    synth.write_scene(scene, out / "scene")
+    iset = io.ImageSet(paths=[out / "scene" / "frames" / n for n in scene.names],
+                       images=list(scene.images), original_size=(640, 360), scale=1.0)
+    gt = scene.masks[scene.ref_index]
+    record = None if args.no_record else args.record
+    if record:
+        args.record = record
+        args.record_every_rows = None
+    sink = _make_sink(args, iset, gt, gt_background=scene.background) if record else None
+    bar = _bar(args)
+    _note_compile(args)
+    try:
+        res = remove_dynamic(scene.images, ref=scene.ref_index, params=params, sink=sink,
+                             names=scene.names, preset_name=args.preset, progress=bar)
+    finally:
+        bar.close()
+        if sink is not None and hasattr(sink, "close"):
+            sink.close()
+    write_outputs(out, res, iset=iset, ref=scene.ref_index, preset_name=args.preset, gt=gt,
+                  record=record)
+    io.write_image(out / "gt_mask.png", gt.astype(np.uint8) * 255)
+    io.write_image(out / "gt_background.png", scene.background)
+    J = jaccard(res.dynamic, gt)
+    psnr = psnr_in_mask(res.clean, scene.background, gt)
+    psnr_in = psnr_in_mask(scene.images[scene.ref_index], scene.background, gt)
+    print(f"demo: synthetic scene seed {args.scene_seed}, {len(scene.images)} views "
+          f"{scene.images[0].shape[1]}x{scene.images[0].shape[0]}, reference {scene.ref_index}")
+    print(f"  Jaccard (dynamic mask vs truth):   {J:.3f}")
+    print(f"  PSNR inside the true mask:         {psnr:.2f} dB (input reference: {psnr_in:.2f} dB)")
+    print(f"  time: {res.timings['total']:.1f} s  -> {out}/" + (f" and {record}" if record else ""))
+    return EXIT_OK
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    try:
+        W, H = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise InputError(f"--size must be WxH, got {args.size!r}") from None
+    if W < 64 or H < 48 or args.views < 2:
+        raise InputError(f"bench needs --size of at least 64x48 and --views >= 2, got "
+                         f"{args.size} and {args.views}")
+    from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
+
+    run_bench(params=params_from_args(args), preset_name=args.preset, size=(W, H),
+              views=args.views, repeat=args.repeat, reference=not args.no_reference,
+              json_path=args.json or None, quiet=args.quiet,
+              recording_sink=lambda path, gt: RerunSink(path, gt_mask=gt))
+    return EXIT_OK
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    params = params_from_args(args)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if not methods:
+        raise InputError("--methods: empty list")
+    if args.json:
+        out = Path(args.json)
+        if out.is_dir():
+            raise InputError(f"--json {out}: is a folder")
+    progress = not args.quiet
+    if args.ablation:
+        names = [n.strip() for n in (args.variants or "").split(",") if n.strip()] or None
+        report = run_ablation(args.data_dir, base=params, names=names, sets=args.sets,
+                              jobs=args.jobs, max_side=args.max_side, ref=args.ref,
+                              progress=progress, preset_name=args.preset)
+        print(format_ablation(report))
+    else:
+        report = run_eval(args.data_dir, sets=args.sets, params=params,
+                          preset_name=args.preset, methods=methods, jobs=args.jobs,
+                          max_side=args.max_side, ref=args.ref, progress=progress)
+        print(format_table(report))
+    n_sets = len({r["set"] for r in report["sets"]})
+    print(f"{n_sets} sets, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
+          + (f" -> {args.json}" if args.json else ""))
+    if args.json:
+        io.write_json(args.json, report)
+    return EXIT_OK
+
+
+def cmd_composite(args: argparse.Namespace) -> int:
+    if args.n_sets:
+        outs = composite.make_composites(args.static_dir, args.objects_dir, args.out,
+                                         n_sets=args.n_sets, seed=args.seed,
+                                         n_views=args.n_views, n_objects=args.objects)
+        for o in outs:
+            print(o)
+        print(f"wrote {len(outs)} composite sets under {args.out}")
+    else:
+        info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
+                                        seed=args.seed, n_views=args.n_views,
+                                        n_objects=args.objects)
+        print(f"wrote {args.out}: {info['n_views']} views {info['size'][0]}x"
+              f"{info['size'][1]}, objects "
+              + ", ".join(o["set"] for o in info["objects"])
+              + f", reference mask {100 * info['ref_mask_fraction']:.1f} %")
+    return EXIT_OK
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from dynremove.batch import run_batch, stderr_progress
+
+    params = params_from_args(args)
+    s = run_batch(args.root, args.out, params=params, preset_name=args.preset,
+                  jobs=args.jobs, max_side=args.max_side, ref=args.ref, frames=args.frames,
+                  span=args.span, pick=args.pick, scheduler=args.scheduler,
+                  on_done=None if args.quiet else stderr_progress)
+    print(f"{len(s['sets'])} sets: {s['n_ok']} done, {s['n_skipped']} skipped (already "
+          f"done), {s['n_failed']} failed; wall {s['wall_s']:.1f} s -> {args.out}/summary.csv")
+    for r in s["sets"]:
+        if r["status"] == "error":
+            print(f"dynremove: error: {r['set']}: {r['error']}", file=sys.stderr)
+    return EXIT_INTERNAL if s["n_failed"] else EXIT_OK
+
+
+# --- commands that read recordings (viewer, imported lazily: it needs Rerun) -------------
+def _recording(path: str) -> Path:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: no such recording")
+    return p
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    from viewer.serve import view
+
+    proc = view(_recording(args.recording), web=args.web, port=args.port,
+                web_port=args.web_port)
+    if proc.returncode is not None and proc.returncode > 0:
+        print(f"dynremove: the viewer exited with code {proc.returncode}; without a "
+              "display, try --web", file=sys.stderr)
+        return EXIT_INTERNAL
+    return EXIT_OK
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from viewer import inspect as ins
+    from viewer import verdict as vd
+
+    path = _recording(args.recording)
+    if args.pixel is None and not args.failures:
+        raise InputError("inspect: give --pixel X,Y or --failures")
+    if args.pixel is not None:
+        x, y = args.pixel
+        print(vd.format_pixel_history(ins.pixel_history(path, x, y, root=args.root)))
+    if args.failures:
+        print(vd.format_failures(ins.failures(path, top=args.top, root=args.root)))
+    return EXIT_OK
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from viewer.export import export_gif
+
+    if Path(args.out).suffix.lower() not in (".gif", ".mp4"):
+        raise InputError(f"export: {args.out} must end in .gif or .mp4")
+    out = export_gif(_recording(args.recording), args.out, fps=args.fps,
+                     max_side=args.max_side, root=args.root)
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
+# --- sinks and messages -------------------------------------------------------------------
+def parse_compare(spec: str, base: Params) -> Params:
+    """``--compare``: a preset name, or ``field=value,...`` changes to the run's params."""
+    if spec in PRESETS:
+        return preset(spec)
+    changes: dict[str, Any] = {}
+    types = {f.name: f.type for f in dataclasses.fields(Params)}
+    for item in spec.split(","):
+        key, _, val = item.partition("=")
+        key = key.strip().replace("-", "_")
+        if key not in types or not _:
+            raise InputError(f"--compare {spec!r}: expected a preset ({', '.join(PRESETS)}) "
+                             f"or field=value pairs of Params, got {item!r}")
+        t = str(types[key])
+        try:
+            changes[key] = (val.lower() in ("1", "true", "yes", "on") if t == "bool" else
+                            int(val) if t == "int" else float(val) if t == "float" else val)
+        except ValueError:
+            raise InputError(f"--compare {spec!r}: {key} takes a {t}, got {val!r}") from None
+    try:
+        return dataclasses.replace(base, **changes)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"--compare {spec!r}: {e}") from None
+
+
+def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
+               gt_background: np.ndarray | None = None, rec: Any = None, root: str = ""):
+    if not getattr(args, "record", None):
+        return None
+    from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
+
+    Path(args.record).parent.mkdir(parents=True, exist_ok=True)
+    return RerunSink(None if rec is not None else args.record,
+                     record_every_rows=getattr(args, "record_every_rows", None),
+                     gt_mask=gt, gt_background=gt_background, rec=rec, root=root)
+
+
+def _bar(args: argparse.Namespace):
+    return ProgressBar(enabled=not getattr(args, "quiet", False))
+
+
+def _note(args: argparse.Namespace, msg: str) -> None:
+    if not getattr(args, "quiet", False):
+        print(f"dynremove: note: {msg}", file=sys.stderr)
+
+
+def kernels_cached() -> bool:
+    """Whether numba's on-disk cache of the scan kernels is newer than their source."""
+    src = Path(_kernels.__file__)
+    cache = list((src.parent / "__pycache__").glob(src.stem + ".*.nbi"))
+    return bool(cache) and max(c.stat().st_mtime for c in cache) >= src.stat().st_mtime
+
+
+def _note_compile(args: argparse.Namespace) -> None:
+    """Say so when this run will compile the kernels (a fresh install: ~35 s, once)."""
+    if not kernels_cached():
+        _note(args, "compiling the scan kernels (once per install, about 30-60 s; later "
+                    "runs reuse numba's cache)")
+
+
+def _say(args: argparse.Namespace, msg: str) -> None:
+    if not getattr(args, "quiet", False):
+        print(msg)
+

@@ -1,0 +1,359 @@
+"""Whole-photo measures: what a removal did to the whole image, not just the mover.
+
+PSNR / SSIM of the whole image, :func:`delta_e76` (CIE76 colour difference),
+:func:`damage_percent` (good pixels the method broke) and
+:func:`leftover_percent` (mover pixels it could have removed but did not).
+Pure functions on plain arrays, like :mod:`dynremove.evaluation.metrics`
+(masks ``(H, W)`` indexed ``[y, x]``, images ``(H, W)`` or ``(H, W, C)``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from dynremove.evaluation.metrics import _as_mask, _check_same_shape, psnr_in_mask, ssim_in_mask
+
+__all__ = [
+    "psnr",
+    "ssim",
+    "delta_e76",
+    "damage_percent",
+    "leftover_percent",
+    "DAMAGE_DILATE_PX",
+    "DE_MAX",
+    "DE_BLUR_SIGMA",
+]
+
+#: Guard band (pixels) around the true mask excluded from :func:`damage_percent`.
+DAMAGE_DILATE_PX: int = 5
+#: CIE76 colour difference above which a pixel is "wrong" (L in 0..100).
+DE_MAX: float = 10.0
+#: Gaussian blur (pixels) applied to both images before the colour comparison.
+DE_BLUR_SIGMA: float = 1.0
+def psnr(img: npt.ArrayLike, ref: npt.ArrayLike, *, data_range: float = 255) -> float:
+    """Peak signal-to-noise ratio over the whole image.
+
+    Same as :func:`psnr_in_mask` with an all-true mask.
+
+    Parameters
+    ----------
+    img : (H, W) or (H, W, C) ndarray
+        Image to evaluate (e.g. the cleaned reference).
+    ref : (H, W) or (H, W, C) ndarray
+        Ground truth (e.g. the true background), same shape as ``img``.
+    data_range : float, optional
+        Peak value ``L`` (255 for 8-bit images).
+
+    Returns
+    -------
+    psnr : float
+        PSNR in dB over every pixel and channel; ``inf`` for identical images.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> ref = np.full((4, 4), 100, np.uint8)
+    >>> round(psnr(ref + np.uint8(10), ref), 4)
+    28.1308
+    """
+    a = np.asarray(img)
+    return psnr_in_mask(a, ref, np.ones(a.shape[:2], bool), data_range=data_range)
+
+
+def ssim(img: npt.ArrayLike, ref: npt.ArrayLike, *, data_range: float = 255) -> float:
+    """Mean SSIM over the whole image (colour: per channel, then averaged).
+
+    Same as :func:`ssim_in_mask` with an all-true mask.
+
+    Parameters
+    ----------
+    img : (H, W) or (H, W, C) ndarray
+        Image to evaluate.
+    ref : (H, W) or (H, W, C) ndarray
+        Ground truth, same shape as ``img``.
+    data_range : float, optional
+        Dynamic range ``L`` of the images (255 for 8-bit).
+
+    Returns
+    -------
+    ssim : float
+        Mean SSIM in ``[-1, 1]``; ``1.0`` for identical images.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> a = np.full((5, 5), 100.0)
+    >>> ssim(a, a)
+    1.0
+    """
+    a = np.asarray(img)
+    return ssim_in_mask(a, ref, np.ones(a.shape[:2], bool), data_range=data_range)
+
+
+def _bgr(img: npt.ArrayLike, name: str) -> np.ndarray:
+    a = np.asarray(img)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"{name} must be an (H, W, 3) BGR image, got shape {a.shape}")
+    if not np.issubdtype(a.dtype, np.number):
+        raise ValueError(f"{name} must be numeric, got {a.dtype}")
+    a = a.astype(np.float32)
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} must be finite (found NaN/inf)")
+    return a
+
+
+def _lab(img: np.ndarray, blur_sigma: float) -> np.ndarray:
+    """Blurred float32 BGR (0..255) -> Lab with L in 0..100."""
+    x = img / np.float32(255.0)
+    if blur_sigma > 0:
+        x = cv2.GaussianBlur(x, (0, 0), float(blur_sigma), sigmaY=float(blur_sigma),
+                             borderType=cv2.BORDER_REFLECT_101)
+    return cv2.cvtColor(x, cv2.COLOR_BGR2Lab)
+
+
+def _check_sigma(blur_sigma: float) -> float:
+    s = float(blur_sigma)
+    if not (math.isfinite(s) and s >= 0):
+        raise ValueError(f"blur_sigma must be a finite number >= 0, got {blur_sigma}")
+    return s
+
+
+def delta_e76(a: npt.ArrayLike, b: npt.ArrayLike, *,
+              blur_sigma: float = DE_BLUR_SIGMA) -> npt.NDArray[np.float32]:
+    """Per-pixel CIE76 colour difference of two BGR images, after a light blur.
+
+    Both images are scaled to ``[0, 1]`` (``float32 / 255``), blurred with a
+    Gaussian of standard deviation ``blur_sigma`` pixels (``cv2.GaussianBlur``,
+    borders reflected; no blur when 0), converted with
+    ``cv2.cvtColor(..., cv2.COLOR_BGR2Lab)`` (L in 0..100, a and b about
+    -127..127) and compared as ``||Lab_a - Lab_b||_2``. The blur makes the
+    measure tolerant of sub-pixel misalignment and noise.
+
+    Parameters
+    ----------
+    a, b : (H, W, 3) ndarray
+        BGR images with values in 0..255 (uint8 or float), same shape.
+    blur_sigma : float, optional
+        Gaussian sigma in pixels (default 1).
+
+    Returns
+    -------
+    de : (H, W) float32 ndarray
+        ΔE*ab (CIE76), 0 where the (blurred) colours agree; ~2.3 is a just
+        noticeable difference.
+
+    Raises
+    ------
+    ValueError
+        On non-colour images, mismatched shapes, non-finite values or a negative
+        ``blur_sigma``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> a = np.zeros((3, 3, 3), np.uint8); b = a.copy(); b[...] = 255
+    >>> float(delta_e76(a, a).max()), round(float(delta_e76(a, b).mean()), 1)
+    (0.0, 100.0)
+    """
+    s = _check_sigma(blur_sigma)
+    x, y = _bgr(a, "a"), _bgr(b, "b")
+    _check_same_shape(x, y, "a", "b")
+    return np.linalg.norm(_lab(x, s) - _lab(y, s), axis=2).astype(np.float32)
+
+
+def _disc(r: int) -> np.ndarray:
+    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+    return (xx * xx + yy * yy <= r * r).astype(np.uint8)
+
+
+def damage_percent(
+    reference: npt.ArrayLike,
+    output: npt.ArrayLike,
+    background: npt.ArrayLike,
+    true_mask: npt.ArrayLike,
+    *,
+    dilate_px: int = DAMAGE_DILATE_PX,
+    de_max: float = DE_MAX,
+    blur_sigma: float = DE_BLUR_SIGMA,
+) -> float:
+    """Percent of the photo that was right in the input and is wrong in the output.
+
+    A pixel counts as *damaged* when all three hold:
+
+    1. it lies outside the true mask dilated by a disc of radius ``dilate_px``
+       (the pixels ``(dx, dy)`` with ``dx² + dy² <= dilate_px²``), so the
+       feathered rim of the mover and the region the method is meant to change
+       are left out;
+    2. it was right in the input: ``ΔE(reference, background) <= de_max``;
+    3. it is wrong in the output: ``ΔE(output, background) > de_max``;
+
+    with ΔE the CIE76 difference of :func:`delta_e76` (both images blurred with
+    a Gaussian of ``blur_sigma`` px before the Lab conversion). The count is
+    divided by **all** ``H * W`` pixels of the image, so the figure reads
+    "percent of the photo broken".
+
+    Parameters
+    ----------
+    reference : (H, W, 3) ndarray
+        The input reference view (with the movers), BGR 0..255.
+    output : (H, W, 3) ndarray
+        The method's cleaned reference, BGR 0..255.
+    background : (H, W, 3) ndarray
+        The true clean reference, BGR 0..255.
+    true_mask : (H, W) bool-like ndarray
+        True dynamic mask of the reference; nonzero means ``True``.
+    dilate_px : int, optional
+        Guard band around the true mask, pixels (default 5; 0 = none).
+    de_max : float, optional
+        ΔE threshold (default 10).
+    blur_sigma : float, optional
+        Gaussian sigma in pixels applied before the colour conversion
+        (default 1; 0 = no blur).
+
+    Returns
+    -------
+    damage : float
+        Percent in ``[0, 100]`` of all image pixels.
+
+    Raises
+    ------
+    ValueError
+        On mismatched shapes, non-colour images, a negative ``dilate_px`` or
+        ``blur_sigma``, or a non-positive ``de_max``.
+
+    Examples
+    --------
+    A 10x10 image, a mover in the top-left corner, and an output that is the
+    background except for a 2x2 patch in the bottom-right corner (4 % of the
+    photo):
+
+    >>> import numpy as np
+    >>> bg = np.full((10, 10, 3), 128, np.uint8)
+    >>> mask = np.zeros((10, 10), bool); mask[:2, :2] = True
+    >>> ref = bg.copy(); ref[mask] = (0, 0, 255)
+    >>> out = bg.copy(); out[8:, 8:] = (255, 0, 0)
+    >>> damage_percent(ref, out, bg, mask, dilate_px=2, blur_sigma=0)
+    4.0
+    >>> damage_percent(ref, bg, bg, mask)
+    0.0
+    """
+    dm = float(de_max)
+    if not (math.isfinite(dm) and dm > 0):
+        raise ValueError(f"de_max must be a finite positive number, got {de_max}")
+    r = int(dilate_px)
+    if r < 0 or r != dilate_px:
+        raise ValueError(f"dilate_px must be an integer >= 0, got {dilate_px}")
+    s = _check_sigma(blur_sigma)
+    ref_, out_, bg_ = _bgr(reference, "reference"), _bgr(output, "output"), \
+        _bgr(background, "background")
+    _check_same_shape(ref_, bg_, "reference", "background")
+    _check_same_shape(out_, bg_, "output", "background")
+    m = _as_mask(true_mask, "true_mask")
+    if m.shape != bg_.shape[:2]:
+        raise ValueError(f"true_mask must have the image's (H, W) = {bg_.shape[:2]}, "
+                         f"got {m.shape}")
+    near = m.astype(np.uint8)
+    if r > 0:
+        near = cv2.dilate(near, _disc(r), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    lab_bg = _lab(bg_, s)
+    right_in = np.linalg.norm(_lab(ref_, s) - lab_bg, axis=2) <= dm
+    wrong_out = np.linalg.norm(_lab(out_, s) - lab_bg, axis=2) > dm
+    n = int(np.count_nonzero((near == 0) & right_in & wrong_out))
+    return 100.0 * n / m.size
+
+
+def leftover_percent(
+    output: npt.ArrayLike,
+    background: npt.ArrayLike,
+    true_mask: npt.ArrayLike,
+    recoverable: npt.ArrayLike | None = None,
+    *,
+    de_max: float = DE_MAX,
+    blur_sigma: float = DE_BLUR_SIGMA,
+) -> tuple[float | None, float | None]:
+    """Percent of the removable mover still wrong in the output, and what was not removable.
+
+    *Leftover* is the percent of the true-mask pixels that are recoverable
+    (``recoverable`` true: some other view saw the background there free of
+    movers) whose output colour is still wrong, ``ΔE(output, background) >
+    de_max`` (CIE76 after a ``blur_sigma`` px Gaussian blur, see
+    :func:`delta_e76`). *Unrecoverable* is the percent of the true mask that no
+    other view saw free; those pixels are left out of the leftover figure
+    since no method working from the views could restore them.
+
+    Parameters
+    ----------
+    output : (H, W, 3) ndarray
+        The method's cleaned reference, BGR 0..255.
+    background : (H, W, 3) ndarray
+        The true clean reference, BGR 0..255.
+    true_mask : (H, W) bool-like ndarray
+        True dynamic mask of the reference; nonzero means ``True``.
+    recoverable : (H, W) bool-like ndarray or None, optional
+        Pixels seen free of movers by at least one other view (e.g.
+        ``free.png`` of ``dynremove composite``). ``None``: unknown, the whole
+        true mask is counted and ``unrecoverable`` is ``None``.
+    de_max : float, optional
+        ΔE threshold (default 10).
+    blur_sigma : float, optional
+        Gaussian sigma in pixels (default 1; 0 = no blur).
+
+    Returns
+    -------
+    leftover : float or None
+        Percent in ``[0, 100]`` of the recoverable true-mask pixels still
+        wrong; ``None`` when there is no such pixel (empty mask, or nothing
+        recoverable).
+    unrecoverable : float or None
+        Percent in ``[0, 100]`` of the true mask not recoverable; ``None`` when
+        ``recoverable`` is ``None`` or the true mask is empty.
+
+    Raises
+    ------
+    ValueError
+        On mismatched shapes, non-colour images, a negative ``blur_sigma`` or a
+        non-positive ``de_max``.
+
+    Examples
+    --------
+    A 4x4 mover whose right half no other view saw; the output fixed only the
+    top-left quarter of it:
+
+    >>> import numpy as np
+    >>> bg = np.full((8, 8, 3), 128, np.uint8)
+    >>> mask = np.zeros((8, 8), bool); mask[2:6, 2:6] = True
+    >>> free = np.zeros((8, 8), bool); free[:, :4] = True
+    >>> out = bg.copy(); out[mask] = (0, 0, 255); out[2:4, 2:4] = 128
+    >>> leftover_percent(out, bg, mask, free, blur_sigma=0)
+    (50.0, 50.0)
+    >>> leftover_percent(out, bg, mask, blur_sigma=0)
+    (75.0, None)
+    """
+    dm = float(de_max)
+    if not (math.isfinite(dm) and dm > 0):
+        raise ValueError(f"de_max must be a finite positive number, got {de_max}")
+    s = _check_sigma(blur_sigma)
+    out_, bg_ = _bgr(output, "output"), _bgr(background, "background")
+    _check_same_shape(out_, bg_, "output", "background")
+    m = _as_mask(true_mask, "true_mask")
+    if m.shape != bg_.shape[:2]:
+        raise ValueError(f"true_mask must have the image's (H, W) = {bg_.shape[:2]}, "
+                         f"got {m.shape}")
+    n_mask = int(np.count_nonzero(m))
+    unrec: float | None = None
+    count = m
+    if recoverable is not None:
+        rec = _as_mask(recoverable, "recoverable")
+        _check_same_shape(rec, m, "recoverable", "true_mask")
+        count = m & rec
+        if n_mask:
+            unrec = 100.0 * (n_mask - int(np.count_nonzero(count))) / n_mask
+    n = int(np.count_nonzero(count))
+    if n == 0:
+        return None, unrec
+    wrong = np.linalg.norm(_lab(out_, s) - _lab(bg_, s), axis=2) > dm
+    return 100.0 * int(np.count_nonzero(wrong & count)) / n, unrec

@@ -1,0 +1,234 @@
+"""A pixel's history in words: the verdict lines and the text of ``dynremove inspect``.
+
+:mod:`viewer.inspect` reads the recording (``pixel_history``, ``failures``);
+this module turns what it read into sentences. No Rerun here: plain dicts in,
+strings out.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+def _label(v: bool | None) -> str:
+    return "?" if v is None else ("dynamic" if v else "static")
+
+
+def _src_name(h: dict[str, Any], s: int) -> str:
+    names = h.get("source_names", [])
+    return names[s] if 0 <= s < len(names) else f"source {s}"
+
+
+def _winning(d: dict[str, Any]) -> tuple[list[dict], list[str]]:
+    win = [c for c in d["candidates"] if c["cluster"] == d["win_cluster"] and c["cluster"] >= 0]
+    return win, sorted({c["src_name"] for c in win})
+
+
+_STAGE_WORDS = {"clean": "the L clean-up", "votes": "the border votes",
+                "snap": "GrabCut (snap to edges)", "select": "the fill by selection"}
+
+
+def verdict_lines(h: dict[str, Any]) -> list[str]:
+    """At most five lines, in words: why the pixel ended up as it did.
+
+    1. the scans' verdict with M vs t_r and what neighbouring patch writes had
+       done to it before its turn; 2. the winning cluster (when recorded);
+    3. what the post-scan steps did; 4. the fill (which source, or the reference
+    kept); 5. ground truth, when recorded.
+    """
+    x, y, t_r = h["x"], h["y"], h["t_r"]
+    dec = {d["scan"]: d for d in h["decisions"]}
+    scans = h.get("scans") or [dict(scan=d["scan"], step=d["step"], M=d["M"],
+                                    verdict="dynamic" if d["dynamic"] else "static",
+                                    overwritten_before=None, first_overwritten=None,
+                                    chosen_source=d["chosen_src"])
+                               for d in h["decisions"]]
+    lines = []
+    dyn = [sc for sc in scans if sc["verdict"] == "dynamic"]
+    key = dyn[0] if dyn else (scans[0] if scans else None)
+    if key is None:
+        lines.append(f"pixel ({x}, {y}): no scan of this recording reached it")
+    else:
+        M = key["M"]
+        if M != M:
+            why = "no cluster of candidates formed (undecided)"
+        else:
+            why = f"M = {M:.2f} {'≤' if M <= t_r else '>'} t_r {t_r:.2f}"
+        if dyn:
+            head = f"dynamic in scan {key['scan']} (step {key['step']}): {why}"
+            others = [sc["scan"] for sc in scans if sc is not key]
+            if others:
+                head += f"; scans {', '.join(map(str, others))}: " + ", ".join(
+                    f"{sc['verdict']}" + (f" M {sc['M']:.2f}" if sc["M"] == sc["M"] else "")
+                    for sc in scans if sc is not key)
+        else:
+            head = (f"{key['verdict']} in every scan: scan {key['scan']} (step "
+                    f"{key['step']}) {why}" if len(scans) > 1 else
+                    f"{key['verdict']} in scan {key['scan']} (step {key['step']}): {why}")
+            if len(scans) > 1:
+                head += "; then " + ", ".join(
+                    f"scan {sc['scan']} M {sc['M']:.2f}" for sc in scans[1:])
+        n = key.get("overwritten_before")
+        if n:
+            head += (f"; its content had been overwritten by {n} neighbouring "
+                     f"patch{'es' if n > 1 else ''} before its turn (first at step "
+                     f"{key['first_overwritten']})")
+        elif n == 0:
+            head += "; no neighbouring patch had overwritten it before its turn"
+        lines.append(head)
+        d = dec.get(key["scan"])
+        if d is not None and d["n_clusters"] > 0:
+            win, srcs = _winning(d)
+            all_src = sorted({c["src_name"] for c in d["candidates"]})
+            lines.append(f"winning cluster {d['win_cluster']}: {len(win)} of "
+                         f"{len(d['candidates'])} candidates, from {len(srcs)} of "
+                         f"{len(h['source_names'])} sources ({', '.join(srcs)}); weight "
+                         f"b_m = Σ B_l = {d['win_weight']:.2f}; {d['n_clusters']} clusters "
+                         f"(candidates from {len(all_src)} sources)")
+        elif d is not None:
+            lines.append(f"no cluster: {len(d['candidates'])} candidates, all DBSCAN noise")
+        else:
+            lines.append("candidates and clusters were not recorded at this pixel "
+                         f"(static pixels are recorded when probed): re-run with --probe "
+                         f"{x},{y} to see them")
+    st = h.get("stages") or {}
+    if len(st) > 1:
+        names = list(st)
+        changes = [f"{'added' if st[b] else 'dropped'} by {_STAGE_WORDS.get(b, b)}"
+                   for a, b in zip(names, names[1:]) if st[a] != st[b] and b != "select"]
+        if changes:
+            lines.append("after the scans: " + "; ".join(changes) +
+                         f"; in the final mask: {'yes' if st[names[-1]] else 'no'}")
+        else:
+            kept = ", ".join(_STAGE_WORDS.get(b, b) for b in names[1:] if b != "select")
+            lines.append(f"after the scans: kept {_label(st[names[0]])} by {kept}")
+    sel = h.get("selection") or {}
+    if "source" in sel:
+        k = sel["source"]
+        others = "; ".join(f"{n}: {why}" for n, why in (sel.get("reasons") or {}).items()
+                           if why != "chosen")
+        if k > 0:
+            lines.append(f"fill: filled from source {_src_name(h, k - 1)}"
+                         + (f" (others: {others})" if others else ""))
+        elif sel.get("explained"):
+            lines.append("fill: reference kept, explained as static 3-D structure "
+                         "(parallax, not a mover)")
+        else:
+            lines.append("fill: reference kept" + (" (not in the final mask)"
+                                                     if not h.get("final_dynamic") else ""))
+    elif h["replacements"]:
+        r = h["replacements"][-1]
+        lines.append(f"fill: patch from {r['src_name']} written at step {r['step']}")
+    if h.get("gt") is not None:
+        fin, gt = h.get("final_dynamic"), h["gt"]
+        kind = ("correct" if fin == gt else "FALSE NEGATIVE (a mover left in)" if gt
+                else "FALSE POSITIVE (static pixel replaced)")
+        lines.append(f"final L {_label(fin)}, ground truth {_label(gt)}: {kind}")
+    if len(lines) > 5:  # the fill and ground truth matter more than the clusters
+        lines = lines[:1] + lines[-4:]
+    return lines
+
+
+def _fold(events: list[tuple[int, str]], max_lines: int) -> list[str]:
+    """Sort by step; print at most ``max_lines`` lines, eliding the middle."""
+    events.sort(key=lambda e: e[0])
+    lines = [t for _, t in events]
+    if len(lines) > max_lines:
+        k = max_lines // 2
+        lines = lines[:k] + [f"  … {len(lines) - 2 * k} more lines …"] + lines[-k:]
+    return lines
+
+
+def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
+    """The verdict in words (≤ 5 lines), then the steps that changed the pixel.
+
+    Runs of patch writes over the pixel are folded into one line per scan;
+    the whole text stays within ``max_lines`` lines.
+    """
+    lines = [f"pixel ({h['x']}, {h['y']}): " + verdict_lines(h)[0]]
+    lines += ["  " + v for v in verdict_lines(h)[1:]]
+    lines.append("history (jump to a step on the `step` timeline):")
+    ev: list[tuple[int, str]] = []
+    dec_scans = {d["scan"] for d in h["decisions"]}
+    for sc in h.get("scans", []):
+        if sc["scan"] in dec_scans:
+            continue
+        M = sc["M"]
+        mtxt = "no cluster" if M != M else f"M {M:.2f} {'≤' if M <= h['t_r'] else '>'} t_r"
+        ev.append((sc["step"], f"  scan {sc['scan']} step {sc['step']}: {sc['verdict']} "
+                               f"({mtxt}; from the per-scan maps)"))
+    for d in h["decisions"]:
+        if d["M"] != d["M"]:
+            verdict = f"no cluster → {'DYNAMIC' if d['dynamic'] else 'undecided'}"
+        else:
+            op = "≤" if d["M"] <= d["t_r"] else ">"
+            verdict = (f"M {d['M']:.2f} {op} t_r {d['t_r']:.2f} → "
+                       f"{'DYNAMIC' if d['dynamic'] else 'static'}")
+        win, srcs = _winning(d)
+        txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
+               f"{len(d['candidates'])} candidates in {d['n_clusters']} clusters; winner "
+               f"cluster {d['win_cluster']} b_m {d['win_weight']:.2f}: " + ", ".join(
+                   f"{c['src_name']} ({c['x']},{c['y']}) B_l {c['B']:.2f}" for c in win)
+               + f"; SIFT distance to the consensus {d['consensus_dist']:.3f}")
+        ev.append((d["step"], txt))
+    for r in h["replacements"]:
+        ev.append((r["step"], f"  scan {r['scan']} step {r['step']}: replaced by the patch "
+                              f"of {r['src_name']} at ({r['src_x']},{r['src_y']}), score "
+                              f"{r['score']:.2f}" + (" (tie-break)" if r["tie_break"] else "")
+                              + f" among {r['n_patches']} patches"))
+    by_scan: dict[int, list[dict]] = {}
+    for r in h["covered_by"]:
+        by_scan.setdefault(r["scan"], []).append(r)
+    own = {sc["scan"]: sc["step"] for sc in h.get("scans", [])}
+    own.update({d["scan"]: d["step"] for d in h["decisions"]})
+    for scan, rs in by_scan.items():
+        steps = [r["step"] for r in rs]
+        srcs = sorted({r["src_name"] for r in rs})
+        n_before = sum(1 for st in steps if scan in own and st < own[scan])
+        ev.append((min(steps), f"  scan {scan} steps {min(steps)}–{max(steps)}: overwritten "
+                               f"by {len(rs)} patches centred nearby ({', '.join(srcs)})"
+                   + (f", {n_before} of them before its own step {own[scan]}"
+                      if scan in own else "")))
+    n_upd = len(h["updates"])
+    if n_upd:
+        u0 = h["updates"][0]
+        ev.append((u0["step"], f"  {n_upd} correspondence updates at this pixel (cases "
+                               + ", ".join(sorted({str(u['case']) for u in h['updates']}))
+                               + ")"))
+    st = h.get("stages") or {}
+    if st:
+        last = max([sc["step"] for sc in h.get("scans", [])] + [e for e, _ in ev] + [0])
+        n_scans = len(h.get("scans", [])) or (1 + max([d["scan"] for d in h["decisions"]],
+                                                       default=0))
+        H, W = h.get("size", (0, 0))
+        first_stage = n_scans * H * W if H and W else last + 1
+        ev.append((first_stage, "  L after each step: " + " → ".join(
+            f"{k} {_label(v)} (step {first_stage + i})" for i, (k, v) in enumerate(st.items()))))
+    lines += _fold(ev, max_lines - len(lines) - 1)
+    fin = f"final L = {_label(h['final_dynamic'])}"
+    if h.get("gt") is not None:
+        fin += f", ground truth = {_label(h['gt'])}"
+    lines.append("  " + fin)
+    return "\n".join(lines)
+
+
+# -- failures ----------------------------------------------------------------------
+
+
+def format_failures(items: list[dict[str, Any]]) -> str:
+    """One line per failure region."""
+    lines = ["region (kind, area, bbox), a pixel in it, the steps at which each scan "
+             "visited that pixel (jump to them on the `step` timeline):"]
+    for e in items:
+        x0, y0, w, h = e["bbox"]
+        steps = ", ".join(str(s) for s in e.get("steps", []))
+        s = (f"{e['kind']} {e['area']:6d} px  ({x0},{y0}) {w}x{h}  pixel "
+             f"{e['pixel'][0]},{e['pixel'][1]}  steps {steps}; {e['n_decisions']} recorded "
+             f"decisions")
+        if e["worst"]:
+            s += (f"; worst M {e['worst']['M']:.2f} at ({e['worst']['x']},{e['worst']['y']})"
+                  f" step {e['worst']['step']}")
+        lines.append(s)
+    if items:
+        lines.append("explain one: dynremove inspect REC --pixel X,Y; in the viewer, type "
+                     "the step into the time panel's `step` field")
+    return "\n".join(lines)
