@@ -194,6 +194,10 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--views", type=int, default=7, help="number of images (default 7)")
     b.add_argument("--json", default="out/bench.json", help="where to write the JSON")
     b.add_argument("--repeat", type=int, default=1, help="timed runs after a warm-up")
+    b.add_argument("--max-side", type=int, default=None, metavar="PX",
+                   help="also time large photos as users run them: analysis at PX, the "
+                        "clean photo at full size (e.g. --size 4032x3024 --views 5 "
+                        "--max-side 1280)")
     b.add_argument("--no-reference", action="store_true",
                    help="skip the numba/reference speed ratio")
     b.add_argument("--quiet", action="store_true")

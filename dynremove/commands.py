@@ -183,6 +183,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
 
     run_bench(params=params_from_args(args), preset_name=args.preset, size=(W, H),
+              max_side=args.max_side,
               views=args.views, repeat=args.repeat, reference=not args.no_reference,
               json_path=args.json or None, quiet=args.quiet,
               recording_sink=lambda path, gt: RerunSink(path, gt_mask=gt))

@@ -31,14 +31,21 @@ from dynremove.refine.fields import harmonic_fill
 from dynremove.refine.morphology import dilate_disc
 
 
-def _seam(a_p, b_p, a_q, b_q, same):
-    v = np.linalg.norm(a_p - b_p, axis=-1) + np.linalg.norm(a_q - b_q, axis=-1)
-    return np.where(same, 0.0, v)
+def pairwise_distance(colours: np.ndarray) -> np.ndarray:
+    """(L, L, H, W) float32: |I_a(p) - I_b(p)| for every label pair (0 on the diagonal)."""
+    nl = len(colours)
+    out = np.zeros((nl, nl) + colours.shape[1:3], np.float32)
+    for a in range(nl):
+        for b in range(a + 1, nl):
+            d = colours[a] - colours[b]
+            out[a, b] = out[b, a] = np.sqrt(np.einsum("...c,...c->...", d, d))
+    return out
 
 
 def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32], *,
                      beta: float, cycles: int = 2,
-                     init: npt.NDArray[np.intp] | None = None) -> npt.NDArray[np.intp]:
+                     init: npt.NDArray[np.intp] | None = None,
+                     distance: npt.NDArray[np.float32] | None = None) -> npt.NDArray[np.intp]:
     """Alpha-expansion of the photomontage energy on a 4-connected grid.
 
     Parameters
@@ -54,6 +61,8 @@ def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32
         Passes over all labels (stops earlier when a pass changes nothing).
     init : (H, W) int ndarray, optional
         Starting labelling (default: the cheapest label per pixel).
+    distance : (L, L, H, W) float32 ndarray, optional
+        ``pairwise_distance(colours)`` if the caller has it already.
 
     Returns
     -------
@@ -61,11 +70,12 @@ def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32
     """
     nl, H, W = D.shape
     lab = np.argmin(D, 0) if init is None else init.astype(np.intp).copy()
+    # V(a, b) at each pixel; an edge sums it over both its pixels
+    pair = beta * (pairwise_distance(colours) if distance is None else distance)
     yy, xx = np.mgrid[0:H, 0:W]
     for _ in range(cycles):
         changed = False
         for a in range(nl):
-            cur = colours[lab, yy, xx]
             cost1 = D[a].astype(np.float64).copy()  # x_p = 1: p takes label a
             cost0 = np.take_along_axis(D, lab[None], 0)[0].astype(np.float64)
             g = maxflow.Graph[float]()
@@ -76,12 +86,12 @@ def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32
                 sp = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
                 sq = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
                 lp, lq = lab[sp], lab[sq]
-                ca = colours[a]
-                cq_at_p = colours[lq, yy[sp], xx[sp]]
-                cp_at_q = colours[lp, yy[sq], xx[sq]]
-                A = beta * _seam(cur[sp], cq_at_p, cp_at_q, cur[sq], lp == lq)
-                B = beta * _seam(cur[sp], ca[sp], cp_at_q, ca[sq], lp == a)
-                C = beta * _seam(ca[sp], cq_at_p, ca[sq], cur[sq], lq == a)
+                yp, xp, yq, xq = yy[sp], xx[sp], yy[sq], xx[sq]
+
+                def V(u, v):  # seam cost of labels u at p and v at q (per edge)
+                    return pair[u, v, yp, xp] + pair[u, v, yq, xq]
+
+                A, B, C = V(lp, lq), V(lp, a), V(a, lq)
                 # E(x_p, x_q) = A + (C - A) x_p - C x_q + (B + C - A)(1 - x_p) x_q
                 w = np.zeros((H, W))
                 w[sp] = np.maximum(B + C - A, 0.0)
@@ -146,4 +156,4 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
-__all__ = ["expansion_labels", "offset_blend"]
+__all__ = ["expansion_labels", "offset_blend", "pairwise_distance"]

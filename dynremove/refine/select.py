@@ -47,7 +47,7 @@ from dynremove.method.geometry import TwoView, sampson_sq
 from dynremove.params import Params
 from dynremove.refine.fields import background_field, blurred_lab, sample_bilinear
 from dynremove.refine.fill import median_fill, realign_fields
-from dynremove.refine.montage import expansion_labels, offset_blend
+from dynremove.refine.montage import expansion_labels, offset_blend, pairwise_distance
 from dynremove.refine.morphology import dilate_disc
 
 _FORBIDDEN = 1e6  # data cost of a label that may not be used
@@ -292,7 +292,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     weight = (1.0 - p_mover) * usable
     weight[0] = 1.0  # outside L the reference is a trusted witness
     weight[0][in_mask] = 1.0 - p_mover[0][in_mask]
-    dist = np.linalg.norm(labs[:, None] - labs[None], axis=-1)  # (nl, nl, h, w)
+    dist = pairwise_distance(labs)  # (S+1, S+1, h, w)
     agree = (dist < tau) & usable[:, None] & usable[None]
     support = (agree * weight[None]).sum(1)
     v_roi = votes[:, y0:y1, x0:x1]
@@ -320,7 +320,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     D[0, ~reg] = 0.0
 
     # 4. graph cut, 5. blend
-    lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2)
+    lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2,
+                           distance=dist)
     rep = lab != 0
     movers = np.zeros((S, H, W), bool)
     mv = usable[1:] & (p_mover[1:] > 0.5) & (np.linalg.norm(labs[1:] - cons[None], axis=-1) > tau)
