@@ -181,6 +181,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         if not (0 <= x < W and 0 <= y < H):
             raise InputError(f"probe pixel ({x}, {y}) is outside the {W}x{H} image")
     names = list(names) if names is not None else [f"image{i}" for i in range(len(images))]
+    if sink.enabled and hasattr(type(sink), "begin"):  # optional hook (RerunSink): open
+        sink.begin(names, (H, W), images=images, ref=ref)  # the recording before features
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
     st, views = prepare(images, ref, params, timings=timings, progress=progress)

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 from PIL import Image
 
+from dynremove.errors import InputError
 from viewer import inspect as vi
 from viewer import paths as P
 from viewer._images import overlay
@@ -34,7 +35,7 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
     inp = vi._blob_rows(store, p(P.REFERENCE_INPUT), index=None)
     images = snaps["image"]
     if not images:
-        raise ValueError(f"{path_rrd}: no reference snapshots recorded")
+        raise InputError(f"{path_rrd}: no reference snapshots recorded")
     ref_in = vi.decode(inp[0][1]) if inp else vi.decode(images[0][1])
     H, W = ref_in.shape[:2] if not (H and W) else (H, W)
     # every step at which something visible changed: image or L

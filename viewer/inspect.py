@@ -70,7 +70,10 @@ def read_rrd_tolerant(path: str):
         warnings.simplefilter("always")
         try:
             store = RrdReader(path).stream().collect()
-            if any("footer" in str(w.message) for w in caught):
+            footer = any("footer" in str(w.message) for w in caught)
+            if _interrupted_note(store, path, note):
+                return store
+            if footer:
                 has_scan(store)
                 note("no footer (the run was interrupted or the file cut): read what "
                      "was recorded")
@@ -96,10 +99,36 @@ def read_rrd_tolerant(path: str):
             raise InputError(f"{path}: damaged recording, nothing readable") from None
         finally:
             os.unlink(tmp)
+    if _interrupted_note(store, path, note):
+        return store
     has_scan(store)
     note(f"damaged or cut short after {pos} of {len(data)} bytes: read the "
          f"{n} complete messages before the damage")
     return store
+
+
+def interruption(store) -> str | None:
+    """"interrupted at scan S, step N" (or "... before the scans began") when the
+    recording is of an interrupted run (``RerunSink.interrupted``), else None."""
+    for ent in store.schema().entity_paths():
+        ent = "/" + str(ent).strip("/")
+        if ent.endswith("/" + P.RUN_INTERRUPTED):
+            msg = _static_values(store, ent).get("message")
+            if msg:
+                return str(msg[0])
+    return None
+
+
+def _interrupted_note(store, path: str, note) -> bool:
+    """One note saying where an interrupted run ends; InputError when it ended before
+    anything inspectable was recorded. False: not an interrupted run."""
+    msg = interruption(store)
+    if msg is None:
+        return False
+    if not any(str(e).endswith(P.REFERENCE_IMAGE) for e in store.schema().entity_paths()):
+        raise InputError(f"{path}: the run was {msg}: nothing to inspect")
+    note(f"the run was {msg}: read what was recorded")
+    return True
 
 
 def load_store(path: str | Path):
@@ -506,8 +535,11 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     """
     L = read_final_dynamic(path, root=root)
     gt = read_gt_mask(path, root=root)
-    if L is None or gt is None:
-        raise ValueError(f"{path}: needs a finished run recorded with a ground-truth mask")
+    if L is None:
+        raise InputError(f"{path}: the run did not finish (no final mask); --failures "
+                         "needs a finished run recorded with a ground-truth mask")
+    if gt is None:
+        raise InputError(f"{path}: needs a finished run recorded with a ground-truth mask")
     dec = read_events(path, "decisions", root=root)
     H, W = L.shape
     scan_dirs = [(m["scan"], m["direction"]) for m in read_scan_maps(path, root=root)] or \

@@ -117,6 +117,7 @@ RUN_INFO = "run/info"
 RUN_PARAMS = "run/params"
 RUN_COVERAGE = "run/coverage"
 LOG = "log"
+RUN_INTERRUPTED = "run/interrupted"  # static: where an interrupted run ends
 
 # Class ids of the AnnotationContext logged at the root (segmentation + points).
 CLASS_BACKGROUND = 0

@@ -127,10 +127,82 @@ class RerunSink(StepColumns):
         self.jpeg_quality = jpeg_quality
         self.skip_unchanged_images = skip_unchanged_images
         self._closed = False
+        self._opened = False  # the file is open (begin() or start())
+        self._scans_began = False
+        self._seen = (0, 0)  # (scan, step) last seen, for interrupted()
+        self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._pending_n = 0
         self.timing: dict[str, list[float]] = {}  # method: [calls, seconds]
         self.snapshots = 0
 
     # -- EventSink -------------------------------------------------------------
+    def begin(self, names: list[str], size: tuple[int, int], *,
+              images: list[np.ndarray] | None = None, ref: int | None = None) -> None:
+        """Open the recording before features are computed (optional hook).
+
+        A Ctrl-C during features, geometry or correspondences then still leaves a
+        readable recording (names, size and the reference image); ``start``
+        completes the setup.
+        """
+        t0 = time.perf_counter()
+        H, W = int(size[0]), int(size[1])
+        src = [n for i, n in enumerate(names) if i != ref]
+        self._open(P.entity_names(src), (H, W))
+        if self.rec is None:
+            return
+        p = self.p
+        extra = {} if ref is None else {"ref_index": int(ref)}
+        self.rec.log(p(P.RUN_INFO), rr.AnyValues(height=H, width=W, names=list(names), **extra),
+                     static=True)
+        if images is not None and ref is not None:
+            self.rec.log(p(P.REFERENCE_INPUT), self._jpeg(np.asarray(images[ref])), static=True)
+        self._set_time(0, 0)
+        self.rec.log(p(P.LOG), rr.TextLog(
+            f"run {self.recording_id}: {len(names)} images ({', '.join(names)}), {W}x{H}"
+            + (f", reference {names[ref]}" if ref is not None else "")
+            + ": computing features and correspondences", level=rr.TextLogLevel.INFO))
+        self.rec.flush()
+        self._tick("begin", t0)
+
+    def interrupted(self) -> None:
+        """Log "interrupted at scan S, step N" (or before the scans) and close the file.
+
+        Called by the CLI on Ctrl-C / SIGTERM. The recording keeps everything
+        logged so far and gets its footer, so it reads back like a finished one.
+        """
+        if self._closed:
+            return
+        if self.rec is None:  # interrupted before begin(): an (almost) empty recording
+            self._open(None, None)
+            if self.rec is None:
+                return
+        try:
+            self._flush_pending()
+        except Exception:  # noqa: BLE001 - the interruption may have cut a chunk short
+            self._pending, self._pending_n = [], 0
+        scan, step = self._seen
+        msg = (f"interrupted at scan {scan}, step {step}" if self._scans_began
+               else "interrupted before the scans began")
+        self._set_time(scan, step)
+        self.rec.log(self.p(P.LOG), rr.TextLog(msg, level=rr.TextLogLevel.WARN))
+        self.rec.log(self.p(P.RUN_INTERRUPTED), rr.AnyValues(
+            message=msg, scan=int(scan), step=int(step), scans_began=self._scans_began),
+            static=True)
+        self.close()
+
+    def _open(self, src_names: list[str] | None, size: tuple[int, int] | None) -> None:
+        """Create the stream and its file (once), when the sink owns it."""
+        if self._opened or not self._owns_rec:
+            self._opened = True
+            return
+        self.rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        bp = None if src_names is None else make_blueprint(src_names, root=self.p.root,
+                                                           size=size)
+        self.rec.save(self.path, default_blueprint=bp)
+        self._bp_sources = src_names
+        self._opened = True
+
     def start(self, info: RunInfo) -> None:
         t0 = time.perf_counter()
         H, W = info.size
@@ -149,11 +221,12 @@ class RerunSink(StepColumns):
         if self.gt_background is not None and self.gt_background.shape[:2] != (self.H, self.W):
             raise ValueError(f"gt_background has shape {self.gt_background.shape}, "
                              f"expected {(self.H, self.W)}+")
-        if self._owns_rec:
-            self.rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id)
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.rec.save(self.path, default_blueprint=make_blueprint(
-                self.src_names, root=self.p.root, size=(self.H, self.W)))
+        if not self._opened:
+            self._open(self.src_names, (self.H, self.W))
+        elif self._owns_rec and getattr(self, "_bp_sources", None) != self.src_names:
+            # begin() guessed the sources; some were dropped since (near-copies)
+            self.rec.send_blueprint(make_blueprint(self.src_names, root=self.p.root,
+                                                   size=(self.H, self.W)))
         self._scan = 0
         self._direction = 1
         self._last_step = 0
@@ -173,6 +246,8 @@ class RerunSink(StepColumns):
     def scan_started(self, scan: int, direction: int, state: ScanState) -> None:
         t0 = time.perf_counter()
         self._scan = int(scan)
+        self._scans_began = True
+        self._seen = (self._scan, self._scan * self.H * self.W)
         self._direction = 1 if int(direction) >= 0 else -1
         self._rows_done = 0
         self._scan_reps = []
@@ -196,6 +271,7 @@ class RerunSink(StepColumns):
         first, end = int(events.step_range[0]), int(events.step_range[1])
         last = max(first, end - 1)
         self._scan, self._last_step = scan, last
+        self._seen = (scan, last)
         d, r, u = events.decisions, events.replacements, events.updates
         if d.dtype.names and d.dtype["cand_src"].shape[0] != self.K:  # K ≠ 2·S: record it
             self.K = int(d.dtype["cand_src"].shape[0])
@@ -237,6 +313,7 @@ class RerunSink(StepColumns):
         scan = int(s["scan"])
         step = max(self._last_step, (scan + 1) * self.H * self.W - 1)
         self._last_step = step
+        self._seen = (scan, step)
         self._flush_pending()
         self._rows_done = self.H
         if self._snap_step != step:
