@@ -8,7 +8,7 @@ BIN := $(VENV)/bin
 $(BIN)/dynremove: pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ".[test,heic,dask]"
+	$(BIN)/python -m pip install -q -e ".[test,heic,dask,notebook]"
 	touch $(BIN)/dynremove
 
 # the total time, install included (the first run also compiles the kernels, once)
