@@ -108,7 +108,7 @@ class Params:
     select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
-    candidate_set: bool = False  # P as a set: a repeated (s, x, y) candidate counts once (paper preset True)
+    candidate_set: bool = True  # P as a set (the paper): a repeated (s, x, y) candidate counts once
 
     def __post_init__(self) -> None:
         if self.patch_size < 3 or self.patch_size % 2 == 0:

@@ -92,7 +92,7 @@ def test_cli_bad_input_exit_code(tmp_path, capsys):
 
 
 def test_default_on_other_synthetic_scenes():
-    """Not just the demo's seed: seeds 1-3 (measured J .831/.942/.942, 28.0/31.1/29.7 dB)."""
+    """Not just the demo's seed: seeds 1-3 (measured J .889/.929/.931, 28.1/31.0/29.1 dB)."""
     js, ps = [], []
     for seed in (1, 2, 3):
         sc = synth.make_scene(seed=seed, n_views=6, size=(360, 640))
