@@ -314,9 +314,21 @@ def _on_sigterm(signum: int, frame: Any) -> None:
     raise Terminated()
 
 
+def viewer_module(name: str):
+    """``viewer.<name>``, imported on first use (it needs Rerun).
+
+    The one door from ``dynremove`` to ``viewer``: commands get it as
+    ``args.viewer`` and never import the viewer themselves.
+    """
+    import importlib
+
+    return importlib.import_module(f"viewer.{name}")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
+    args.viewer = viewer_module
     debug = bool(os.environ.get("DYNREMOVE_DEBUG"))
 
     _quiet_opencv()

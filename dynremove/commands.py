@@ -1,7 +1,8 @@
 """The sub-commands of ``dynremove``: ``cmd_<name>(args) -> exit code``, one per command.
 
-``dynremove.cli`` builds the parser and dispatches here. ``viewer`` (Rerun) is
-imported lazily, only by the commands and options that need it.
+``dynremove.cli`` builds the parser and dispatches here. The viewer (Rerun) is
+never imported here: commands that need it call ``args.viewer(name)``, which
+``dynremove.cli`` sets (it imports ``viewer.<name>`` on first use).
 """
 
 from __future__ import annotations
@@ -81,9 +82,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         raise InputError("--compare needs --record FILE.rrd (the two runs go into one recording)")
     rec = None
     if compare is not None:
-        from viewer.sink import open_compare_stream
-
-        rec = open_compare_stream(args.record, [n for i, n in enumerate(iset.names) if i != ref],
+        rec = args.viewer("sink").open_compare_stream(args.record, [n for i, n in enumerate(iset.names) if i != ref],
                                   roots=["runs/main", "runs/compare"])
     sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
     sink_b = None
@@ -180,7 +179,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     if W < 64 or H < 48 or args.views < 2:
         raise InputError(f"bench needs --size of at least 64x48 and --views >= 2, got "
                          f"{args.size} and {args.views}")
-    from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
+    RerunSink = args.viewer("sink").RerunSink
 
     run_bench(params=params_from_args(args), preset_name=args.preset, size=(W, H),
               max_side=args.max_side,
@@ -254,7 +253,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
     return EXIT_INTERNAL if s["n_failed"] else EXIT_OK
 
 
-# --- commands that read recordings (viewer, imported lazily: it needs Rerun) -------------
+# --- commands that read recordings (``args.viewer``: see dynremove.cli) ------------------
 def _recording(path: str) -> Path:
     p = Path(path)
     if not p.is_file():
@@ -263,9 +262,7 @@ def _recording(path: str) -> Path:
 
 
 def cmd_view(args: argparse.Namespace) -> int:
-    from viewer.serve import view
-
-    proc = view(_recording(args.recording), web=args.web, port=args.port,
+    proc = args.viewer("serve").view(_recording(args.recording), web=args.web, port=args.port,
                 web_port=args.web_port)
     if proc.returncode is not None and proc.returncode > 0:
         print(f"dynremove: the viewer exited with code {proc.returncode}; without a "
@@ -275,9 +272,7 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
-    from viewer import inspect as ins
-    from viewer import verdict as vd
-
+    ins, vd = args.viewer("inspect"), args.viewer("verdict")
     path = _recording(args.recording)
     if args.pixel is None and not args.failures:
         raise InputError("inspect: give --pixel X,Y or --failures")
@@ -290,8 +285,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    from viewer.export import export_gif
-
+    export_gif = args.viewer("export").export_gif
     if Path(args.out).suffix.lower() not in (".gif", ".mp4"):
         raise InputError(f"export: {args.out} must end in .gif or .mp4")
     out = export_gif(_recording(args.recording), args.out, fps=args.fps,
@@ -329,10 +323,8 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
                gt_background: np.ndarray | None = None, rec: Any = None, root: str = ""):
     if not getattr(args, "record", None):
         return None
-    from viewer.sink import RerunSink  # lazy on purpose: Rerun only when asked for
-
     Path(args.record).parent.mkdir(parents=True, exist_ok=True)
-    return RerunSink(None if rec is not None else args.record,
+    return args.viewer("sink").RerunSink(None if rec is not None else args.record,
                      record_every_rows=getattr(args, "record_every_rows", None),
                      gt_mask=gt, gt_background=gt_background, rec=rec, root=root)
 
