@@ -166,37 +166,16 @@ def _static_values(store, entity: str) -> dict[str, Any]:
     return out
 
 
-def _image_rows(store, entity: str, archetype: str, *, index: str | None = "step"):
-    """[(step | None, ndarray)] of a raw image entity (SegmentationImage/Image)."""
-    t = _arrow(store, entity, index=index)
-    if t is None or t.num_rows == 0:
-        return []
-    buf = _column(t, f"{entity}:{archetype}:buffer")
-    fmt = _column(t, f"{entity}:{archetype}:format")
-    if buf is None or fmt is None:
-        return []
-    steps = t.column(index).to_pylist() if index else [None] * t.num_rows
-    out = []
-    for i in range(t.num_rows):
-        if not buf[i].is_valid:
-            continue
-        f = fmt[i].as_py()[0]
-        data = buf[i].values[0].values.to_numpy(zero_copy_only=False)
-        shape = (f["height"], f["width"])
-        if data.size != shape[0] * shape[1]:
-            shape = shape + (data.size // (shape[0] * shape[1]),)
-        out.append((steps[i], data.reshape(shape).copy()))
-    return out
-
-
 # rerun's ChannelDatatype enum values (0.41) → numpy dtypes
 _CHANNEL_DTYPES = {6: np.uint8, 7: np.int8, 8: np.uint16, 9: np.int16, 10: np.uint32,
                    11: np.int32, 12: np.uint64, 13: np.int64, 33: np.float16,
                    34: np.float32, 35: np.float64}
 
 
-def _typed_image_rows(store, entity: str, archetype: str, *, index: str | None = "step"):
-    """Like :func:`_image_rows`, with the buffer viewed as its channel datatype."""
+def _image_rows(store, entity: str, archetype: str, *, index: str | None = "step"):
+    """[(step | None, ndarray)] of a raw image entity (SegmentationImage, Image,
+    DepthImage), the buffer viewed as its channel datatype (uint8 when unset);
+    (H, W) or (H, W, C) by the buffer's size."""
     t = _arrow(store, entity, index=index)
     if t is None or t.num_rows == 0:
         return []
@@ -213,7 +192,10 @@ def _typed_image_rows(store, entity: str, archetype: str, *, index: str | None =
         raw = buf[i].values[0].values.to_numpy(zero_copy_only=False)
         dtype = _CHANNEL_DTYPES.get(f.get("channel_datatype") or 6, np.uint8)
         data = np.frombuffer(raw.tobytes(), dtype)
-        out.append((steps[i], data.reshape(f["height"], f["width"]).copy()))
+        shape = (f["height"], f["width"])
+        if data.size != shape[0] * shape[1]:
+            shape = shape + (data.size // (shape[0] * shape[1]),)
+        out.append((steps[i], data.reshape(shape).copy()))
     return out
 
 
@@ -361,14 +343,14 @@ def read_scan_maps(path: str | Path, *, root: str = "") -> list[dict[str, Any]]:
     the first of them, −1 = none). Empty for recordings made before these maps.
     """
     store, p = load_store(path), P.Paths(root)
-    m_rows = _typed_image_rows(store, p(P.scan_map("M")), "DepthImage")
+    m_rows = _image_rows(store, p(P.scan_map("M")), "DepthImage")
     if not m_rows:
         return []
     ent = p(P.scan_map("M"))
     t = _arrow(store, ent)
     scans = _column(t, f"{ent}:scan")
     dirs = _column(t, f"{ent}:direction")
-    by_step = {k: dict(_typed_image_rows(store, p(P.scan_map(k)), arch))
+    by_step = {k: dict(_image_rows(store, p(P.scan_map(k)), arch))
                for k, arch in (("verdict", "SegmentationImage"),
                                ("chosen_source", "SegmentationImage"),
                                ("overwritten_before", "DepthImage"),

@@ -18,6 +18,8 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from dynremove.refine.fields import blurred_lab
+
 
 def agreement_with_reference(reference: npt.NDArray[np.uint8],
                              sources: npt.NDArray[np.uint8],
@@ -42,11 +44,7 @@ def agreement_with_reference(reference: npt.NDArray[np.uint8],
     h, w = max(8, H // 2), max(8, W // 2)
     S_half = np.diag([w / W, h / H, 1.0])
 
-    def lab(img):
-        img = cv2.GaussianBlur(img, (0, 0), 1.5)
-        return cv2.cvtColor(img.astype(np.float32) / 255, cv2.COLOR_BGR2Lab)
-
-    lab_r = lab(cv2.resize(reference, (w, h), interpolation=cv2.INTER_AREA))
+    lab_r = blurred_lab(cv2.resize(reference, (w, h), interpolation=cv2.INTER_AREA), 1.5)
     out = np.zeros(len(sources))
     for k, src in enumerate(sources):
         Hh = S_half @ homographies[k] @ np.linalg.inv(S_half)
@@ -58,7 +56,7 @@ def agreement_with_reference(reference: npt.NDArray[np.uint8],
         inside = cv2.erode(inside, np.ones((5, 5), np.uint8)).astype(bool)
         if inside.sum() < 0.25 * h * w:
             continue
-        d = np.linalg.norm(lab(warped) - lab_r, axis=-1)
+        d = np.linalg.norm(blurred_lab(warped, 1.5) - lab_r, axis=-1)
         out[k] = float((d[inside] < de_max).mean())
     return out
 

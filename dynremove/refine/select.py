@@ -162,6 +162,13 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     return ok[lab] & (hit > 0)
 
 
+def member_median(values: np.ndarray, member: np.ndarray) -> np.ndarray:
+    """Per-channel median of ``values`` (S, n, 3) over the sources ``member`` (S, n)
+    marks (at least one per column), as uint8 (n, 3)."""
+    vals = np.where(member[..., None], values.astype(np.float32), np.nan)
+    return np.clip(np.nanmedian(vals, axis=0) + 0.5, 0, 255).astype(np.uint8)
+
+
 def _cluster_median(cand_img, labs, lab, rep, free, tau):
     """Each replaced pixel's chosen source, replaced by the per-channel median of the
     free sources that agree with it (ΔE < ``tau``): the chosen region keeps one
@@ -173,9 +180,7 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     tau = np.broadcast_to(tau, rep.shape)[ys, xs]
     member = free[:, ys, xs] & (np.linalg.norm(labs[1:, ys, xs] - lab_c[None], axis=-1) < tau)
     member[chosen - 1, np.arange(len(ys))] = True
-    vals = np.where(member[..., None], cand_img[1:, ys, xs].astype(np.float32), np.nan)
-    med = np.nanmedian(vals, axis=0)
-    out[chosen, ys, xs] = np.clip(med + 0.5, 0, 255).astype(np.uint8)
+    out[chosen, ys, xs] = member_median(cand_img[1:, ys, xs], member)
     members = np.zeros((len(cand_img) - 1,) + rep.shape, bool)
     members[:, ys, xs] = member
     return out, members
@@ -370,4 +375,4 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons)
 
 
-__all__ = ["REASONS", "Selection", "select_fill"]
+__all__ = ["REASONS", "Selection", "member_median", "select_fill"]

@@ -26,7 +26,7 @@ import numpy.typing as npt
 from dynremove.refine.fields import blurred_lab
 from dynremove.refine.montage import offset_blend
 from dynremove.refine.morphology import dilate_disc
-from dynremove.refine.select import Selection
+from dynremove.refine.select import Selection, member_median
 
 
 def _resize_nearest(a: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -108,9 +108,7 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     chosen = lab[py, px]
     member = members[:, py, px] & usable[1:, py, px]
     member[chosen - 1, np.arange(len(py))] = True
-    vals = np.where(member[..., None], cand[1:, py, px].astype(np.float32), np.nan)
-    med = np.nanmedian(vals, axis=0)
-    cand[chosen, py, px] = np.clip(med + 0.5, 0, 255).astype(np.uint8)
+    cand[chosen, py, px] = member_median(cand[1:, py, px], member)
     labs = np.stack([blurred_lab(c, max(sx, sy)) for c in cand])
     d_ref = np.linalg.norm(labs - labs[0][None], axis=-1)
     out = offset_blend(reference[roi], cand, lab, rep_roi, usable, d_ref, ring_px=ring_px)
