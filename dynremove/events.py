@@ -93,6 +93,12 @@ class ScanState:
     float32 of the current scan (NaN where not visited yet or undecided);
     ``N``: (S, H, W, 2) int32 correspondences (x, y) per source; ``C``: (S, H, W)
     float32 similarity maps. Views are not writeable: copy what you keep.
+
+    Per-pixel decision maps of the current scan (Sec. 3.2.1; zero where not
+    visited yet): ``clusters`` (H, W, 4) int32 = |P| (candidates), k (DBSCAN
+    clusters), |A_m| (size of the winning cluster) and a bitmask of the sources
+    in A_m (bit s = source s); ``b_m`` (H, W) float32, the winning cluster's
+    weight Σ_{l ∈ A_m} B_l (0 when undecided).
     """
 
     image: np.ndarray
@@ -102,6 +108,8 @@ class ScanState:
     C: np.ndarray
     scan: int
     direction: int  # +1: top-left → bottom-right, −1: bottom-right → top-left
+    clusters: np.ndarray | None = None
+    b_m: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -174,6 +182,8 @@ class MemorySink:
         self.batches: list[EventBatch] = []
         self.summaries: list[np.ndarray] = []
         self.M_maps: list[np.ndarray] = []
+        self.cluster_maps: list[np.ndarray] = []  # (H, W, 4) int32 per scan, see ScanState
+        self.b_m_maps: list[np.ndarray] = []
         self.snapshots: list[np.ndarray] | None = [] if snapshots else None
         self.result: Any = None
         self.scans_started: list[tuple[int, int]] = []
@@ -192,6 +202,9 @@ class MemorySink:
     def scan_finished(self, summary: np.ndarray, state: ScanState) -> None:
         self.summaries.append(summary.copy())
         self.M_maps.append(state.M.copy())
+        if state.clusters is not None:
+            self.cluster_maps.append(state.clusters.copy())
+            self.b_m_maps.append(state.b_m.copy())
 
     def finish(self, result: Any) -> None:
         self.result = result

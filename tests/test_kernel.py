@@ -96,6 +96,20 @@ def test_kernel_equals_reference(crop_with_F, variant):
     np.testing.assert_array_equal(a[0].fg_r, b[0].fg_r)
     for ma, mb in zip(a[2], b[2]):
         np.testing.assert_allclose(ma, mb, rtol=0, atol=1e-6, equal_nan=True)
+    # the per-pixel decision maps (|P|, k, |A_m|, sources of A_m; b_m)
+    assert len(a[4].cluster_maps) == len(b[4].cluster_maps) == len(a[3])
+    for ka, kb in zip(a[4].cluster_maps, b[4].cluster_maps):
+        np.testing.assert_array_equal(ka, kb)
+        assert (ka[..., 2] <= ka[..., 0]).all() and (ka[..., 3] > 0).any()
+    for ba, bb in zip(a[4].b_m_maps, b[4].b_m_maps):
+        np.testing.assert_allclose(ba, bb, rtol=0, atol=1e-5)
+    # they agree with the recorded decisions at the recorded pixels
+    d0 = a[4].decisions
+    d0 = d0[d0["scan"] == 0]
+    k0 = a[4].cluster_maps[0][d0["y"], d0["x"]]
+    np.testing.assert_array_equal(k0[:, 0], d0["n_cand"])
+    np.testing.assert_array_equal(k0[:, 1], d0["n_clusters"])
+    np.testing.assert_allclose(a[4].b_m_maps[0][d0["y"], d0["x"]], d0["win_weight"], atol=1e-6)
     for name in ("decisions", "replacements", "updates"):
         ea, eb = getattr(a[4], name), getattr(b[4], name)
         assert ea.dtype == eb.dtype and len(ea) == len(eb)

@@ -286,6 +286,7 @@ def test_event_buffer_overflow_is_detected():
     L = np.zeros((H, W), np.uint8)
     kn._scan_rows(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
                   st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L,
+                  np.zeros((H, W), np.float32), np.zeros((H, W, 4), np.int32),
                   np.zeros((H, W), np.float32), np.zeros((H, W), bool), pf, pi, 0, 1, 0, H,
                   True, *bufs.args(), stats)
     assert stats[0] == H * W

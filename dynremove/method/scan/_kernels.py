@@ -609,7 +609,8 @@ def _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi, x, y,
 
 @numba.njit(cache=True, nogil=True)
 def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-               N, C, F, hasF, L, Mmap, probe, pf, pi, scan, direction, r0, r1, rec,
+               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, pf, pi, scan, direction, r0, r1,
+               rec,
                dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
                rep_i, rep_f, upd_i, upd_f, counts, stats):
     """Visit rows r0..r1−1 (in visiting order) of one scan; mutate the state in place.
@@ -619,7 +620,10 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     features; sources src_img/src_lab/src_gray/fc_s/fg_s with a leading S axis;
     N (S, H, W, 2) int32, C (S, H, W) float32; F (S, 3, 3) float64, hasF (S,) bool;
     L (H, W) uint8 (1 = dynamic in some scan); Mmap (H, W) float32 of this scan;
-    probe (H, W) bool. direction +1: top-left → bottom-right, −1: the reverse.
+    Kmap (H, W, 4) int32 of this scan: |P|, k (clusters), |A_m| (the winning
+    cluster's size) and a bitmask of the sources in A_m (bit s); Bmap (H, W)
+    float32: b_m (the winning cluster's weight, Σ B_l); probe (H, W) bool.
+    direction +1: top-left → bottom-right, −1: the reverse.
 
     Per pixel: ``_candidates`` → ``_cluster`` → ``_decide``; if dynamic,
     ``_choose_patch`` → ``_write_patch`` (+ f_c, f_g of q*) →
@@ -684,6 +688,17 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
             else:
                 stats[2] += 1
             Mmap[y, x] = M
+            Bmap[y, x] = bm
+            Kmap[y, x, 0] = n
+            Kmap[y, x, 1] = k
+            wsize = 0
+            wsrc = 0
+            for i in range(n):
+                if k > 0 and labels[i] == m:
+                    wsize += 1
+                    wsrc |= 1 << cs[i]
+            Kmap[y, x, 2] = wsize
+            Kmap[y, x, 3] = wsrc
             chosen = -1
             if dynamic:
                 stats[0] += 1

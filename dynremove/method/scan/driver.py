@@ -195,12 +195,15 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
     for scan in range(params.max_scans):
         direction = 1 if scan % 2 == 0 else -1
         Mmap = np.full((H, W), np.nan, np.float32)
+        Kmap = np.zeros((H, W, 4), np.int32)
+        Bmap = np.zeros((H, W), np.float32)
         stats = np.zeros(3, np.int64)
 
         def state() -> ScanState:
             return ScanState(image=_readonly(st.img), dynamic=_readonly(L.astype(bool)),
                              M=_readonly(Mmap), N=_readonly(st.N), C=_readonly(st.C),
-                             scan=scan, direction=direction)
+                             scan=scan, direction=direction, clusters=_readonly(Kmap),
+                             b_m=_readonly(Bmap))
 
         t0 = time.perf_counter()
         if record:
@@ -209,7 +212,7 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
             r1 = min(H, r0 + chunk_rows)
             scan_fn(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
                     st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L, Mmap,
-                    probe, scan=scan, direction=direction, r0=r0, r1=r1, stats=stats)
+                    Kmap, Bmap, probe, scan=scan, direction=direction, r0=r0, r1=r1, stats=stats)
             if record:
                 base = scan * H * W
                 batch = bufs.take(scan, (r0, r1 - 1), (base + r0 * W, base + r1 * W))

@@ -304,7 +304,8 @@ def update_correspondences(P, labels, m, nbrs, N, C, fc_r, fg_r, fc_s, fg_s, x, 
 
 
 def scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-              N, C, F, hasF, L, Mmap, probe, params: Params, scan, direction, r0, r1, rec,
+              N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, params: Params, scan, direction, r0, r1,
+              rec,
               dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
               rep_i, rep_f, upd_i, upd_f, counts, stats, *, sift_unit, sample_rate=0.0):
     """Rows r0..r1−1 of one scan, Algorithm 1; the kernel's state, buffers and
@@ -322,6 +323,10 @@ def scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s
             if m < 0:
                 stats[2] += 1
             Mmap[y, x] = M
+            Bmap[y, x] = bm
+            win = [P[i][0] for i in range(len(P)) if m >= 0 and labels[i] == m]
+            Kmap[y, x] = (len(P), int(labels.max()) + 1 if len(P) else 0, len(win),
+                          sum(1 << s for s in set(win)))
             dynamic = m >= 0 and M <= params.t_r
             chosen = -1
             if dynamic:
