@@ -60,7 +60,9 @@ def _choose_both(P, labels, m, params, F, hasF, src_lab_vals, fc_s, fg_s, fhat_c
     cs, cx, cy, lab_ = _arrays(P, labels)
     K = len(P)
     nb = params.hog_bins
-    got_k = kn._choose_patch(lab, gray, src_lab, src_gray, fc_s, fg_s, F, hasF, pf, pi, X, Y,
+    hb_s, hm_s = (np.stack(a) for a in zip(*(kn._gradient_bins(g, nb) for g in src_gray)))
+    got_k = kn._choose_patch(lab, *kn._gradient_bins(gray, nb), src_lab, hb_s, hm_s, fc_s, fg_s,
+                             F, hasF, pf, pi, X, Y,
                              *NBR, K, cs, cx, cy, lab_, m, fhat_c, fhat_g, np.empty(K),
                              np.empty(3), np.empty(3), np.empty(nb), np.empty(nb))
     ctx = R._Ctx(params, U, F, hasF)
@@ -287,7 +289,10 @@ def test_event_buffer_overflow_is_detected():
     kn._scan_rows(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
                   st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L,
                   np.zeros((H, W), np.float32), np.zeros((H, W, 4), np.int32),
-                  np.zeros((H, W), np.float32), np.zeros((H, W), bool), pf, pi, 0, 1, 0, H,
+                  np.zeros((H, W), np.float32), np.zeros((H, W), bool),
+                  *kn._gradient_bins(st.gray, 8),
+                  *(a[None].repeat(S, 0) for a in kn._gradient_bins(st.src_gray[0], 8)),
+                  pf, pi, 0, 1, 0, H,
                   True, *bufs.args(), stats)
     assert stats[0] == H * W
     assert bufs.counts[0] == H * W and bufs.counts[1] == H * W and bufs.counts[2] == H * W * S

@@ -91,12 +91,15 @@ def _lab_d2(a, ya, xa, b, yb, xb):
 
 @numba.njit(cache=True, nogil=True)
 def _sift_d2(a, ya, xa, b, yb, xb):
-    """Squared distance of two uint8 descriptors as an exact integer."""
-    d = 0
+    """Squared distance of two uint8 descriptors as an exact integer.
+
+    int32 lanes so the loop vectorises; exact, since 128 · 255² < 2³¹.
+    """
+    d = np.int32(0)
     for k in range(a.shape[2]):
-        t = np.int64(a[ya, xa, k]) - np.int64(b[yb, xb, k])
+        t = np.int32(a[ya, xa, k]) - np.int32(b[yb, xb, k])
         d += t * t
-    return d
+    return np.int64(d)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -199,17 +202,18 @@ def _dbscan(D, n, eps, min_pts, labels, is_core, stack):
 
 
 @numba.njit(cache=True, nogil=True)
-def _region_stats(lab, gray, x0, y0, lab2, gray2, x1, y1, ulo, uhi, vlo, vhi,
+def _region_stats(lab, hb, hm, x0, y0, lab2, hb2, hm2, x1, y1, ulo, uhi, vlo, vhi,
                   nb, hog_scale, gc0, gh0, gc1, gh1):
     """Lab mean g_c and rotation-invariant HoG g_h of one overlap region in two images.
 
     The region is the window offsets u ∈ [ulo, uhi], v ∈ [vlo, vhi] around (x0, y0)
     in image 0 and (x1, y1) in image 1; pixels outside either image are skipped
-    in both, so the two descriptors always cover the same pixels. Returns the
+    in both, so the two descriptors always cover the same pixels. Each image comes
+    as its Lab and its gradient bins (hb, hm) of ``_gradient_bins``. Returns the
     pixel count (0: no overlap).
     """
-    H0, W0 = gray.shape
-    H1, W1 = gray2.shape
+    H0, W0 = hb.shape
+    H1, W1 = hb2.shape
     for c in range(3):
         gc0[c] = 0.0
         gc1[c] = 0.0
@@ -231,8 +235,10 @@ def _region_stats(lab, gray, x0, y0, lab2, gray2, x1, y1, ulo, uhi, vlo, vhi,
             for c in range(3):
                 gc0[c] += lab[ya, xa, c]
                 gc1[c] += lab2[yb, xb, c]
-            _hog_add(gray, xa, ya, nb, gh0)
-            _hog_add(gray2, xb, yb, nb, gh1)
+            if hb[ya, xa] >= 0:
+                gh0[hb[ya, xa]] += hm[ya, xa]
+            if hb2[yb, xb] >= 0:
+                gh1[hb2[yb, xb]] += hm2[yb, xb]
     if cnt > 0:
         for c in range(3):
             gc0[c] /= cnt
@@ -242,8 +248,10 @@ def _region_stats(lab, gray, x0, y0, lab2, gray2, x1, y1, ulo, uhi, vlo, vhi,
     return cnt
 
 
-@numba.njit(cache=True, nogil=True)
-def _hog_add(gray, x, y, nb, h):
+@numba.njit(cache=True, nogil=True, inline="always")
+def _hog_bin(gray, x, y, nb):
+    """HoG bin (−1: zero gradient) and magnitude of pixel (x, y): central
+    differences, clamped at the border; the angle atan2 + π cut into nb bins."""
     H, W = gray.shape
     gx = (np.float64(gray[y, min(x + 1, W - 1)]) - np.float64(gray[y, max(x - 1, 0)])) * 0.5
     gy = (np.float64(gray[min(y + 1, H - 1), x]) - np.float64(gray[max(y - 1, 0), x])) * 0.5
@@ -253,7 +261,35 @@ def _hog_add(gray, x, y, nb, h):
         b = int(a * nb / (2.0 * math.pi))
         if b >= nb:
             b = nb - 1
-        h[b] += m
+        return b, m
+    return -1, 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def _refresh_bins(gray, nb, hb, hm, x0, x1, y0, y1):
+    """Recompute the gradient bins on rows y0..y1, columns x0..x1 (clipped)."""
+    H, W = gray.shape
+    for y in range(max(y0, 0), min(y1, H - 1) + 1):
+        for x in range(max(x0, 0), min(x1, W - 1) + 1):
+            b, m = _hog_bin(gray, x, y, nb)
+            hb[y, x] = b
+            hm[y, x] = m
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _gradient_bins(gray, nb):
+    """Every pixel's HoG bin and magnitude (``_hog_bin``): the per-pixel part of
+    g_h, computed once so that a window's HoG is a sum. gray (H, W) float32 →
+    hb (H, W) int8 (−1: zero gradient), hm (H, W) float64."""
+    H, W = gray.shape
+    hb = np.empty((H, W), np.int8)
+    hm = np.empty((H, W), np.float64)
+    for y in numba.prange(H):
+        for x in range(W):
+            b, m = _hog_bin(gray, x, y, nb)
+            hb[y, x] = b
+            hm[y, x] = m
+    return hb, hm
 
 
 @numba.njit(cache=True, nogil=True)
@@ -417,7 +453,7 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
 
 
 @numba.njit(cache=True, nogil=True)
-def _choose_patch(lab, gray, src_lab, src_gray, fc_s, fg_s, F, hasF, pf, pi, x, y,
+def _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf, pi, x, y,
                   ndx0, ndy0, ndx1, ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g,
                   score, gc0, gc1, gh0, gh1):
     """q* (Sec. 3.2.2) among the candidates of A_m; mirrors ``reference.choose_patch``.
@@ -431,7 +467,7 @@ def _choose_patch(lab, gray, src_lab, src_gray, fc_s, fg_s, F, hasF, pf, pi, x, 
     λ4‖f̂_c − f_c‖² + λ5‖f̂_g − f_g‖² (q̂), first in candidate order.
     Fills score[:n]; returns (index of q*, best score, number tied).
     """
-    H, W = gray.shape
+    H, W = hb_r.shape
     h = pi[P] // 2
     nb = pi[HOG_BINS]
     u = pf[SIFT_UNIT]
@@ -454,7 +490,8 @@ def _choose_patch(lab, gray, src_lab, src_gray, fc_s, fg_s, F, hasF, pf, pi, x, 
             uhi = min(h, dxn + h)
             vlo = max(-h, dyn - h)
             vhi = min(h, dyn + h)
-            cnt = _region_stats(src_lab[s], src_gray[s], cx[i], cy[i], lab, gray, x, y,
+            cnt = _region_stats(src_lab[s], hb_s[s], hm_s[s], cx[i], cy[i], lab, hb_r, hm_r,
+                                x, y,
                                 ulo, uhi, vlo, vhi, nb, pf[HOG_SCALE], gc0, gh0, gc1, gh1)
             if cnt == 0:
                 continue
@@ -609,8 +646,8 @@ def _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi, x, y,
 
 @numba.njit(cache=True, nogil=True)
 def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, pf, pi, scan, direction, r0, r1,
-               rec,
+               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, pf, pi,
+               scan, direction, r0, r1, rec,
                dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
                rep_i, rep_f, upd_i, upd_f, counts, stats):
     """Visit rows r0..r1−1 (in visiting order) of one scan; mutate the state in place.
@@ -622,7 +659,9 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     L (H, W) uint8 (1 = dynamic in some scan); Mmap (H, W) float32 of this scan;
     Kmap (H, W, 4) int32 of this scan: |P|, k (clusters), |A_m| (the winning
     cluster's size) and a bitmask of the sources in A_m (bit s); Bmap (H, W)
-    float32: b_m (the winning cluster's weight, Σ B_l); probe (H, W) bool.
+    float32: b_m (the winning cluster's weight, Σ B_l); probe (H, W) bool;
+    hb_r, hm_r (H, W) and hb_s, hm_s (S, H, W): the gradient bins of the reference
+    (kept up to date after each write) and of the sources (``_gradient_bins``).
     direction +1: top-left → bottom-right, −1: the reverse.
 
     Per pixel: ``_candidates`` → ``_cluster`` → ``_decide``; if dynamic,
@@ -704,7 +743,7 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                 stats[0] += 1
                 L[y, x] = 1
                 # ---- removal (Sec. 3.2.2) -----------------------------------------
-                ib, best, ntie = _choose_patch(lab, gray, src_lab, src_gray, fc_s, fg_s, F,
+                ib, best, ntie = _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F,
                                                hasF, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1,
                                                n, cs, cx, cy, labels, m, fhat_c, fhat_g,
                                                score, gc0, gc1, gh0, gh1)
@@ -713,6 +752,8 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                 qy = cy[ib]
                 _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y,
                              half)
+                _refresh_bins(gray, nb, hb_r, hm_r, x - half - 1, x + half + 1,
+                              y - half - 1, y + half + 1)
                 for c in range(3):
                     fc_r[y, x, c] = fc_s[s, qy, qx, c]
                 for j in range(fg_r.shape[2]):

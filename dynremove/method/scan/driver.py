@@ -176,6 +176,14 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
     pf, pi = pack_params(params, sift_unit=st.sift_unit, sample_rate=sample_static)
     bufs = _Buffers(chunk_rows, W, S, record)
     L = np.zeros((H, W), np.uint8)
+    # the per-pixel part of g_h (Sec. 3.2.2), once; the kernel keeps the reference's
+    # current after each write, so a patch's HoG is a sum, not 2·p² atan2
+    nb = params.hog_bins
+    hb_r, hm_r = kn._gradient_bins(st.gray, nb)
+    hb_s = np.empty(st.src_gray.shape, np.int8)
+    hm_s = np.empty(st.src_gray.shape, np.float64)
+    for s in range(S):
+        hb_s[s], hm_s[s] = kn._gradient_bins(st.src_gray[s], nb)
     M_maps: list[np.ndarray] = []
     summaries: list[np.ndarray] = []
     if kernel == "numba":
@@ -212,7 +220,7 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
             r1 = min(H, r0 + chunk_rows)
             scan_fn(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
                     st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L, Mmap,
-                    Kmap, Bmap, probe, scan=scan, direction=direction, r0=r0, r1=r1, stats=stats)
+                    Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, scan=scan, direction=direction, r0=r0, r1=r1, stats=stats)
             if record:
                 base = scan * H * W
                 batch = bufs.take(scan, (r0, r1 - 1), (base + r0 * W, base + r1 * W))
