@@ -220,7 +220,8 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
             r1 = min(H, r0 + chunk_rows)
             scan_fn(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
                     st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L, Mmap,
-                    Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, scan=scan, direction=direction, r0=r0, r1=r1, stats=stats)
+                    Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, scan=scan, direction=direction,
+                    r0=r0, r1=r1, stats=stats)
             if record:
                 base = scan * H * W
                 batch = bufs.take(scan, (r0, r1 - 1), (base + r0 * W, base + r1 * W))
