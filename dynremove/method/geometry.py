@@ -10,6 +10,8 @@ the same direction).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -167,12 +169,17 @@ def sampson_sq(F: npt.NDArray[np.float64], xy_r: npt.ArrayLike,
 
 
 def geometry_for_sources(ref_gray: npt.NDArray[np.uint8], src_grays: list[npt.NDArray[np.uint8]],
-                         *, seed: int = 0) -> list[TwoView]:
-    """Match the reference to each source and estimate F_s and H_s."""
-    xy_r, d_r = detect(ref_gray)
-    out = []
-    for g in src_grays:
-        xy_s, d_s = detect(g)
-        m = match(d_r, d_s)
-        out.append(estimate_two_view(xy_r[m[:, 0]], xy_s[m[:, 1]], seed=seed))
-    return out
+                         *, seed: int = 0, workers: int | None = None) -> list[TwoView]:
+    """Match the reference to each source and estimate F_s and H_s.
+
+    Detection and matching run on ``workers`` threads (default: the CPU count;
+    OpenCV releases the GIL), the estimation in order (OpenCV's RNG is global):
+    the result does not depend on ``workers``.
+    """
+    workers = workers or os.cpu_count() or 1
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        feats = list(pool.map(detect, [ref_gray, *src_grays]))
+        xy_r, d_r = feats[0]
+        matches = list(pool.map(lambda f: match(d_r, f[1]), feats[1:]))
+    return [estimate_two_view(xy_r[m[:, 0]], f[0][m[:, 1]], seed=seed)
+            for f, m in zip(feats[1:], matches)]
