@@ -106,6 +106,7 @@ class Params:
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
     select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
+    select_sweep: bool = False  # above that parallax, matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
     candidate_set: bool = True  # P as a set (the paper): a repeated (s, x, y) candidate counts once

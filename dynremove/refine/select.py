@@ -15,7 +15,9 @@ that the scan flagged with doubled content.
    Pixels of L explained by at least half of the sources are static 3-D
    structure that the scan's homography-gated matches could not follow.
 2. **Background candidates.** Every source is sampled through its field,
-   re-interpolated across the rest of L (``fields.background_field``) and
+   re-interpolated across the rest of L (``fields.background_field``); where
+   the set has parallax, found instead by a plane + parallax sweep for the
+   depth at which the sources agree (``parallax.sweep_fields``); then
    re-aligned by flow from the filled reference (``fill.realign_fields``).
 3. **Consensus with independent, weighted witnesses.** A colour model of the
    movers (histogram of L against a ring around it, as GrabCut's) gives each
@@ -47,6 +49,7 @@ from dynremove.method.geometry import TwoView, sampson_sq
 from dynremove.params import Params
 from dynremove.refine.fields import background_field, blurred_lab, sample_bilinear
 from dynremove.refine.fill import median_fill, realign_fields
+from dynremove.refine.parallax import fit_parallax, sweep_fields
 from dynremove.refine.montage import expansion_labels, offset_blend, pairwise_distance
 from dynremove.refine.morphology import dilate_disc
 
@@ -269,6 +272,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     hole = cv2.dilate(dilate_disc(core, 2).astype(np.uint8), np.ones((7, 7), np.uint8)
                       ).astype(bool)
     fields = [background_field(base[k], hole) for k in range(S)]
+    if P.select_sweep and mode == "parallax" and core.any():
+        # hidden 3-D structure: the depth at which the sources agree, not a membrane
+        model = fit_parallax(base, views, ~dilate_disc(mask, 4), seed=P.seed)
+        if model is not None:
+            fields, _ = sweep_fields([blurred_lab(s, 0.0) for s in sources], views, model,
+                                     hole, fields)
     if P.fuse_realign > 0 and core.any():
         for _ in range(P.fuse_realign):
             first, _ = median_fill(reference, sources, fields, dilate_disc(core, 2))

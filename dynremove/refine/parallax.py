@@ -1,0 +1,288 @@
+"""The hidden background's matches by a plane + parallax sweep (default preset).
+
+Inside L the reference shows the mover, so its matches in the sources cannot
+be measured there. ``fields.background_field`` interpolates them across L as a
+membrane, which is right for a plane and wrong for 3-D structure hidden behind
+the mover (a balcony in front of a wall lands tens of pixels off, and the fill
+is doubled). This module recovers it from the sources themselves:
+
+1. **Plane + parallax** (Irani & Anandan, *Parallax geometry of pairs of
+   points*, 1996; Sawhney, *3D geometry from planar parallax*, CVPR 1994). In
+   source s a reference pixel x_r matches on its epipolar line l_s = F_s x̃_r,
+   at h_s(x_r) (the homography H_s's point moved onto l_s) plus a parallax
+   t_s along the line. For a static point t_s = k_s γ(x_r) + a_s x + b_s y + c_s:
+   one scalar γ per pixel (its depth relative to a plane) shared by every
+   source, up to each source's scale k_s and an affine term (each H_s may be
+   induced by a different plane). k_s, a_s, b_s, c_s are fitted robustly on
+   the visible pixels' flow matches, with γ measured in the source of widest
+   parallax.
+2. **Sweep** (plane sweep, Collins, CVPR 1996). For each γ of a range, every
+   source is sampled at its match and the cost is the mean CIE76 distance
+   (capped) of the sources to their per-channel median: the right depth is
+   where the sources agree. Costs are computed at half resolution.
+3. **Semi-global matching** (Hirschmüller, *Stereo processing by semiglobal
+   matching and mutual information*, PAMI 2008) over 4 paths regularises γ,
+   which is then upsampled. Pixels where the sources never agree keep the
+   membrane field.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numba
+import numpy as np
+import numpy.typing as npt
+
+from dynremove.method.geometry import TwoView, sampson_sq
+
+_CAP = 30.0  # ΔE cap of one source's distance to the median in the sweep cost
+
+
+@dataclass(frozen=True)
+class ParallaxModel:
+    """Per-source μ_s = k γ + a x/W + b y/H + c, with x_s ~ H_s x̃_r + μ_s ẽ_s."""
+
+    coef: npt.NDArray[np.float64]  # (S, 4): k, a, b, c; rows of NaN where not fitted
+    anchor: int  # the source whose μ defines γ
+    mad_px: npt.NDArray[np.float64]  # (S,) median reprojection residual of the fit (px)
+    gamma_range: tuple[float, float]  # γ over the visible pixels (0.5, 99.5 percentiles)
+
+
+def epipole(F: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """The epipole ẽ_s in the source (F_sᵀ ẽ_s = 0), unit norm, (3,) float64."""
+    _, _, vt = np.linalg.svd(F.T)
+    e = vt[-1]
+    return e / np.linalg.norm(e)
+
+
+def project(Hm, e, mu, gx, gy):
+    """x_s = π(H x̃ + μ ẽ) for reference pixel coordinates gx, gy: (x, y) float32 each."""
+    px = Hm[0, 0] * gx + Hm[0, 1] * gy + Hm[0, 2] + mu * e[0]
+    py = Hm[1, 0] * gx + Hm[1, 1] * gy + Hm[1, 2] + mu * e[1]
+    pw = Hm[2, 0] * gx + Hm[2, 1] * gy + Hm[2, 2] + mu * e[2]
+    pw = np.where(np.abs(pw) < 1e-9, 1e-9, pw)
+    return (px / pw).astype(np.float32), (py / pw).astype(np.float32)
+
+
+def _mu_of(Hm, e, gx, gy, xs, ys):
+    """μ with x̃_s × (H x̃ + μ ẽ) = 0 in the least-squares sense (closed form)."""
+    p = np.stack([Hm[0, 0] * gx + Hm[0, 1] * gy + Hm[0, 2],
+                  Hm[1, 0] * gx + Hm[1, 1] * gy + Hm[1, 2],
+                  Hm[2, 0] * gx + Hm[2, 1] * gy + Hm[2, 2]], -1)
+    xt = np.stack([xs, ys, np.ones_like(xs)], -1).astype(np.float64)
+    a = np.cross(xt, p)
+    b = np.cross(xt, np.broadcast_to(e, xt.shape))
+    return -(a * b).sum(-1) / np.maximum((b * b).sum(-1), 1e-18)
+
+
+def fit_parallax(fields: list[np.ndarray], views: list[TwoView], visible: np.ndarray, *,
+                 line_px: float = 1.5, max_samples: int = 40000, seed: int = 0
+                 ) -> ParallaxModel | None:
+    """Fit each source's parallax to a common γ on the visible pixels.
+
+    fields: per source (H, W, 2) float32 flow matches; views: the TwoView per
+    source (H_s, F_s); visible (H, W) bool: pixels whose matches are trusted
+    (outside L). A match counts only within ``line_px`` (Sampson) of its epipolar
+    line. μ_s of every match is solved in closed form; γ is the μ of the source
+    of widest parallax; k, a, b, c by iteratively reweighted least squares.
+    The residual is measured in pixels, by reprojection. None when fewer than
+    two sources have F.
+    """
+    S = len(fields)
+    Hh, Ww = visible.shape
+    rng = np.random.default_rng(seed)
+    ys, xs = np.nonzero(visible)
+    if len(ys) > max_samples:
+        pick = np.sort(rng.choice(len(ys), max_samples, replace=False))
+        ys, xs = ys[pick], xs[pick]
+    gx, gy = xs.astype(np.float64), ys.astype(np.float64)
+    mu, ok, spread = {}, {}, {}
+    for k in range(S):
+        v = views[k]
+        if v.F is None:
+            continue
+        e = epipole(v.F)
+        m = fields[k][ys, xs].astype(np.float64)
+        good = sampson_sq(v.F, np.stack([gx, gy], -1), m) <= line_px ** 2
+        if good.sum() < 500:
+            continue
+        ok[k] = good
+        mu[k] = _mu_of(v.H, e, gx, gy, m[:, 0], m[:, 1])
+        hx, hy = project(v.H, e, 0.0, gx, gy)
+        spread[k] = float(np.median(np.hypot(m[:, 0] - hx, m[:, 1] - hy)[good]))
+    if len(mu) < 2:
+        return None
+    anchor = max(mu, key=lambda k: spread[k])
+    G = mu[anchor]
+    coef = np.full((S, 4), np.nan)
+    mad = np.full(S, np.inf)
+    for k in mu:
+        sel = ok[k] & ok[anchor]
+        if sel.sum() < 500:
+            continue
+        A = np.c_[G[sel], xs[sel] / Ww, ys[sel] / Hh, np.ones(int(sel.sum()))]
+        y = mu[k][sel]
+        w = np.ones(len(y))
+        for _ in range(5):
+            c = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
+            r = y - A @ c
+            sc = 1.4826 * np.median(np.abs(r)) + 1e-12
+            w = 1.0 / np.maximum(1.0, np.abs(r) / (2.0 * sc))
+        coef[k] = c
+        px, py = project(views[k].H, epipole(views[k].F), A @ c, gx[sel], gy[sel])
+        m = fields[k][ys[sel], xs[sel]]
+        mad[k] = float(np.median(np.hypot(px - m[:, 0], py - m[:, 1])))
+    lo, hi = np.percentile(G[ok[anchor]], [0.5, 99.5])
+    return ParallaxModel(coef=coef, anchor=anchor, mad_px=mad, gamma_range=(float(lo), float(hi)))
+
+
+@numba.njit(cache=True, nogil=True)
+def sgm(cost, P1, P2):
+    """Semi-global matching over 4 paths (Hirschmüller 2008).
+
+    cost (h, w, D) float32 → aggregated (h, w, D) float32; the argmin over D is
+    the regularised label. P1: penalty of a ±1 label change, P2 of a larger one.
+    """
+    h, w, D = cost.shape
+    agg = np.zeros((h, w, D), np.float32)
+    Lr = np.empty(D, np.float32)
+    prev = np.empty(D, np.float32)
+    for path in range(4):
+        if path < 2:
+            n_lines, n_len = h, w
+        else:
+            n_lines, n_len = w, h
+        for line in range(n_lines):
+            for i in range(n_len):
+                j = i if path % 2 == 0 else n_len - 1 - i
+                if path < 2:
+                    y, x = line, j
+                else:
+                    y, x = j, line
+                if i == 0:
+                    for d in range(D):
+                        Lr[d] = cost[y, x, d]
+                else:
+                    mp = prev[0]
+                    for d in range(1, D):
+                        if prev[d] < mp:
+                            mp = prev[d]
+                    for d in range(D):
+                        v = prev[d]
+                        if d > 0 and prev[d - 1] + P1 < v:
+                            v = prev[d - 1] + P1
+                        if d < D - 1 and prev[d + 1] + P1 < v:
+                            v = prev[d + 1] + P1
+                        if mp + P2 < v:
+                            v = mp + P2
+                        Lr[d] = cost[y, x, d] + v - mp
+                for d in range(D):
+                    agg[y, x, d] += Lr[d]
+                    prev[d] = Lr[d]
+    return agg
+
+
+def sweep_fields(src_labs: list[np.ndarray], views: list[TwoView], model: ParallaxModel,
+                 hole: np.ndarray, base: list[np.ndarray], *, step_px: float = 1.0,
+                 scale: float = 0.5, P1: float = 1.0, P2: float = 8.0,
+                 box: int = 3, prior: float = 2.0, prior_px: float = 8.0,
+                 margin: float = 1.0, max_mad_px: float = 2.0, max_steps: int = 256
+                 ) -> tuple[list[np.ndarray], np.ndarray]:
+    """Fields of the hidden background inside ``hole`` by the sweep + SGM.
+
+    src_labs: per source (H, W, 3) float32 Lab; views: TwoView per source; base:
+    per source (H, W, 2) float32, the fields to start from (kept outside ``hole``,
+    and for sources without a model or whose model's median residual exceeds
+    ``max_mad_px``). γ is swept in steps of about ``step_px`` of the anchor
+    source's image, over the visible range widened by 10 % each side.
+    Where the colours cannot tell depths apart (flat or repetitive texture),
+    the base field wins: a cost of ``prior`` · min(|Δ| / ``prior_px``, 1), Δ the
+    anchor's displacement from the base field's γ, and the sweep's γ is used
+    only where its colour cost (7×7 window of the coarse grid) beats the base
+    field's by more than ``margin`` (ΔE).
+    Returns (fields, gamma): the new fields and γ (H, W) float32 (NaN outside
+    the hole or where the base field was kept). Costs at ``scale`` of the hole's box.
+    """
+    Hh, Ww = hole.shape
+    S = len(base)
+    use = [k for k in range(S) if views[k].F is not None and np.isfinite(model.coef[k, 0])
+           and model.mad_px[k] <= max_mad_px]
+    gamma = np.full((Hh, Ww), np.nan, np.float32)
+    a = model.anchor
+    if len(use) < 2 or a not in use or not hole.any():
+        return [b.copy() for b in base], gamma
+    ys, xs = np.nonzero(hole)
+    y0, y1 = int(ys.min()), int(ys.max()) + 1
+    x0, x1 = int(xs.min()), int(xs.max()) + 1
+    hh, ww = max(1, int(round((y1 - y0) * scale))), max(1, int(round((x1 - x0) * scale)))
+    cy = y0 + (np.arange(hh) + 0.5) * (y1 - y0) / hh - 0.5
+    cx = x0 + (np.arange(ww) + 0.5) * (x1 - x0) / ww - 0.5
+    CX, CY = (g.astype(np.float64) for g in np.meshgrid(cx, cy))
+    eps = {k: epipole(views[k].F) for k in use}
+    lo, hi = model.gamma_range
+    span = max(hi - lo, 1e-9)
+    lo, hi = lo - 0.1 * span, hi + 0.1 * span
+    # γ → px of the anchor, at the hole's centre
+    xc, yc = np.array([(x0 + x1) / 2.0]), np.array([(y0 + y1) / 2.0])
+    pa = project(views[a].H, eps[a], np.array([lo, hi]), xc, yc)
+    span_px = float(np.hypot(pa[0][1] - pa[0][0], pa[1][1] - pa[1][0]))
+    n_steps = int(np.clip(np.ceil(span_px / step_px) + 1, 2, max_steps))
+    steps = np.linspace(lo, hi, n_steps)
+    px_per_gamma = span_px / (hi - lo)
+    bx = cv2.remap(base[a], CX.astype(np.float32), CY.astype(np.float32), cv2.INTER_LINEAR,
+                   borderMode=cv2.BORDER_REPLICATE)
+    g_base = _mu_of(views[a].H, eps[a], CX, CY, bx[..., 0].astype(np.float64),
+                    bx[..., 1].astype(np.float64))
+    n = len(use)
+    aff = [model.coef[k, 1] * CX / Ww + model.coef[k, 2] * CY / Hh + model.coef[k, 3]
+           for k in use]
+    cost = np.empty((hh, ww, n_steps), np.float32)
+    labs = np.empty((n, hh, ww, 3), np.float32)
+    inside = np.empty((n, hh, ww), bool)
+    pen = np.empty((hh, ww), np.float32)
+    for i, g in enumerate(steps):
+        for j, k in enumerate(use):
+            fx, fy = project(views[k].H, eps[k], model.coef[k, 0] * g + aff[j], CX, CY)
+            labs[j] = cv2.remap(src_labs[k], fx, fy, cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)
+            inside[j] = (fx >= 0) & (fx <= Ww - 1) & (fy >= 0) & (fy <= Hh - 1)
+        med = np.median(labs, axis=0)
+        dE = np.minimum(np.linalg.norm(labs - med[None], axis=-1), _CAP)
+        c = np.where(inside, dE, _CAP).mean(0)
+        pen[:] = prior * np.minimum(np.abs(g - g_base) * px_per_gamma / prior_px, 1.0)
+        c += pen
+        cost[..., i] = cv2.boxFilter(c, -1, (box, box)) if box > 1 else c
+    agg = sgm(cost, np.float32(P1), np.float32(P2))
+    ib = np.argmin(agg, axis=-1)
+    best = steps[ib]
+    keep_base = np.zeros((hh, ww), bool)
+    if margin > 0:
+        i0 = np.clip(np.rint((g_base - lo) / (hi - lo) * (n_steps - 1)), 0, n_steps - 1
+                     ).astype(np.intp)
+        c_best = np.take_along_axis(cost, ib[..., None], -1)[..., 0]
+        c_base = np.take_along_axis(cost, i0[..., None], -1)[..., 0]
+        keep_base = cv2.boxFilter(c_base - c_best, -1, (7, 7)) <= margin
+    # back to full size on the hole's box (γ and where the base field is kept)
+    gb = cv2.resize(best.astype(np.float32), (x1 - x0, y1 - y0),
+                    interpolation=cv2.INTER_LINEAR)
+    kb = cv2.resize(keep_base.astype(np.uint8), (x1 - x0, y1 - y0),
+                    interpolation=cv2.INTER_NEAREST).astype(bool)
+    sub = hole[y0:y1, x0:x1] & ~kb
+    gamma[y0:y1, x0:x1][sub] = gb[sub]
+    gxf, gyf = (g.astype(np.float64) for g in np.meshgrid(np.arange(x0, x1), np.arange(y0, y1)))
+    out = []
+    for k in range(S):
+        f = base[k].copy()
+        if k in use and sub.any():
+            c = model.coef[k]
+            mu = c[0] * gb + c[1] * gxf / Ww + c[2] * gyf / Hh + c[3]
+            fx, fy = project(views[k].H, eps[k], mu, gxf, gyf)
+            f[y0:y1, x0:x1, 0][sub] = fx[sub]
+            f[y0:y1, x0:x1, 1][sub] = fy[sub]
+        out.append(f)
+    return out, gamma
+
+
+__all__ = ["ParallaxModel", "epipole", "fit_parallax", "project", "sgm", "sweep_fields"]
