@@ -292,7 +292,8 @@ def test_event_buffer_overflow_is_detected():
                   np.zeros((H, W), np.float32), np.zeros((H, W), bool),
                   *kn._gradient_bins(st.gray, 8),
                   *(a[None].repeat(S, 0) for a in kn._gradient_bins(st.src_gray[0], 8)),
-                  pf, pi, 0, 1, 0, H,
+                  False, np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1, 4), np.int32),
+                  np.zeros((H, W), np.uint8), pf, pi, 0, 1, 0, H,
                   True, *bufs.args(), stats)
     assert stats[0] == H * W
     assert bufs.counts[0] == H * W and bufs.counts[1] == H * W and bufs.counts[2] == H * W * S

@@ -641,13 +641,76 @@ def _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi, x, y,
             counts[2] = e + 1
 
 
+# --- the decisions of a scan, precomputed on all cores (exact) ----------------------
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, preK):
+    """Every pixel's decision from the state at the start of a scan, in parallel.
+
+    The decision at x_r reads N and C at its two scan neighbours and f(x_r) only;
+    during a scan they change only at dynamic pixels (the update of Sec. 3.2.3
+    and the write of f at the pixel itself). So wherever neither neighbour has
+    been updated yet in the scan, this precomputed decision is exactly the one
+    the sequential scan would make (``_scan_rows`` checks and recomputes the
+    others). Fills preM (H, W) float64 (NaN: undecided), preB (H, W) float64 b_m
+    and preK (H, W, 4) int32 as Kmap.
+    """
+    S, H, W = N.shape[0], N.shape[1], N.shape[2]
+    K = 2 * S
+    as_set = pi[CAND_SET] != 0
+    if direction > 0:
+        ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
+    else:
+        ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
+    for y in numba.prange(H):
+        cs = np.empty(K, np.int64)
+        cx = np.empty(K, np.int64)
+        cy = np.empty(K, np.int64)
+        cB = np.empty(K, np.float64)
+        slot = np.empty(K, np.int64)
+        D = np.empty((K, K), np.float64)
+        labels = np.empty(K, np.int64)
+        is_core = np.empty(K, np.bool_)
+        stack = np.empty(K * K + 1, np.int64)
+        bk = np.empty(K + 1, np.float64)
+        fhat_c = np.empty(3, np.float64)
+        fhat_g = np.empty(fg_r.shape[2], np.float64)
+        nx_ = np.empty(2, np.int64)
+        ny_ = np.empty(2, np.int64)
+        ox_ = np.empty(2, np.int64)
+        oy_ = np.empty(2, np.int64)
+        for x in range(W):
+            n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
+                                cB, slot, nx_, ny_, ox_, oy_)
+            k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack)
+            M = np.nan
+            m = -1
+            bm = 0.0
+            if k > 0:
+                m, bm, M, _ = _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB,
+                                      labels, k, pf, bk, fhat_c, fhat_g)
+            wsize = 0
+            wsrc = 0
+            for i in range(n):
+                if k > 0 and labels[i] == m:
+                    wsize += 1
+                    wsrc |= 1 << cs[i]
+            preM[y, x] = M
+            preB[y, x] = bm
+            preK[y, x, 0] = n
+            preK[y, x, 1] = k
+            preK[y, x, 2] = wsize
+            preK[y, x, 3] = wsrc
+
+
 # --- Algorithm 1: one chunk of rows of a scan ------------------------------------------
 
 
 @numba.njit(cache=True, nogil=True)
 def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, pf, pi,
-               scan, direction, r0, r1, rec,
+               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
+               use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1, rec,
                dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
                rep_i, rep_f, upd_i, upd_f, counts, stats):
     """Visit rows r0..r1−1 (in visiting order) of one scan; mutate the state in place.
@@ -661,7 +724,10 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     cluster's size) and a bitmask of the sources in A_m (bit s); Bmap (H, W)
     float32: b_m (the winning cluster's weight, Σ B_l); probe (H, W) bool;
     hb_r, hm_r (H, W) and hb_s, hm_s (S, H, W): the gradient bins of the reference
-    (kept up to date after each write) and of the sources (``_gradient_bins``).
+    (kept up to date after each write) and of the sources (``_gradient_bins``);
+    with ``use_pre``, preM/preB/preK from ``_decide_all`` at the scan's start are
+    taken for static pixels whose neighbours are not ``dirty`` (dirty (H, W)
+    uint8: updated in this scan, set here), so the result is the same.
     direction +1: top-left → bottom-right, −1: the reverse.
 
     Per pixel: ``_candidates`` → ``_cluster`` → ``_decide``; if dynamic,
@@ -711,6 +777,33 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
         for xi in range(W):
             x = xi if direction > 0 else W - 1 - xi
             step = np.int64(scan) * H * W + np.int64(vi) * W + xi
+            if use_pre:
+                # the precomputed decision holds unless a neighbour was updated
+                # in this scan; static ones are taken as they are (unless recorded)
+                pM = preM[y, x]
+                ok = not (pM <= pf[T_R])
+                for t in range(2):
+                    xa = x + (ndx0 if t == 0 else ndx1)
+                    ya = y + (ndy0 if t == 0 else ndy1)
+                    if 0 <= xa < W and 0 <= ya < H and dirty[ya, xa] != 0:
+                        ok = False
+                if ok and rec:
+                    if probe[y, x]:
+                        ok = False
+                    elif pf[SAMPLE_RATE] > 0.0:
+                        hsh = (np.uint64(x) * np.uint64(73856093)) ^ \
+                            (np.uint64(y) * np.uint64(19349663)) ^ \
+                            (np.uint64(scan) * np.uint64(83492791))
+                        if float(hsh % np.uint64(1000003)) < pf[SAMPLE_RATE] * 1000003.0:
+                            ok = False
+                if ok:
+                    Mmap[y, x] = pM
+                    Bmap[y, x] = preB[y, x]
+                    for c in range(4):
+                        Kmap[y, x, c] = preK[y, x, c]
+                    if preK[y, x, 1] == 0:
+                        stats[2] += 1
+                    continue
             # ---- decision (Sec. 3.2.1) --------------------------------------------
             n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
                                 cB, slot, nx_, ny_, ox_, oy_)
@@ -776,6 +869,7 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                     counts[1] = e + 1
                 # ---- update (Sec. 3.2.3) ------------------------------------------
                 if pi[UPDATE] != 0:
+                    dirty[y, x] = 1
                     _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi,
                                             x, y, n, cs, cx, cy, labels, m, nx_, ny_, nn,
                                             scan, step, rec, upd_i, upd_f, counts)

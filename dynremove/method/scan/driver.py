@@ -149,6 +149,10 @@ class _Buffers:
                           replacements=r, updates=u)
 
 
+# precompute the scan's decisions on all cores (exact; off only to measure it)
+PRECOMPUTE = True
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     v = a.view()
     v.flags.writeable = False
@@ -214,13 +218,24 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
                              b_m=_readonly(Bmap))
 
         t0 = time.perf_counter()
+        # every decision from the scan's starting state, on all cores; the scan
+        # then recomputes only what its own updates invalidate (exact)
+        use_pre = kernel == "numba" and PRECOMPUTE
+        preM = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
+        preB = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
+        preK = np.empty((H, W, 4), np.int32) if use_pre else np.empty((1, 1, 4), np.int32)
+        if use_pre:
+            kn._decide_all(st.N, st.C, st.fc_r, st.fg_r, st.fc_s, st.fg_s, pf, pi, direction,
+                           preM, preB, preK)
+        dirty = np.zeros((H, W), np.uint8)
         if record:
             sink.scan_started(scan, direction, state())
         for r0 in range(0, H, chunk_rows):
             r1 = min(H, r0 + chunk_rows)
             scan_fn(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
                     st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L, Mmap,
-                    Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, scan=scan, direction=direction,
+                    Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, use_pre, preM, preB, preK, dirty,
+                    scan=scan, direction=direction,
                     r0=r0, r1=r1, stats=stats)
             if record:
                 base = scan * H * W

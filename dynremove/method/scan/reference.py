@@ -305,12 +305,13 @@ def update_correspondences(P, labels, m, nbrs, N, C, fc_r, fg_r, fc_s, fg_s, x, 
 
 def scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
-              params: Params, scan, direction, r0, r1, rec,
+              use_pre, preM, preB, preK, dirty, params: Params, scan, direction, r0, r1, rec,
               dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
               rep_i, rep_f, upd_i, upd_f, counts, stats, *, sift_unit, sample_rate=0.0):
     """Rows r0..r1−1 of one scan, Algorithm 1; the kernel's state, buffers and
     events, with the parameters read from ``params`` by name. The kernel's cached
-    gradient bins (hb_*, hm_*) are ignored: the HoG is computed from ``gray``."""
+    gradient bins (hb_*, hm_*) and precomputed decisions (use_pre, pre*, dirty)
+    are ignored: every pixel is computed here, the HoG from ``gray``."""
     ctx = _Ctx(params, sift_unit, F, hasF)
     H, W = gray.shape
     for vi in range(r0, r1):
