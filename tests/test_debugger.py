@@ -107,10 +107,29 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
     mask = (gt & ~L) if kind == "FN" else (~gt & L)
     if not mask.any():
         pytest.skip(f"this run has no {kind} pixel")
-    y, x = map(int, np.argwhere(mask)[len(np.argwhere(mask)) // 2])
+    # a pixel where no decision event was recorded, when there is one: the answer
+    # then comes from the per-scan maps alone, without a re-run with --probe
+    d = mem.decisions
+    recorded = np.zeros_like(mask)
+    recorded[d["y"], d["x"]] = True
+    pick = mask & ~recorded if (mask & ~recorded).any() else mask
+    y, x = map(int, np.argwhere(pick)[len(np.argwhere(pick)) // 2])
     h = vi.pixel_history(method_run["path"], x, y)
+    assert not h["decisions"] or not (mask & ~recorded).any()
     Hh, Ww = L.shape
-    assert len(h["scans"]) == len(mem.M_maps)
+    assert len(h["scans"]) == len(mem.M_maps) == len(mem.cluster_maps) == len(mem.b_m_maps)
+    names = h["source_names"]
+    for sc, K, B in zip(h["scans"], mem.cluster_maps, mem.b_m_maps):  # exactly the core's
+        n, k, size, bits = (int(v) for v in K[y, x])
+        assert (sc["n_candidates"], sc["n_clusters"], sc["win_size"]) == (n, k, size)
+        assert sc["win_sources"] == [names[s] for s in range(len(names)) if bits >> s & 1]
+        assert bits < 1 << len(names)
+        assert sc["b_m"] == float(B[y, x])
+    maps = vi.read_scan_maps(method_run["path"])
+    for m, K, B in zip(maps, mem.cluster_maps, mem.b_m_maps):  # every pixel, losslessly
+        for c, name in enumerate(("n_candidates", "n_clusters", "win_size", "win_sources")):
+            np.testing.assert_array_equal(m[name], K[..., c])
+        np.testing.assert_array_equal(m["b_m"], B)
     half = method_run["params"].patch_size // 2 if method_run["params"].write == "patch" else 0
     for sc, M in zip(h["scans"], mem.M_maps):
         want = float(M[y, x])
@@ -132,6 +151,15 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
         assert f"{m0:.2f}" in words
     if h["scans"][0]["overwritten_before"]:
         assert f"overwritten by {h['scans'][0]['overwritten_before']} neighbouring" in words
+    key = next((sc for sc in h["scans"] if sc["verdict"] == "dynamic"), h["scans"][0])
+    if key["win_size"]:  # the winning cluster's size, sources and b_m, in words
+        assert (f"{key['win_size']} of {key['n_candidates']} candidates from "
+                f"{len(key['win_sources'])} of {len(names)} sources") in words
+        assert all(name in words for name in key["win_sources"])
+        assert f"b_m = Σ B_l = {key['b_m']:.2f}" in words
+    else:
+        assert "no cluster" in words or "no candidate" in words
+    assert "re-run with --probe" not in words
     text = vd.format_pixel_history(h)
     assert len(text.splitlines()) <= 30
     assert text.splitlines()[0].startswith(f"pixel ({x}, {y}): ")

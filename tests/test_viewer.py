@@ -143,6 +143,53 @@ def test_default_cadence_is_about_50_per_scan(tmp_path):
     assert 45 <= len(vi.read_snapshots(path)["M"]) <= 55
 
 
+def _latest_at(path, entity: str, column: str, steps) -> list[list]:
+    """What the viewer shows at each of ``steps`` (latest row at or before it)."""
+    from rerun.chunk import RrdReader
+
+    t = RrdReader(str(path)).stream().collect().reader(
+        index="step", contents=entity).to_arrow_table()
+    rows = sorted((s, v) for s, v in zip(t.column("step").to_pylist(),
+                                          t.column(f"{entity}:{column}").to_pylist())
+                  if s is not None and v is not None)
+    at = np.searchsorted([s for s, _ in rows], steps, side="right") - 1
+    return [rows[i][1] if i >= 0 else [] for i in at]
+
+
+def test_per_source_overlays_show_exactly_the_current_step(run):
+    """Per-source candidates and q* boxes have rows only where they change, yet at
+    every step they show that step's data, or nothing."""
+    d, r = run["truth"].decisions, run["truth"].replacements
+    steps = np.arange(3 * H * W)
+    names = P.entity_names([run["info"].names[i] for i in run["info"].source_indices])
+    for s, name in enumerate(names):
+        cand = _latest_at(run["path"], f"/sources/{name}/candidates", "Points2D:positions",
+                          steps)
+        want = {}
+        for e in d:
+            m = e["cand_src"] == s
+            if m.any():
+                want[int(e["step"])] = (e["cand_xy"][m] + 0.5).tolist()
+        for t in steps.tolist():
+            assert cand[t] == want.get(t, []), f"{name} candidates at step {t}"
+        boxes = _latest_at(run["path"], f"/sources/{name}/chosen_patch", "Boxes2D:centers",
+                           steps)
+        want = {int(e["step"]): [[e["src_x"] + 0.5, e["src_y"] + 0.5]] for e in r
+                if e["src"] == s}
+        for t in steps.tolist():
+            assert boxes[t] == want.get(t, []), f"{name} q* at step {t}"
+        n_rows = len(_table_steps(run["path"], f"/sources/{name}/chosen_patch"))
+        assert n_rows <= 2 * len(want)  # only where it changes
+
+
+def _table_steps(path, entity: str) -> list[int]:
+    from rerun.chunk import RrdReader
+
+    t = RrdReader(str(path)).stream().collect().reader(
+        index="step", contents=entity).to_arrow_table()
+    return [s for s in t.column("step").to_pylist() if s is not None]
+
+
 # -- pixel history, failures --------------------------------------------------------
 def test_pixel_history_of_dynamic_pixel(run):
     d = run["truth"].decisions
@@ -171,6 +218,10 @@ def test_pixel_history_of_probe(run):
     empty = vi.pixel_history(run["path"], 0, 1)
     text = vd.format_pixel_history(empty)  # never recorded: answered from the scan maps
     assert "not recorded at this pixel" in text and "--probe 0,1" in text
+    # a recording without the core's cluster maps (older cores, fabricated runs)
+    assert empty["scans"] and all(sc[k] is None for sc in empty["scans"] for k in (
+        "n_candidates", "n_clusters", "win_size", "win_sources", "b_m"))
+    assert all(m["b_m"] is None for m in vi.read_scan_maps(run["path"]))
     assert text.splitlines()[0].startswith("pixel (0, 1): static in every scan")
 
 

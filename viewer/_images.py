@@ -24,6 +24,58 @@ VERDICT_NAMES = {0: "not visited", 1: "static (M > t_r)", 2: "dynamic (M ≤ t_r
 VERDICT_COLORS = {0: (0, 0, 0, 0), 1: (60, 140, 255, 110), 2: (255, 40, 40, 140),
                   3: (160, 160, 160, 160)}
 
+
+def ramp_rgba(values, vmax: float, *, cmap: int = cv2.COLORMAP_VIRIDIS,
+              alpha: int = 255) -> list[tuple[int, int, int, int]]:
+    """RGBA of ``values`` on a fixed colour ramp ``0 → vmax`` (clipped)."""
+    v = np.clip(np.asarray(values, np.float64) / max(float(vmax), 1e-12), 0, 1)
+    bgr = cv2.applyColorMap(np.rint(v * 255).astype(np.uint8).reshape(-1, 1), cmap)
+    return [(int(c[0, 2]), int(c[0, 1]), int(c[0, 0]), int(alpha)) for c in bgr]
+
+
+def count_classes(vmax: int, label: str, zero: str, *, ramp_max: int | None = None,
+                  cmap: int = cv2.COLORMAP_VIRIDIS) -> list[tuple[int, str, tuple]]:
+    """AnnotationContext entries of a small count map (``scan_maps/n_candidates`` …).
+
+    Value v in 1..vmax is labelled ``label.format(v)`` and coloured on a fixed ramp
+    0 → ``ramp_max`` (default ``vmax``); 0 is ``zero``, transparent. The colours
+    never depend on the data, so two scans or two runs read alike.
+    """
+    vals = np.arange(1, int(vmax) + 1)
+    cols = ramp_rgba(vals, ramp_max or vmax, cmap=cmap)
+    return [(0, zero, (0, 0, 0, 0))] + [(int(v), label.format(int(v)), c)
+                                        for v, c in zip(vals, cols)]
+
+
+def source_set_classes(names: list[str]) -> list[tuple[int, str, tuple]]:
+    """AnnotationContext entries of the bitmask map ``scan_maps/win_sources``.
+
+    Bit s = source s (``names[s]``); each mask is labelled with the sources of
+    the winning cluster A_m and coloured by how many of the S sources they are
+    (fixed ramp 0 → S). 0: no winning cluster. Only for S ≤ 10 (2^S entries).
+    """
+    S = len(names)
+    masks = np.arange(1, 1 << S)
+    pop = np.array([bin(int(m)).count("1") for m in masks])
+    cols = ramp_rgba(pop, S, cmap=cv2.COLORMAP_PLASMA)
+    out = [(0, "no winning cluster (undecided)", (0, 0, 0, 0))]
+    for m, k, c in zip(masks.tolist(), pop.tolist(), cols):
+        srcs = ", ".join(n for s, n in enumerate(names) if m >> s & 1)
+        out.append((m, f"A_m from {k} of {S} sources: {srcs}", c))
+    return out
+
+
+def mask_sources(mask: int, names: list[str]) -> list[str]:
+    """The source names of bitmask ``mask`` (bit s = ``names[s]``), in order.
+
+    >>> mask_sources(0b101, ["a", "b", "c"]), mask_sources(0b1001, ["a", "b"])
+    (['a', 'c'], ['a', 'source 3'])
+    """
+    m = int(mask)
+    return [names[s] if s < len(names) else f"source {s}"
+            for s in range(m.bit_length()) if m >> s & 1]
+
+
 # Candidate colours by DBSCAN cluster id (RGB); noise (−1) is grey.
 CLUSTER_PALETTE = np.array([
     (230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48),

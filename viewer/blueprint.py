@@ -64,7 +64,13 @@ def _more(p: P.Paths) -> rrb.Tabs:
         rrb.Spatial2DView(name="patch source", origin=p(P.scan_map("chosen_source"))),
         rrb.Spatial2DView(name="overwritten before",
                           origin=p(P.scan_map("overwritten_before"))),
-        grid_columns=2, name="per scan")
+        # the core's decision: b_m = Σ B_l of A_m, |A_m|, A_m's sources, |P|, k
+        rrb.Spatial2DView(name="b_m", origin=p(P.scan_map("b_m"))),
+        rrb.Spatial2DView(name="|A_m|", origin=p(P.scan_map("win_size"))),
+        rrb.Spatial2DView(name="A_m src", origin=p(P.scan_map("win_sources"))),
+        rrb.Spatial2DView(name="|P|", origin=p(P.scan_map("n_candidates"))),
+        rrb.Spatial2DView(name="k", origin=p(P.scan_map("n_clusters"))),
+        grid_columns=3, name="per scan")
     return rrb.Tabs(
         per_scan,
         rrb.Spatial2DView(name="input", origin=p(P.REFERENCE),

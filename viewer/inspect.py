@@ -25,7 +25,7 @@ from dynremove.events import (CORRESPONDENCE_UPDATE_DTYPE, REPLACEMENT_DTYPE,
                               WHY_DYNAMIC, WHY_PROBE, WHY_SAMPLE, decision_dtype)
 from dynremove.refine.select import REASONS
 from viewer import paths as P
-from viewer._images import visit_step
+from viewer._images import mask_sources, visit_step
 
 _KINDS = {"decisions": P.EVENTS_DECISIONS, "replacements": P.EVENTS_REPLACEMENTS,
           "updates": P.EVENTS_UPDATES}
@@ -341,6 +341,11 @@ def read_scan_maps(path: str | Path, *, root: str = "") -> list[dict[str, Any]]:
     source), ``overwritten_before`` (patches centred elsewhere that overwrote the
     pixel before the scan reached it) and ``first_overwritten`` (global step of
     the first of them, −1 = none). Empty for recordings made before these maps.
+
+    The core's decision maps (Sec. 3.2.1), None in recordings made before them:
+    ``n_candidates`` |P|, ``n_clusters`` k, ``win_size`` |A_m| (uint8),
+    ``win_sources`` (bitmask of the sources in A_m, bit s = source s of the run
+    info's ``source_names``) and ``b_m`` (float32, Σ B_l over A_m; 0 = none).
     """
     store, p = load_store(path), P.Paths(root)
     m_rows = _image_rows(store, p(P.scan_map("M")), "DepthImage")
@@ -354,7 +359,12 @@ def read_scan_maps(path: str | Path, *, root: str = "") -> list[dict[str, Any]]:
                for k, arch in (("verdict", "SegmentationImage"),
                                ("chosen_source", "SegmentationImage"),
                                ("overwritten_before", "DepthImage"),
-                               ("first_overwritten", "DepthImage"))}
+                               ("first_overwritten", "DepthImage"),
+                               ("n_candidates", "SegmentationImage"),
+                               ("n_clusters", "SegmentationImage"),
+                               ("win_size", "SegmentationImage"),
+                               ("win_sources", "SegmentationImage"),
+                               ("b_m", "DepthImage"))}
     out = []
     for i, (step, Mq) in enumerate(m_rows):
         scan = int(scans[i].as_py()[0]) if scans is not None else i
@@ -370,7 +380,8 @@ def read_scan_maps(path: str | Path, *, root: str = "") -> list[dict[str, Any]]:
                            if step in by_step["chosen_source"] else None),
             overwritten_before=by_step["overwritten_before"].get(step),
             first_overwritten=(np.where(first > 0, first.astype(np.int64) - 1
-                                        + scan * H * W, -1) if first is not None else None)))
+                                        + scan * H * W, -1) if first is not None else None),
+            **{k: by_step[k].get(step) for k in P.CLUSTER_MAP_NAMES}))
     return out
 
 
@@ -426,6 +437,21 @@ def _decision_dict(d: np.void, t_r: float, names: list[str]) -> dict[str, Any]:
                 clusters=dict(sorted(clusters.items())))
 
 
+def _cluster_at(m: dict[str, Any], x: int, y: int, names: list[str]) -> dict[str, Any]:
+    """The decision maps of one scan at (x, y): |P|, k, |A_m|, A_m's sources, b_m
+    (each None when the recording has no such map)."""
+    def at(k):
+        a = m.get(k)
+        return None if a is None else a[y, x]
+
+    n, k, w, bits, bm = (at(k) for k in P.CLUSTER_MAP_NAMES)
+    return dict(n_candidates=None if n is None else int(n),
+                n_clusters=None if k is None else int(k),
+                win_size=None if w is None else int(w),
+                win_sources=None if bits is None else mask_sources(int(bits), names),
+                b_m=None if bm is None else float(bm))
+
+
 def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[str, Any]:
     """Everything the recording knows about reference pixel ``(x, y)``.
 
@@ -436,7 +462,11 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     ``covered_by`` (patch writes centred elsewhere that overwrote it), ``updates``
     (correspondence updates at the pixel), ``final_dynamic`` and ``gt`` (bool or
     None), plus ``source_names``. Only decisions the core recorded are present:
-    dynamic ones, probes (``--probe``) and sampled static ones.
+    dynamic ones, probes (``--probe``) and sampled static ones. ``scans`` holds,
+    for every scan and every pixel, what the per-scan maps say: ``M``,
+    ``verdict``, ``overwritten_before``…, and the winning cluster's
+    ``n_candidates`` |P|, ``n_clusters`` k, ``win_size`` |A_m|, ``win_sources``
+    (source names) and ``b_m`` (None in recordings made before these maps).
     """
     info = read_run_info(path, root=root)
     H, W = int(info.get("height", 0) or 0), int(info.get("width", 0) or 0)
@@ -482,7 +512,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             overwritten_before=None if m["overwritten_before"] is None
             else int(m["overwritten_before"][y, x]),
             first_overwritten=None if m["first_overwritten"] is None
-            else int(m["first_overwritten"][y, x])))
+            else int(m["first_overwritten"][y, x]),
+            **_cluster_at(m, x, y, names)))
     sel = {}
     for k, v in (read_selection(path, root=root).items() if inside else ()):
         if k == "reasons":  # per source: why it did or did not fill this pixel

@@ -17,7 +17,6 @@ Layout::
     reference/M              colour-mapped M of the current scan, fixed range [0, 1]
     reference/scanline       the row being visited
     reference/M_legend       how to read M (static text; the colour bar is under the map)
-    reference/scanline       the row being visited
     reference/decisions/scan<k>/rows_<a>_<b>
                              Points2D of one chunk's recorded decisions (+ text
                              AnyValues), logged ONCE at the chunk's last step and
@@ -33,7 +32,11 @@ Layout::
     scan_maps/*              per scan, at its last step, lossless: M (uint16, M·10⁴,
                              65535 = undecided), verdict, chosen_source,
                              overwritten_before, first_overwritten (derived from the
-                             Replacement events in the sink)
+                             Replacement events in the sink); from the core's
+                             decision maps (Sec. 3.2.1): n_candidates |P|,
+                             n_clusters k, win_size |A_m| (uint8), win_sources
+                             (uint16 bitmask, bit s = source s) and b_m
+                             (float32, Σ B_l over A_m, 0 = no winning cluster)
     errors/legend            class-coloured legend points under the errors map
     probes/x<X>_y<Y>         TextLog: each probe pixel's decisions in words, per step
     similarity/<name>        colour-mapped C_s (start and after each scan)
@@ -98,6 +101,7 @@ ERRORS_LEGEND = "errors/legend"
 SCAN_MAPS = "scan_maps"
 SCAN_MAP_NAMES = ("M", "verdict", "chosen_source", "overwritten_before",
                   "first_overwritten")
+CLUSTER_MAP_NAMES = ("n_candidates", "n_clusters", "win_size", "win_sources", "b_m")
 M_SCALE = 10000  # scan_maps/M holds round(M · M_SCALE) as uint16
 M_UNDECIDED = 65535
 STAGE_TIMELINE = "stage"
@@ -146,7 +150,8 @@ def source(name: str, leaf: str) -> str:
 
 
 def scan_map(name: str) -> str:
-    """Path ``scan_maps/<name>`` of a per-scan map (one of :data:`SCAN_MAP_NAMES`)."""
+    """Path ``scan_maps/<name>`` of a per-scan map (:data:`SCAN_MAP_NAMES`,
+    :data:`CLUSTER_MAP_NAMES`)."""
     return f"{SCAN_MAPS}/{name}"
 
 

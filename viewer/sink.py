@@ -33,8 +33,9 @@ from dynremove.events import EventBatch, RunInfo, ScanState
 from dynremove.refine.select import REASONS
 from viewer import paths as P
 from viewer._images import (CLASS_COLORS, REASON_NAMES, VERDICT_COLORS, VERDICT_NAMES,
-                            cluster_colors, colormap, colormap_with_legend, encode_jpeg,
-                            encode_png, error_labels, overwritten_maps, visited_mask)
+                            cluster_colors, colormap, colormap_with_legend, count_classes,
+                            encode_jpeg, encode_png, error_labels, overwritten_maps,
+                            source_set_classes, visited_mask)
 from viewer.blueprint import make_blueprint, make_compare_blueprint
 from viewer.sink_columns import StepColumns
 
@@ -68,8 +69,11 @@ of candidate matches (the cluster with the largest summed weight b_m = Σ B_l).
   M > t_r → static.
 * B_l is a candidate's weight (the C value of the neighbour it came from);
   𝓑 is the DBSCAN distance between two candidates.
-* Lossless per-scan values: `scan_maps/M` (M·10⁴), `scan_maps/verdict`;
-  `dynremove inspect REC --pixel X,Y` explains any pixel in words.
+* Lossless per-scan values: `scan_maps/M` (M·10⁴), `scan_maps/verdict`, and the
+  decision of every pixel: `n_candidates` |P|, `n_clusters` k, `win_size` |A_m|,
+  `win_sources` (the sources of A_m; hover a pixel for their names) and `b_m`
+  (tab "more maps → per scan"); `dynremove inspect REC --pixel X,Y` explains any
+  pixel in words from them, probed or not.
 """
 
 
@@ -164,11 +168,13 @@ class RerunSink(StepColumns):
         self.rec.flush()
         self._tick("begin", t0)
 
-    def interrupted(self) -> None:
+    def interrupted(self, stage: str | None = None) -> None:
         """Log "interrupted at scan S, step N" (or before the scans) and close the file.
 
         Called by the CLI on Ctrl-C / SIGTERM. The recording keeps everything
         logged so far and gets its footer, so it reads back like a finished one.
+        ``stage``: where the run was, said when the scans had not begun
+        ("interrupted before the scans began (during features)").
         """
         if self._closed:
             return
@@ -182,7 +188,7 @@ class RerunSink(StepColumns):
             self._pending, self._pending_n = [], 0
         scan, step = self._seen
         msg = (f"interrupted at scan {scan}, step {step}" if self._scans_began
-               else "interrupted before the scans began")
+               else "interrupted before the scans began" + (f" ({stage})" if stage else ""))
         self._set_time(scan, step)
         self.rec.log(self.p(P.LOG), rr.TextLog(msg, level=rr.TextLogLevel.WARN))
         self.rec.log(self.p(P.RUN_INTERRUPTED), rr.AnyValues(
@@ -240,6 +246,7 @@ class RerunSink(StepColumns):
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._pending_n = 0
         self._pending_scan = 0
+        self._cluster_legends = False
         self._log_static(info, params)
         self._tick("start", t0)
 
@@ -546,7 +553,8 @@ class RerunSink(StepColumns):
         2 dynamic, 3 undecided), ``chosen_source`` (k + 1 = patch from source k),
         ``overwritten_before`` (patches centred elsewhere that overwrote the pixel
         before the scan reached it) and ``first_overwritten`` (step of the first
-        of them − the scan's first step + 1; 0 = never).
+        of them − the scan's first step + 1; 0 = never). The core's cluster maps
+        follow (:meth:`_log_cluster_maps`) when the state carries them.
         """
         H, W = self.H, self.W
         M = np.asarray(state.M, np.float32)
@@ -579,6 +587,52 @@ class RerunSink(StepColumns):
         rec.log(p(P.scan_map("first_overwritten")), rr.DepthImage(
             first_rel, meter=1.0, colormap="turbo", depth_range=(0.0, float(H * W))))
         self._chosen = []
+        if getattr(state, "clusters", None) is not None and state.b_m is not None:
+            self._log_cluster_maps(state, scan)  # absent from fabricated/older cores
+
+    def _log_cluster_maps(self, state: ScanState, scan: int) -> None:
+        """The core's decision maps of the scan (Sec. 3.2.1), lossless, at its last step.
+
+        ``n_candidates`` |P|, ``n_clusters`` k, ``win_size`` |A_m| (uint8
+        SegmentationImages, each value named and coloured on a fixed ramp),
+        ``win_sources`` (bitmask of the sources in A_m, bit s = source s: uint16,
+        every combination named by its sources; uint32 above 16 sources) and
+        ``b_m`` = Σ_{l ∈ A_m} B_l (float32 DepthImage, exact; 0 = no winning
+        cluster). About 2 MiB per scan of 854×480 in the file, 1.6 MiB of it b_m
+        (float32 hardly compresses; the small integer maps do).
+        """
+        rec, p = self.rec, self.p
+        cl = np.asarray(state.clusters)  # (H, W, 4): |P|, k, |A_m|, sources of A_m
+        if not self._cluster_legends:  # static: K is final once the first chunk came
+            kmax = max(1, self.K)
+            min_pts = max(1, int(dict(self.info.params).get("dbscan_min_pts", 2)))
+            for name, label, zero, ramp in (
+                    ("n_candidates", "|P| = {} candidates", "no candidate", kmax),
+                    ("n_clusters", "k = {} clusters", "no cluster (undecided)",
+                     max(1, kmax // min_pts)),
+                    ("win_size", "|A_m| = {} candidates", "no winning cluster", kmax)):
+                rec.log(p(P.scan_map(name)), rr.AnnotationContext(
+                    count_classes(min(255, kmax), label, zero, ramp_max=ramp)), static=True)
+            if self.S <= 10:  # 2^S named combinations
+                rec.log(p(P.scan_map("win_sources")), rr.AnnotationContext(
+                    source_set_classes(list(self.src_names))), static=True)
+            self._cluster_legends = True
+        for c, name in enumerate(("n_candidates", "n_clusters", "win_size")):
+            rec.log(p(P.scan_map(name)),
+                    rr.SegmentationImage(np.clip(cl[..., c], 0, 255).astype(np.uint8)),
+                    rr.AnyValues(scan=scan, direction=self._direction))
+        bits = np.uint16 if self.S <= 16 else np.uint32
+        rec.log(p(P.scan_map("win_sources")),
+                rr.SegmentationImage(cl[..., 3].astype(bits)),
+                rr.AnyValues(scan=scan, direction=self._direction,
+                             bit_order=", ".join(f"bit {s} = {n}"
+                                                 for s, n in enumerate(self.src_names))))
+        rec.log(p(P.scan_map("b_m")), rr.DepthImage(
+            np.array(state.b_m, np.float32), meter=1.0, colormap="plasma",
+            depth_range=(0.0, float(max(1, self.K)))),
+            rr.AnyValues(scan=scan, direction=self._direction,
+                         meaning="b_m = Σ B_l over the winning cluster A_m (B_l: a "
+                                 "candidate's weight, its C value); 0 = no winning cluster"))
 
     def _log_stages(self, result: Any, clean: np.ndarray, L: np.ndarray) -> int:
         """The post-scan steps on the timeline, after the last scan step.

@@ -140,6 +140,7 @@ class StepColumns:
         """Overlays that explain one step: current decision, candidates, chosen patch.
 
         Logged partitioned by step; an empty partition at ``step + 1`` clears them.
+        The per-source entities get rows only where they change (``own_rows``).
         """
         shown = d  # every recorded decision gets its marker: dynamic, probe, sampled
         if len(shown) == 0 and len(r) == 0:
@@ -152,6 +153,19 @@ class StepColumns:
 
         def lengths_of(ev_steps: np.ndarray) -> np.ndarray:
             return np.bincount(np.searchsorted(steps, ev_steps), minlength=n)
+
+        def own_rows(ev_steps: np.ndarray) -> tuple[list, np.ndarray]:
+            """Index and partition lengths of an entity with data at ``ev_steps``
+            (sorted) only: a row at each of them and an empty one at the step after,
+            unless data follows there. Latest-at then shows exactly what rows at
+            every step of ``steps`` would show, with far fewer rows for the
+            per-source entities (a patch comes from one source at a step), which is
+            what the web viewer's load time grows with."""
+            u = np.unique(ev_steps.astype(np.int64))
+            own = np.union1d(u, u + 1)
+            index = [rr.TimeColumn("scan", sequence=np.full(len(own), scan, np.int64)),
+                     rr.TimeColumn("step", sequence=own.copy())]
+            return index, np.bincount(np.searchsorted(own, ev_steps), minlength=len(own))
 
         def ordered(a: np.ndarray) -> np.ndarray:
             return a[np.argsort(a["step"], kind="stable")]
@@ -193,9 +207,9 @@ class StepColumns:
                 m = src == s
                 if not m.any():
                     continue
-                lens = lengths_of(cstep[m])
+                own_idx, lens = own_rows(cstep[m])
                 off = _offsets(lens)
-                self.rec.send_columns(self.p(P.source(name, P.CANDIDATES)), indexes=idx,
+                self.rec.send_columns(self.p(P.source(name, P.CANDIDATES)), indexes=own_idx,
                                       columns=[
                     *rr.Points2D.columns(
                         positions=cxy[m].astype(np.float32) + 0.5,
@@ -226,14 +240,15 @@ class StepColumns:
                 if not m.any():
                     continue
                 cs = c[m]
-                self.rec.send_columns(self.p(P.source(name, P.CHOSEN_PATCH)), indexes=idx,
+                own_idx, lens = own_rows(cs["step"])
+                self.rec.send_columns(self.p(P.source(name, P.CHOSEN_PATCH)), indexes=own_idx,
                                       columns=[*rr.Boxes2D.columns(
                     centers=np.stack([cs["src_x"], cs["src_y"]], 1).astype(np.float32) + 0.5,
                     half_sizes=half[m].copy(),
                     colors=np.tile(np.array([[0, 255, 0]], np.uint8), (len(cs), 1)),
                     labels=[f"q* score {sc:.2f}" + (" (tie)" if t else "") for sc, t in
                             zip(cs["score"].tolist(), cs["tie_break"].tolist())]
-                ).partition(lengths_of(cs["step"]))])
+                ).partition(lens)])
 
     def _log_matches(self, u: np.ndarray, img_rows: tuple[int, int]) -> None:
         """Correspondences updated in this chunk, dim, in each source's own image space.

@@ -23,6 +23,35 @@ def _winning(d: dict[str, Any]) -> tuple[list[dict], list[str]]:
     return win, sorted({c["src_name"] for c in win})
 
 
+def cluster_words(sc: dict[str, Any] | None, d: dict[str, Any] | None,
+                  n_sources: int, *, short: bool = False) -> str | None:
+    """The winning cluster A_m of one scan in words, or None when nothing says.
+
+    ``sc``: the scan's entry of ``pixel_history(...)["scans"]`` (the per-scan
+    maps, for every pixel); ``d``: the recorded decision of that scan (probes,
+    dynamic and sampled pixels), used when the recording has no cluster maps.
+    """
+    if sc is not None and sc.get("n_candidates") is not None:
+        n, k, size = sc["n_candidates"], sc["n_clusters"], sc["win_size"]
+        srcs, b_m = list(sc["win_sources"] or []), sc["b_m"]
+        cid = d["win_cluster"] if d is not None else None
+    elif d is not None:
+        win, srcs = _winning(d)
+        n, k, size, b_m, cid = (len(d["candidates"]), d["n_clusters"], len(win),
+                                d["win_weight"], d["win_cluster"])
+    else:
+        return None
+    if not k or not size:
+        return (f"no cluster: {n} candidate{'s' if n != 1 else ''}, all DBSCAN noise"
+                if n else "no candidate (all outside the sources)")
+    if short:
+        return (f"A_m {size} of {n} candidates from {len(srcs)} of {n_sources} sources, "
+                f"b_m {b_m:.2f}, k {k}")
+    return (f"winning cluster A_m{'' if cid is None else f' (cluster {cid})'}: {size} of "
+            f"{n} candidates from {len(srcs)} of {n_sources} sources ({', '.join(srcs)}); "
+            f"b_m = Σ B_l = {b_m:.2f}; k = {k} cluster{'s' if k != 1 else ''}")
+
+
 _STAGE_WORDS = {"clean": "the L clean-up", "votes": "the border votes",
                 "snap": "GrabCut (snap to edges)", "select": "the fill by selection"}
 
@@ -31,7 +60,8 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     """At most five lines, in words: why the pixel ended up as it did.
 
     1. the scans' verdict with M vs t_r and what neighbouring patch writes had
-       done to it before its turn; 2. the winning cluster (when recorded);
+       done to it before its turn; 2. the winning cluster A_m (size, sources,
+       b_m), from the per-scan maps for any pixel, else from a recorded decision;
     3. what the post-scan steps did; 4. the fill (which source, or the reference
     kept); 5. ground truth, when recorded.
     """
@@ -75,21 +105,10 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         elif n == 0:
             head += "; no neighbouring patch had overwritten it before its turn"
         lines.append(head)
-        d = dec.get(key["scan"])
-        if d is not None and d["n_clusters"] > 0:
-            win, srcs = _winning(d)
-            all_src = sorted({c["src_name"] for c in d["candidates"]})
-            lines.append(f"winning cluster {d['win_cluster']}: {len(win)} of "
-                         f"{len(d['candidates'])} candidates, from {len(srcs)} of "
-                         f"{len(h['source_names'])} sources ({', '.join(srcs)}); weight "
-                         f"b_m = Σ B_l = {d['win_weight']:.2f}; {d['n_clusters']} clusters "
-                         f"(candidates from {len(all_src)} sources)")
-        elif d is not None:
-            lines.append(f"no cluster: {len(d['candidates'])} candidates, all DBSCAN noise")
-        else:
-            lines.append("candidates and clusters were not recorded at this pixel "
-                         f"(static pixels are recorded when probed): re-run with --probe "
-                         f"{x},{y} to see them")
+        words = cluster_words(key, dec.get(key["scan"]), len(h["source_names"]))
+        lines.append(words if words is not None else
+                     "candidates and clusters were not recorded at this pixel (a recording "
+                     f"without cluster maps): re-run with --probe {x},{y} to see them")
     st = h.get("stages") or {}
     if len(st) > 1:
         names = list(st)
@@ -154,8 +173,10 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
             continue
         M = sc["M"]
         mtxt = "no cluster" if M != M else f"M {M:.2f} {'≤' if M <= h['t_r'] else '>'} t_r"
+        cw = cluster_words(sc, None, len(h["source_names"]), short=True)
         ev.append((sc["step"], f"  scan {sc['scan']} step {sc['step']}: {sc['verdict']} "
-                               f"({mtxt}; from the per-scan maps)"))
+                               f"({mtxt}{'; ' + cw if cw and M == M else ''}; "
+                               "from the per-scan maps)"))
     for d in h["decisions"]:
         if d["M"] != d["M"]:
             verdict = f"no cluster → {'DYNAMIC' if d['dynamic'] else 'undecided'}"
@@ -165,7 +186,8 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
                        f"{'DYNAMIC' if d['dynamic'] else 'static'}")
         win, srcs = _winning(d)
         txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
-               f"{len(d['candidates'])} candidates in {d['n_clusters']} clusters; winner "
+               f"{len(d['candidates'])} candidates in {d['n_clusters']} "
+               f"cluster{'s' if d['n_clusters'] != 1 else ''}; winner "
                f"cluster {d['win_cluster']} b_m {d['win_weight']:.2f}: " + ", ".join(
                    f"{c['src_name']} ({c['x']},{c['y']}) B_l {c['B']:.2f}" for c in win)
                + f"; SIFT distance to the consensus {d['consensus_dist']:.3f}")
