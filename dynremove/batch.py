@@ -14,7 +14,9 @@ at the end.
 
 Sets run in parallel with joblib (``--jobs``; each worker runs OpenCV
 single-threaded), or on a Dask cluster (``--scheduler tcp://host:port``, extra
-``dynremove[dask]``) through joblib's ``dask`` backend.
+``dynremove[dask]``) through joblib's ``dask`` backend: one task per set, on every
+worker thread of the cluster (``--jobs`` is then unused). The workers import the
+same dynremove and read ROOT and write DIR at the same paths (a shared disk).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ OUTPUT_FILES = ("clean.png", "dynamic_mask.png", "coverage.png", "report.json")
 SUMMARY_FIELDS = ("set", "status", "n_images", "reference", "dynamic_fraction",
                   "jaccard_vs_gt", "seconds", "error", "inputs", "out")
 SKIP_DIRS = {"masks", "gt", "groundtruth", "ground_truth"}  # beside frames/: not sets
+DASK_CONNECT_TIMEOUT_S = 30
 
 
 # --- outputs of one run (shared with ``dynremove run``) ---------------------------------
@@ -303,13 +306,15 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     options = {"params": params.to_dict(), "preset": preset_name, "max_side": max_side,
                "ref": ref, "frames": frames, "span": span, "pick": pick}
     t0 = time.perf_counter()
-    rows = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler, on_done=on_done)
+    rows, workers = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler,
+                             on_done=on_done)
     summary = {"root": str(root), "out": str(out), "sets": rows,
                "n_ok": sum(r["status"] == "ok" for r in rows),
                "n_skipped": sum(r["status"] == "skipped" for r in rows),
                "n_failed": sum(r["status"] == "error" for r in rows),
-               "wall_s": round(time.perf_counter() - t0, 3), "jobs": jobs,
-               "scheduler": scheduler, "preset": preset_name, "options": options}
+               "wall_s": round(time.perf_counter() - t0, 3),
+               "jobs": None if scheduler else jobs, "scheduler": scheduler,
+               "workers": workers, "preset": preset_name, "options": options}
     io.write_json(out / "summary.json", summary)
     buf = _pyio.StringIO()
     w = csv.DictWriter(buf, fieldnames=SUMMARY_FIELDS, lineterminator="\n")
@@ -322,38 +327,46 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
 
 def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
              scheduler: str | None, on_done: Callable[[int, int, dict], None] | None
-             ) -> list[dict]:
-    from joblib import Parallel, delayed, parallel_config
+             ) -> tuple[list[dict], int]:
+    """The rows in set order, and the number of workers (joblib's, or the Dask
+    cluster's when ``scheduler``)."""
+    from joblib import Parallel, delayed, effective_n_jobs, parallel_config
 
     results: dict[str, dict] = {}
-    gen: Iterable[dict]
-    client = None
-    if scheduler:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise InputError("--scheduler needs the optional extra: "
-                             "pip install 'dynremove[dask]'") from None
-        try:
-            client = Client(scheduler, timeout=30)
-        except (OSError, TimeoutError, ValueError) as e:
-            raise InputError(f"--scheduler {scheduler}: cannot connect ({e})") from None
-    try:
-        if scheduler:
-            with parallel_config(backend="dask"):
-                gen = Parallel(n_jobs=-1, return_as="generator_unordered")(
-                    delayed(run_set)(bs, out, options, single_thread=True) for bs in sets)
-                gen = list(_collect(gen, sets, on_done, results))
-        elif jobs == 1:
+    if not scheduler:
+        if jobs == 1:
             _collect((run_set(bs, out, options) for bs in sets), sets, on_done, results)
         else:
-            gen = Parallel(n_jobs=jobs, return_as="generator_unordered")(
-                delayed(run_set)(bs, out, options, single_thread=True) for bs in sets)
-            _collect(gen, sets, on_done, results)
+            _collect(Parallel(n_jobs=jobs, return_as="generator_unordered")(
+                delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
+                sets, on_done, results)
+        return [results[bs.name] for bs in sets], effective_n_jobs(jobs)
+    # Dask: the workers import dynremove and read / write the same paths (shared disk)
+    try:
+        from distributed import Client
+    except ImportError:
+        raise InputError("--scheduler needs the optional extra: "
+                         "pip install 'dynremove[dask]'") from None
+    try:
+        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise InputError(f"--scheduler {scheduler}: cannot connect "
+                         f"({' '.join(str(e).split())})") from None
+    try:
+        if not client.nthreads():  # else the sets would wait for ever
+            try:
+                client.wait_for_workers(1, timeout=DASK_CONNECT_TIMEOUT_S)
+            except TimeoutError:
+                raise InputError(f"--scheduler {scheduler}: no worker joined within "
+                                 f"{DASK_CONNECT_TIMEOUT_S} s") from None
+        workers = len(client.nthreads())
+        with parallel_config(backend="dask"):  # joblib's backend: the default client
+            _collect(Parallel(n_jobs=-1, return_as="generator_unordered")(
+                delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
+                sets, on_done, results)
     finally:
-        if client is not None:
-            client.close()
-    return [results[bs.name] for bs in sets]
+        client.close()
+    return [results[bs.name] for bs in sets], workers
 
 
 def _collect(gen: Iterable[dict], sets: Sequence[BatchSet],

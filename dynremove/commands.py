@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import signal
 import sys
 import time
 import warnings
@@ -51,13 +52,13 @@ def params_from_args(args: argparse.Namespace) -> Params:
 def cmd_run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     created = not Path(args.out).exists()
-    out = io.prepare_out_dir(args.out)
     try:
+        out = io.prepare_out_dir(args.out)
         return _run(args, params, out)
     except BaseException:
         if created:  # bad input or interrupted: leave no empty folder behind
             try:
-                out.rmdir()  # only if still empty
+                Path(args.out).rmdir()  # only if still empty
             except OSError:
                 pass
         raise
@@ -65,55 +66,61 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     t0 = time.perf_counter()
-    iset = io.load_image_set(args.images, max_side=args.max_side,
-                             valid_mask=args.valid_mask, frames=args.frames, span=args.span,
-                             pick=args.pick)
-    ref, ref_info, ref_notes = choose_reference(args.ref, iset)
-    iset.notes.extend(ref_notes)
-    t_load = time.perf_counter() - t0
-    for n in iset.notes:
-        _note(args, n)
-    gt = None
-    if args.gt:
-        H, W = iset.images[0].shape[:2]
-        gt = io.read_mask(args.gt, (W, H))
-    compare = parse_compare(args.compare, params) if args.compare else None
-    if compare is not None and not args.record:
-        raise InputError("--compare needs --record FILE.rrd (the two runs go into one recording)")
-    rec = None
-    if compare is not None:
-        rec = args.viewer("sink").open_compare_stream(args.record, [n for i, n in enumerate(iset.names) if i != ref],
-                                  roots=["runs/main", "runs/compare"])
-    sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
-    sink_b = None
-    bar = _bar(args)
-    _note_compile(args)
+    where = _Where(_bar(args))  # the progress bar, and where the run is for an interruption
+    iset: io.ImageSet | None = None
+    ref: int | None = None
+    rec = sink = sink_b = None
     try:
+        iset = io.load_image_set(args.images, max_side=args.max_side,
+                                 valid_mask=args.valid_mask, frames=args.frames,
+                                 span=args.span, pick=args.pick)
+        where.stage = "while choosing the reference"
+        ref, ref_info, ref_notes = choose_reference(args.ref, iset)
+        iset.notes.extend(ref_notes)
+        t_load = time.perf_counter() - t0
+        for n in iset.notes:
+            _note(args, n)
+        gt = None
+        if args.gt:
+            where.stage = "while reading the ground truth"
+            H, W = iset.images[0].shape[:2]
+            gt = io.read_mask(args.gt, (W, H))
+        compare = parse_compare(args.compare, params) if args.compare else None
+        if compare is not None and not args.record:
+            raise InputError("--compare needs --record FILE.rrd (the two runs go into one "
+                             "recording)")
+        if args.record:
+            where.stage = "while opening the recording"
+        if compare is not None:
+            rec = args.viewer("sink").open_compare_stream(
+                args.record, [n for i, n in enumerate(iset.names) if i != ref],
+                roots=["runs/main", "runs/compare"])
+        sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
+        _note_compile(args)
+        where.stage = "during features"
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             res = remove_dynamic(iset.images, ref=ref, params=params, sink=sink,
                                  probes=args.probe or (), sample_static=args.sample_static,
-                                 names=iset.names, preset_name=args.preset, progress=bar,
+                                 names=iset.names, preset_name=args.preset, progress=where,
                                  valid_masks=iset.valid_masks)
             if compare is not None:
                 sink_b = _make_sink(args, iset, gt, rec=rec, root="runs/compare")
+                where.stage = "during features"
                 res_b = remove_dynamic(iset.images, ref=ref, params=compare, sink=sink_b,
                                        probes=args.probe or (),
                                        sample_static=args.sample_static, names=iset.names,
-                                       preset_name="compare", progress=bar,
+                                       preset_name="compare", progress=where,
                                        valid_masks=iset.valid_masks)
                 _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic "
                      f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
         for w in caught:
             _note(args, str(w.message))
     except (KeyboardInterrupt, Terminated):
-        # the sink (viewer.RerunSink) logs "interrupted at scan S, step N" when it can
-        for sk in (sink, sink_b):
-            if hasattr(sk, "interrupted"):
-                sk.interrupted()
+        _record_interruption(args, where.stage, iset, ref, rec, [sink, sink_b])
         raise
     finally:
-        bar.close()
+        where.close()
         if hasattr(sink, "close"):
             sink.close()
         if rec is not None:
@@ -130,6 +137,71 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
          + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, "
          f"{res.timings['total'] + t_load:.1f} s)")
     return EXIT_OK
+
+
+class _Where:
+    """The progress callback of a run: draws the bar and keeps where the run is
+    ("during features", "after correspondence", ...) for an interruption."""
+
+    def __init__(self, bar: ProgressBar) -> None:
+        self.bar = bar
+        self.stage = "while loading the images"
+
+    def __call__(self, stage: str, frac: float) -> None:
+        self.stage = f"during {stage}" if frac < 1.0 else f"after {stage}"
+        self.bar(stage, frac)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def _record_interruption(args: argparse.Namespace, stage: str, iset: io.ImageSet | None,
+                         ref: int | None, rec: Any, sinks: list[Any]) -> None:
+    """Ctrl-C / SIGTERM during ``run --record``: end the recording with "interrupted ...".
+
+    The sinks log "interrupted at scan S, step N" (or "before the scans began
+    (``stage``)") and write the footer. Interrupted before the sink existed
+    (loading the images, choosing the reference), a recording is written that
+    says so, with the names, size and reference when they are known. Further
+    SIGINT / SIGTERM are ignored meanwhile so that the file is not cut
+    mid-message; if the recording cannot be written, the interruption is still
+    what the command reports.
+    """
+    if not getattr(args, "record", None):
+        return
+    held = _hold_signals()
+    try:
+        live = [s for s in sinks if s is not None and hasattr(s, "interrupted")]
+        if not live:
+            sink = _make_sink(args, iset, None, rec=rec, root="runs/main" if rec else "")
+            if iset is not None and sink is not None:
+                H, W = iset.images[0].shape[:2]
+                sink.begin(iset.names, (H, W), images=iset.images, ref=ref)
+            live = [sink]
+        for s in live:
+            if s is not None:
+                s.interrupted(stage)
+    except Exception as e:  # noqa: BLE001 - e.g. disk full: exit as interrupted anyway
+        print(f"dynremove: note: {args.record}: could not record the interruption "
+              f"({type(e).__name__}: {' '.join(str(e).split())})", file=sys.stderr)
+    finally:
+        _release_signals(held)
+
+
+def _hold_signals() -> dict[int, Any]:
+    """Ignore SIGINT and SIGTERM (main thread only); the previous handlers."""
+    held: dict[int, Any] = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            held[sig] = signal.signal(sig, signal.SIG_IGN)
+        except (ValueError, OSError):  # not the main thread
+            pass
+    return held
+
+
+def _release_signals(held: dict[int, Any]) -> None:
+    for sig, handler in held.items():
+        signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:

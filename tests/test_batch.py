@@ -140,3 +140,47 @@ def test_dask_scheduler_without_the_extra_or_cluster(tmp_path, root, capsys, mon
                "tcp://127.0.0.1:1", "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2 and "dynremove[dask]" in err and "Traceback" not in err
+
+
+def test_dask_local_cluster_gives_the_same_masks_as_jobs_1(tmp_path, root, capsys):
+    """``--scheduler`` on a ``distributed.LocalCluster`` of 2 worker processes bound
+    to 127.0.0.1 (CI installs the ``[dask]`` extra, so this runs there)."""
+    try:
+        from distributed import LocalCluster
+    except ImportError:
+        pytest.skip("distributed is not installed (pip install 'dynremove[dask]')")
+    o1, od = tmp_path / "j1", tmp_path / "dask"
+    assert main(["batch", str(root), "--out", str(o1), *FAST]) == 1  # 'bad' fails
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        addr = cluster.scheduler_address
+        assert addr.startswith("tcp://127.0.0.1:")
+        rc = main(["batch", str(root), "--out", str(od), "--scheduler", addr, *FAST])
+    err = capsys.readouterr().err
+    assert rc == 1 and "Traceback" not in err, err  # the failing set is reported, as with joblib
+    rows = summary_rows(od)
+    assert {k: r["status"] for k, r in rows.items()} == {"a": "ok", "bad": "error",
+                                                        "davis/b": "ok"}
+    assert rows["bad"]["error"] == summary_rows(o1)["bad"]["error"]
+    for s in ("a", "davis/b"):
+        assert ((od / s / "dynamic_mask.png").read_bytes()
+                == (o1 / s / "dynamic_mask.png").read_bytes()), s
+        assert ((od / s / "clean.png").read_bytes() == (o1 / s / "clean.png").read_bytes()), s
+    js = json.loads((od / "summary.json").read_text())
+    assert js["scheduler"] == addr and js["jobs"] is None and js["workers"] == 2
+    assert (js["n_ok"], js["n_failed"]) == (2, 1)
+
+
+def test_dask_scheduler_without_workers_is_an_input_error(tmp_path, root, capsys,
+                                                         monkeypatch):
+    try:
+        from distributed import LocalCluster
+    except ImportError:
+        pytest.skip("distributed is not installed (pip install 'dynremove[dask]')")
+    monkeypatch.setattr(batch, "DASK_CONNECT_TIMEOUT_S", 1)
+    with LocalCluster(n_workers=0, processes=True, host="127.0.0.1",
+                      dashboard_address=None) as cluster:
+        rc = main(["batch", str(root), "--out", str(tmp_path / "o"), "--scheduler",
+                   cluster.scheduler_address, "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "no worker joined within 1 s" in err and "Traceback" not in err, err

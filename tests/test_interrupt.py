@@ -164,3 +164,112 @@ def test_sink_interrupted_before_start(tmp_path):
     rrd2 = tmp_path / "none.rrd"
     RerunSink(rrd2).interrupted()
     assert _log_texts(rrd2) == ["interrupted before the scans began"]
+
+
+# --- before the sink exists: loading, reference, opening the recording ---------------------
+def _wait_for_main(p: subprocess.Popen, timeout: float = 120) -> None:
+    """Until ``dynremove.cli.main`` runs: it installs the SIGTERM handler (Linux:
+    /proc/PID/status SigCgt), i.e. the imports are done and the run begins."""
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        try:
+            status = Path(f"/proc/{p.pid}/status").read_text()
+        except OSError:
+            break
+        caught = int(status.split("SigCgt:")[1].split()[0], 16)
+        if caught >> (signal.SIGTERM - 1) & 1:
+            return
+        time.sleep(0.001)
+    p.kill()
+    pytest.fail(f"the run did not reach main() (exit {p.poll()}): {p.communicate()[1]}")
+
+
+def _readable_or_none(rrd: Path, err: str, rc: int) -> str | None:
+    """Exit 130 with one line; the recording, if any, ends with "interrupted ..." and
+    ``inspect`` reads it (exit 0, or 2 when nothing was recorded to inspect)."""
+    assert rc == 130, err
+    lines = _clean_lines(err)
+    assert lines[-1] == "dynremove: interrupted", err
+    assert not [ln for ln in lines if "error" in ln], err
+    if not rrd.exists():
+        return None
+    texts = _log_texts(rrd)
+    assert texts and texts[-1].startswith("interrupted"), texts
+    assert vi.interruption(_store(rrd)) == texts[-1]
+    r = _inspect(rrd, "--failures")
+    assert r.returncode in (0, 2), r.stderr
+    ins = _clean_lines(r.stderr)
+    assert len(ins) <= 2 and texts[-1] in ins[0], r.stderr
+    return texts[-1]
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="needs Linux /proc")
+def test_ctrl_c_right_after_start_leaves_a_readable_recording_or_none(tmp_path):
+    images = _write_set(tmp_path / "set", (120, 160))
+    seen = []
+    for k, delay in enumerate((0.0, 0.02, 0.1)):
+        rrd = tmp_path / f"run{k}.rrd"
+        p = _start(images, tmp_path, rrd)
+        _wait_for_main(p)
+        time.sleep(delay)
+        rc, err = _interrupt(p)
+        msg = _readable_or_none(rrd, err, rc)
+        seen.append(msg)
+        if msg is not None and msg.startswith("interrupted before the scans began"):
+            assert msg.endswith(")"), msg  # says at which stage: "(while loading the images)"
+        assert not (tmp_path / "out").exists()  # no empty output folder left behind
+    assert any(m is not None for m in seen), seen
+
+
+def test_ctrl_c_at_a_mid_point_says_which_stage(tmp_path):
+    images = _write_set(tmp_path / "set", (240, 320))
+    rrd = tmp_path / "run.rrd"
+    p = _start(images, tmp_path, rrd)
+    for line in p.stderr:  # non-tty progress: one line when a stage completes
+        if line.startswith("features"):
+            break
+    rc, err = _interrupt(p)
+    msg = _readable_or_none(rrd, err, rc)
+    assert msg is not None  # the sink opened the file before the features
+    stages = ("(after features)", "(during correspondence)", "(after correspondence)")
+    assert msg.startswith("interrupted at scan") or msg.endswith(stages), msg
+
+
+@pytest.mark.parametrize("where, stage, sig, code", [
+    ("load_image_set", "while loading the images", KeyboardInterrupt, 130),
+    ("choose_reference", "while choosing the reference", KeyboardInterrupt, 130),
+    ("choose_reference", "while choosing the reference", "Terminated", 143)])
+def test_interrupted_before_the_sink_exists(tmp_path, monkeypatch, capsys, where, stage,
+                                            sig, code):
+    """In process: a Ctrl-C / SIGTERM while loading or choosing the reference writes a
+    recording that says so (with the names and size once the images are read)."""
+    from dynremove import commands
+    from dynremove.cli import main
+
+    exc = commands.Terminated if sig == "Terminated" else sig
+    images = _write_set(tmp_path / "set", (48, 64))
+    target = commands.io if where == "load_image_set" else commands
+
+    def cut(*a, **k):
+        raise exc()
+
+    monkeypatch.setattr(target, where, cut)
+    rrd = tmp_path / "run.rrd"
+    rc = main(["run", str(images), "--out", str(tmp_path / "out"), "--record", str(rrd),
+               "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == code and len(err.splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+    msg = f"interrupted before the scans began ({stage})"
+    assert _log_texts(rrd)[-1] == msg
+    store = _store(rrd)
+    assert vi.interruption(store) == msg
+    info = vi._static_values(store, "/run/info")
+    if where == "choose_reference":  # the images were read: their names and size
+        assert info["names"] == sorted(q.name for q in images.iterdir())
+        assert info["height"] == [48] and info["width"] == [64]
+    else:
+        assert not info
+    with pytest.raises(vi.InputError, match=r"before the scans began \(" + stage):
+        vi.load_store(rrd)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored

@@ -150,10 +150,14 @@ class EvalSet:
 
 
 def image_files(folder: Path) -> list[Path]:
-    """The image files of a folder (by extension, hidden files skipped), sorted."""
-    return sorted(q for q in folder.iterdir()
-                  if q.is_file() and not q.name.startswith(".")
-                  and q.suffix.lower() in io.IMAGE_EXTS)
+    """The image files of a folder, sorted; hidden files skipped.
+
+    The rule of ``run`` and ``batch`` (:func:`dynremove.io.list_inputs`): a file is
+    an image when its suffix is a common image suffix or when OpenCV or Pillow
+    recognise its content (AVIF, HEIC with the extra, no or odd suffix, ...).
+    """
+    files = sorted(q for q in folder.iterdir() if q.is_file() and not q.name.startswith("."))
+    return [q for q in files if q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q)]
 
 
 def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) -> list[EvalSet]:
