@@ -152,3 +152,16 @@ def test_select_fill_with_the_sweep_shows_the_hidden_block():
         dE = np.linalg.norm(blurred_lab(sel.clean, 0.0) - lab_t, axis=-1)
         err[sweep] = float(np.median(dE[BLOCK]))
     assert err[True] < 5.0 and err[True] < err[False] / 2, err
+
+
+def test_a_planar_scene_is_not_identifiable():
+    """A plane's γ is affine in (x, y): k_s cannot be fitted, the sweep is refused."""
+    _, _, views, fields, _ = _scene()
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    flat = []
+    for k, v in enumerate(views):
+        mu = [1.0, -0.7, 1.4, 0.5][k] * (2.0 * gx / W) + 0.3 * k * gx / W
+        fx, fy = px.project(v.H, px.epipole(v.F), mu, gx, gy)
+        flat.append(np.stack([fx, fy], -1).astype(np.float32))
+    assert px.fit_parallax(flat, views, np.ones((H, W), bool)) is None
+    assert px.fit_parallax(fields, views, np.ones((H, W), bool)) is not None

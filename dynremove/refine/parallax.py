@@ -78,8 +78,8 @@ def _mu_of(Hm, e, gx, gy, xs, ys):
 
 
 def fit_parallax(fields: list[np.ndarray], views: list[TwoView], visible: np.ndarray, *,
-                 line_px: float = 1.5, max_samples: int = 40000, seed: int = 0
-                 ) -> ParallaxModel | None:
+                 line_px: float = 1.5, max_samples: int = 40000, seed: int = 0,
+                 min_depth_px: float = 3.0) -> ParallaxModel | None:
     """Fit each source's parallax to a common γ on the visible pixels.
 
     fields: per source (H, W, 2) float32 flow matches; views: the TwoView per
@@ -88,7 +88,9 @@ def fit_parallax(fields: list[np.ndarray], views: list[TwoView], visible: np.nda
     line. μ_s of every match is solved in closed form; γ is the μ of the source
     of widest parallax; k, a, b, c by iteratively reweighted least squares.
     The residual is measured in pixels, by reprojection. None when fewer than
-    two sources have F.
+    two sources have F, or when the visible parallax departs from a plane's by
+    less than ``min_depth_px`` (90th percentile, in the anchor source): then
+    k_s cannot be told from the affine term.
     """
     S = len(fields)
     Hh, Ww = visible.shape
@@ -134,6 +136,16 @@ def fit_parallax(fields: list[np.ndarray], views: list[TwoView], visible: np.nda
         px, py = project(views[k].H, epipole(views[k].F), A @ c, gx[sel], gy[sel])
         m = fields[k][ys[sel], xs[sel]]
         mad[k] = float(np.median(np.hypot(px - m[:, 0], py - m[:, 1])))
+    # identifiability: the anchor's γ must depart from an affine function of
+    # (x, y), or k_s cannot be told from the affine term (a plane's γ is affine)
+    sa = ok[anchor]
+    A = np.c_[xs[sa] / Ww, ys[sa] / Hh, np.ones(int(sa.sum()))]
+    ca = np.linalg.lstsq(A, G[sa], rcond=None)[0]
+    e_a = epipole(views[anchor].F)
+    p0 = project(views[anchor].H, e_a, A @ ca, gx[sa], gy[sa])
+    p1 = project(views[anchor].H, e_a, G[sa], gx[sa], gy[sa])
+    if np.percentile(np.hypot(p1[0] - p0[0], p1[1] - p0[1]), 90) < min_depth_px:
+        return None
     lo, hi = np.percentile(G[ok[anchor]], [0.5, 99.5])
     return ParallaxModel(coef=coef, anchor=anchor, mad_px=mad, gamma_range=(float(lo), float(hi)))
 
