@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 from PIL import Image
 
 from dynremove.cli import main
@@ -84,3 +85,17 @@ def test_run_help_shows_the_values_a_plain_run_uses(capsys):
     assert "--write {patch,pixel}" in out
     assert "--correspondence {homography+flow,homography,flow,gated}" in out
     assert "λ8" in out and "σ_c" in out  # the paper's symbols
+
+
+def test_bench_times_the_large_photo_path_not_a_full_size_analysis():
+    """``bench --max-side`` times what users run: analysis at max_side, the clean
+    photo at full size (12 MP analysed at full size would need > 20 GB)."""
+    from dynremove.evaluation.bench import run_bench
+
+    out = run_bench(size=(320, 240), views=3, max_side=160, reference=False,
+                    json_path=None, quiet=True)
+    assert out["analysis_size"] == [160, 120] and out["full_output_size"] == [320, 240]
+    assert out["full_output_end_to_end_s"] == out["end_to_end_s"]
+    # the scan's rate is over the analysed pixels
+    s = out["scans"][0]
+    assert s["px_per_s"] == pytest.approx(160 * 120 / s["seconds"], rel=1e-6)
