@@ -641,6 +641,58 @@ def _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi, x, y,
             counts[2] = e + 1
 
 
+# --- one pixel's decision, shared by the scan and its precompute ---------------------
+
+
+@numba.njit(cache=True, nogil=True)
+def _work_arrays(K, G):
+    """Per-pixel work arrays of a decision: candidates (cs, cx, cy, cB, slot),
+    DBSCAN (D, labels, is_core, stack), b_k and f̂ (bk, fhat_c, fhat_g; G = the
+    SIFT length), and the scan neighbours (nx_, ny_, ox_, oy_)."""
+    return (np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64),
+            np.empty(K, np.float64), np.empty(K, np.int64), np.empty((K, K), np.float64),
+            np.empty(K, np.int64), np.empty(K, np.bool_), np.empty(K * K + 1, np.int64),
+            np.empty(K + 1, np.float64), np.empty(3, np.float64), np.empty(G, np.float64),
+            np.empty(2, np.int64), np.empty(2, np.int64), np.empty(2, np.int64),
+            np.empty(2, np.int64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1, as_set,
+              work, Mmap, Bmap, Kmap):
+    """``_candidates`` → ``_cluster`` → ``_decide`` at (x, y); writes M, b_m and
+    (|P|, k, |A_m|, sources of A_m) into Mmap, Bmap, Kmap at (y, x).
+
+    Returns (n, nn, k, m, b_m, M, ‖f_g(x_r) − f̂_g‖²); m = −1 and M = NaN when no
+    cluster formed. The candidates, labels and f̂ stay in ``work``.
+    """
+    (cs, cx, cy, cB, slot, D, labels, is_core, stack, bk, fhat_c, fhat_g,
+     nx_, ny_, ox_, oy_) = work
+    n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
+                        cB, slot, nx_, ny_, ox_, oy_)
+    k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack)
+    M = np.nan
+    m = -1
+    bm = 0.0
+    cdist = np.nan
+    if k > 0:
+        m, bm, M, cdist = _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB,
+                                  labels, k, pf, bk, fhat_c, fhat_g)
+    wsize = 0
+    wsrc = 0
+    for i in range(n):
+        if k > 0 and labels[i] == m:
+            wsize += 1
+            wsrc |= 1 << cs[i]
+    Mmap[y, x] = M
+    Bmap[y, x] = bm
+    Kmap[y, x, 0] = n
+    Kmap[y, x, 1] = k
+    Kmap[y, x, 2] = wsize
+    Kmap[y, x, 3] = wsrc
+    return n, nn, k, m, bm, M, cdist
+
+
 # --- the decisions of a scan, precomputed on all cores (exact) ----------------------
 
 
@@ -664,44 +716,10 @@ def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, pre
     else:
         ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
     for y in numba.prange(H):
-        cs = np.empty(K, np.int64)
-        cx = np.empty(K, np.int64)
-        cy = np.empty(K, np.int64)
-        cB = np.empty(K, np.float64)
-        slot = np.empty(K, np.int64)
-        D = np.empty((K, K), np.float64)
-        labels = np.empty(K, np.int64)
-        is_core = np.empty(K, np.bool_)
-        stack = np.empty(K * K + 1, np.int64)
-        bk = np.empty(K + 1, np.float64)
-        fhat_c = np.empty(3, np.float64)
-        fhat_g = np.empty(fg_r.shape[2], np.float64)
-        nx_ = np.empty(2, np.int64)
-        ny_ = np.empty(2, np.int64)
-        ox_ = np.empty(2, np.int64)
-        oy_ = np.empty(2, np.int64)
+        work = _work_arrays(K, fg_r.shape[2])
         for x in range(W):
-            n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
-                                cB, slot, nx_, ny_, ox_, oy_)
-            k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack)
-            M = np.nan
-            m = -1
-            bm = 0.0
-            if k > 0:
-                m, bm, M, _ = _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB,
-                                      labels, k, pf, bk, fhat_c, fhat_g)
-            wsize = 0
-            wsrc = 0
-            for i in range(n):
-                if k > 0 and labels[i] == m:
-                    wsize += 1
-                    wsrc |= 1 << cs[i]
-            preM[y, x] = M
-            preB[y, x] = bm
-            preK[y, x, 0] = n
-            preK[y, x, 1] = k
-            preK[y, x, 2] = wsize
-            preK[y, x, 3] = wsrc
+            _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1,
+                      as_set, work, preM, preB, preK)
 
 
 # --- Algorithm 1: one chunk of rows of a scan ------------------------------------------
@@ -730,7 +748,7 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     uint8: updated in this scan, set here), so the result is the same.
     direction +1: top-left → bottom-right, −1: the reverse.
 
-    Per pixel: ``_candidates`` → ``_cluster`` → ``_decide``; if dynamic,
+    Per pixel: ``_decision`` (``_candidates`` → ``_cluster`` → ``_decide``); if dynamic,
     ``_choose_patch`` → ``_write_patch`` (+ f_c, f_g of q*) →
     ``_update_correspondences``. Mirrors ``reference.scan_rows``.
 
@@ -746,27 +764,14 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     as_set = pi[CAND_SET] != 0
     half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
     # per-pixel work arrays
-    cs = np.empty(K, np.int64)
-    cx = np.empty(K, np.int64)
-    cy = np.empty(K, np.int64)
-    cB = np.empty(K, np.float64)
-    slot = np.empty(K, np.int64)
-    D = np.empty((K, K), np.float64)
-    labels = np.empty(K, np.int64)
-    is_core = np.empty(K, np.bool_)
-    stack = np.empty(K * K + 1, np.int64)
-    bk = np.empty(K + 1, np.float64)
-    fhat_c = np.empty(3, np.float64)
-    fhat_g = np.empty(fg_r.shape[2], np.float64)
+    work = _work_arrays(K, fg_r.shape[2])
+    (cs, cx, cy, cB, slot, D, labels, is_core, stack, bk, fhat_c, fhat_g,
+     nx_, ny_, ox_, oy_) = work
     score = np.empty(K, np.float64)
     gc0 = np.empty(3)
     gc1 = np.empty(3)
     gh0 = np.empty(nb)
     gh1 = np.empty(nb)
-    nx_ = np.empty(2, np.int64)
-    ny_ = np.empty(2, np.int64)
-    ox_ = np.empty(2, np.int64)
-    oy_ = np.empty(2, np.int64)
     # the two scan neighbours (x + dx, y + dy): left/up, or right/down
     if direction > 0:
         ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
@@ -805,32 +810,12 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                         stats[2] += 1
                     continue
             # ---- decision (Sec. 3.2.1) --------------------------------------------
-            n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
-                                cB, slot, nx_, ny_, ox_, oy_)
-            k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack)
-            M = np.nan
-            m = -1
-            bm = 0.0
-            cdist = np.nan
-            dynamic = False
-            if k > 0:
-                m, bm, M, cdist = _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB,
-                                          labels, k, pf, bk, fhat_c, fhat_g)
-                dynamic = M <= pf[T_R]
-            else:
+            n, nn, k, m, bm, M, cdist = _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, x,
+                                                  y, ndx0, ndy0, ndx1, ndy1, as_set, work,
+                                                  Mmap, Bmap, Kmap)
+            dynamic = k > 0 and M <= pf[T_R]
+            if k == 0:
                 stats[2] += 1
-            Mmap[y, x] = M
-            Bmap[y, x] = bm
-            Kmap[y, x, 0] = n
-            Kmap[y, x, 1] = k
-            wsize = 0
-            wsrc = 0
-            for i in range(n):
-                if k > 0 and labels[i] == m:
-                    wsize += 1
-                    wsrc |= 1 << cs[i]
-            Kmap[y, x, 2] = wsize
-            Kmap[y, x, 3] = wsrc
             chosen = -1
             if dynamic:
                 stats[0] += 1
