@@ -141,6 +141,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write a Rerun recording of the scans")
     r.add_argument("--record-every-rows", type=int, default=None, metavar="N",
                    help="snapshot the reference every N rows (default: ~50 per scan)")
+    r.add_argument("--record-detail", choices=("default", "full"), default="default",
+                   help="candidates and q* box in the source views at probes, sampled "
+                        "static and 1 in 16 dynamic decisions (default; a smaller file) "
+                        "or at every recorded decision (full)")
     r.add_argument("--probe", type=parse_xy, action="append", metavar="X,Y",
                    help="record every decision at this pixel (repeatable)")
     r.add_argument("--sample-static", type=float, default=0.002, metavar="F",
@@ -185,6 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--record", default="recordings/demo.rrd", metavar="FILE.rrd",
                    help="recording to write (default: recordings/demo.rrd)")
     d.add_argument("--no-record", action="store_true", help="do not write a recording")
+    d.add_argument("--record-detail", choices=("default", "full"), default="default",
+                   help="'full': candidates in the source views at every recorded "
+                        "decision (see run --record-detail)")
     d.add_argument("--quiet", action="store_true")
     add_param_flags(d)
     d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002, compare=None)

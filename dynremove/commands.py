@@ -398,6 +398,7 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
     Path(args.record).parent.mkdir(parents=True, exist_ok=True)
     return args.viewer("sink").RerunSink(None if rec is not None else args.record,
                      record_every_rows=getattr(args, "record_every_rows", None),
+                     detail=getattr(args, "record_detail", "default"),
                      gt_mask=gt, gt_background=gt_background, rec=rec, root=root)
 
 

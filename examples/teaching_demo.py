@@ -30,7 +30,8 @@ def main() -> None:
     scene = synth.make_scene(seed=args.seed, n_views=5, size=(120, 160), n_objects=1)
     r = scene.ref_index
     sink = RerunSink(args.out, record_every_rows=1, gt_mask=scene.masks[r],
-                     gt_background=scene.background, skip_unchanged_images=False)
+                     gt_background=scene.background, skip_unchanged_images=False,
+                     detail="full")  # candidates in the sources at every step
     res = remove_dynamic(scene.images, ref=r, params=preset(args.preset), sink=sink,
                          sample_static=1.0, probes=[(80, 60)], names=scene.names,
                          preset_name=args.preset)

@@ -19,6 +19,7 @@ from test_viewer_fixtures import ROOT, fabricate_run, gt_for  # noqa: E402
 
 from dynremove import events as ev  # noqa: E402
 from viewer import RerunSink, make_blueprint, make_compare_blueprint  # noqa: E402
+from viewer.sink import STEP_GRID  # noqa: E402
 from viewer import export, serve  # noqa: E402
 from viewer import inspect as vi  # noqa: E402
 from viewer import verdict as vd  # noqa: E402
@@ -57,6 +58,30 @@ def run(tmp_path_factory):
                      recording_id="test-run")
     info, result, truth = fabricate_run([sink], H=H, W=W, S=S, n_scans=3)
     return dict(path=path, info=info, result=result, truth=truth, sink=sink, gt=gt)
+
+
+@pytest.fixture(scope="module")
+def run_full(tmp_path_factory):
+    """The same fabricated run at ``detail="full"``."""
+    path = tmp_path_factory.mktemp("rec") / "full.rrd"
+    gt, bg = gt_for(H, W, S)
+    sink = RerunSink(path, record_every_rows=5, gt_mask=gt, gt_background=bg,
+                     recording_id="test-run-full", detail="full")
+    info, result, truth = fabricate_run([sink], H=H, W=W, S=S, n_scans=3)
+    return dict(path=path, info=info, result=result, truth=truth, sink=sink, gt=gt)
+
+
+def _source_overlay_steps(d: np.ndarray, detail: str) -> set[int]:
+    """Steps whose decision gets candidates and q* in the source views: all at
+    "full"; at "default" the probes, sampled static ones and the dynamic ones at
+    x, y multiples of STEP_GRID (written out here, not taken from the sink)."""
+    if detail == "full":
+        return set(d["step"].tolist())
+    g = STEP_GRID
+    keep = [int(e["step"]) for e in d
+            if (int(e["why"]) & (ev.WHY_PROBE | ev.WHY_SAMPLE)) or not e["dynamic"]
+            or (int(e["x"]) % g == 0 and int(e["y"]) % g == 0)]
+    return set(keep)
 
 
 # -- contents ----------------------------------------------------------------------
@@ -156,10 +181,15 @@ def _latest_at(path, entity: str, column: str, steps) -> list[list]:
     return [rows[i][1] if i >= 0 else [] for i in at]
 
 
-def test_per_source_overlays_show_exactly_the_current_step(run):
+@pytest.mark.parametrize("detail", ["default", "full"])
+def test_per_source_overlays_show_exactly_the_current_step(run, run_full, detail):
     """Per-source candidates and q* boxes have rows only where they change, yet at
-    every step they show that step's data, or nothing."""
+    every step they show that step's data, or nothing: at every recorded decision
+    ("full"), or at the probes, sampled static and grid dynamic ones ("default")."""
+    run = run_full if detail == "full" else run
     d, r = run["truth"].decisions, run["truth"].replacements
+    shown = _source_overlay_steps(d, detail)
+    assert 0 < len(shown) <= len(d) and (len(shown) < len(d)) == (detail == "default")
     steps = np.arange(3 * H * W)
     names = P.entity_names([run["info"].names[i] for i in run["info"].source_indices])
     for s, name in enumerate(names):
@@ -168,18 +198,37 @@ def test_per_source_overlays_show_exactly_the_current_step(run):
         want = {}
         for e in d:
             m = e["cand_src"] == s
-            if m.any():
+            if m.any() and int(e["step"]) in shown:
                 want[int(e["step"])] = (e["cand_xy"][m] + 0.5).tolist()
+        assert want
         for t in steps.tolist():
             assert cand[t] == want.get(t, []), f"{name} candidates at step {t}"
         boxes = _latest_at(run["path"], f"/sources/{name}/chosen_patch", "Boxes2D:centers",
                            steps)
         want = {int(e["step"]): [[e["src_x"] + 0.5, e["src_y"] + 0.5]] for e in r
-                if e["src"] == s}
+                if e["src"] == s and int(e["step"]) in shown}
+        assert want
         for t in steps.tolist():
             assert boxes[t] == want.get(t, []), f"{name} q* at step {t}"
         n_rows = len(_table_steps(run["path"], f"/sources/{name}/chosen_patch"))
         assert n_rows <= 2 * len(want)  # only where it changes
+
+
+@pytest.mark.parametrize("detail", ["default", "full"])
+def test_reference_overlays_at_every_recorded_decision(run, run_full, detail):
+    """The current marker and the chosen patch on the reference follow every
+    recorded decision and replacement at both details, and nothing in between."""
+    run = run_full if detail == "full" else run
+    d, r = run["truth"].decisions, run["truth"].replacements
+    steps = np.arange(3 * H * W)
+    cur = _latest_at(run["path"], "/reference/current", "Points2D:positions", steps)
+    want = {int(e["step"]): [[e["x"] + 0.5, e["y"] + 0.5]] for e in d}
+    for t in steps.tolist():
+        assert cur[t] == want.get(t, []), f"current marker at step {t}"
+    box = _latest_at(run["path"], "/reference/chosen_patch", "Boxes2D:centers", steps)
+    want = {int(e["step"]): [[e["x"] + 0.5, e["y"] + 0.5]] for e in r}
+    for t in steps.tolist():
+        assert box[t] == want.get(t, []), f"chosen patch at step {t}"
 
 
 def _table_steps(path, entity: str) -> list[int]:
@@ -341,6 +390,8 @@ def test_sink_rejects_bad_ground_truth(tmp_path):
     with pytest.raises(ValueError, match="gt_mask"):
         fabricate_run([sink], H=H, W=W, S=S, n_scans=1)
     sink.close()
+    with pytest.raises(ValueError, match="detail"):
+        RerunSink(tmp_path / "bad2.rrd", detail="most")
 
 
 # -- export, serve -------------------------------------------------------------------

@@ -84,6 +84,7 @@ def test_cli_recordings_verify_and_inspect(scene, tmp_path, capsys):
     code = main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o"),
                  "--record", str(rec), "--probe", "10,12", "--gt", str(mask), "--quiet"])
     assert code == 0 and rec.stat().st_size > 0
+    assert vi.read_run_info(rec)["record_detail"] == "default"
     r = subprocess.run([serve.rerun_binary(), "rrd", "verify", str(rec)],
                        env=cli_env(tmp_path), capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
@@ -109,3 +110,74 @@ def test_compare_logs_two_runs_side_by_side(scene, tmp_path):
     assert vi.read_run_info(rec, root="runs/compare")["params"]["t_r"] == preset("paper").t_r
     assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o2"),
                  "--compare", "no_such_field=1", "--record", str(tmp_path / "x.rrd")]) == 2
+
+
+def _rows_by_entity(path) -> dict[str, int]:
+    """Rows per step-indexed entity, read back with the dataframe API."""
+    from rerun.chunk import RrdReader
+
+    store = RrdReader(str(path)).stream().collect()
+    out = {}
+    for ent in sorted(str(e) for e in store.schema().entity_paths()):
+        t = store.reader(index="step", contents=ent).to_arrow_table()
+        n = sum(1 for s in t.column("step").to_pylist() if s is not None) if t.num_rows else 0
+        if n:
+            out[ent] = n
+    return out
+
+
+def test_default_detail_has_far_fewer_step_rows_and_the_same_maps(scene, tmp_path):
+    """One run of the method, recorded at both details: the default's source views
+    get candidates and q* at far fewer steps, while the per-scan decision maps, the
+    raw events and what inspect says about a pixel are identical."""
+    paths = {k: tmp_path / f"{k}.rrd" for k in ("default", "full")}
+    sinks = [RerunSink(paths[k], record_every_rows=8, gt_mask=scene.masks[scene.ref_index],
+                       detail=k) for k in paths]
+    remove_dynamic(scene.images, ref=scene.ref_index, params=preset("default"),
+                   sink=Tee(*sinks), probes=[(20, 30)])
+    rows = {k: _rows_by_entity(p) for k, p in paths.items()}
+
+    def total(k, prefix="", leaves=("",)):
+        return sum(n for e, n in rows[k].items() if e.startswith(prefix) and e.endswith(leaves))
+
+    # candidates and q* in the source views: 1 in 16 dynamic decisions, + probes
+    src = {k: total(k, "/sources/", ("/candidates", "/chosen_patch")) for k in rows}
+    assert src["full"] > 1000 and src["default"] * 6 < src["full"], src
+    assert total("default") * 2 < total("full"), (total("default"), total("full"))
+    # the reference's per-step overlays follow every recorded decision in both
+    for ent in ("/reference/current", "/reference/chosen_patch"):
+        assert rows["default"][ent] == rows["full"][ent] > 0
+    # the per-scan decision maps: identical tables, identical arrays
+    from rerun.chunk import RrdReader
+
+    tables = {k: RrdReader(str(p)).stream().collect().reader(
+        index="step", contents="/scan_maps/**").to_arrow_table() for k, p in paths.items()}
+    cols = sorted(c for c in tables["full"].column_names if c.startswith("/scan_maps/"))
+    assert len(cols) >= 10 and cols == sorted(c for c in tables["default"].column_names
+                                              if c.startswith("/scan_maps/"))
+    for c in cols + ["step"]:
+        assert tables["default"].column(c).equals(tables["full"].column(c)), c
+    maps = {k: vi.read_scan_maps(p) for k, p in paths.items()}
+    assert len(maps["default"]) == len(maps["full"]) > 0
+    for a, b in zip(maps["default"], maps["full"]):
+        assert a.keys() == b.keys() and a["b_m"] is not None
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    for kind in ("decisions", "replacements", "updates"):
+        np.testing.assert_array_equal(vi.read_events(paths["default"], kind),
+                                      vi.read_events(paths["full"], kind))
+    for x, y in ((20, 30), (0, 0), (64, 48)):
+        texts = [vd.format_pixel_history(vi.pixel_history(p, x, y)) for p in paths.values()]
+        assert texts[0] == texts[1]
+    assert vi.read_run_info(paths["default"])["record_detail"] == "default"
+
+
+def test_cli_record_detail_full(scene, tmp_path):
+    synth.write_scene(scene, tmp_path / "set")
+    rec = tmp_path / "full.rrd"
+    assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o"),
+                 "--record", str(rec), "--record-detail", "full", "--quiet"]) == 0
+    info = vi.read_run_info(rec)
+    assert info["record_detail"] == "full" and info["step_grid"] == 1
+    with pytest.raises(SystemExit):
+        main(["run", str(tmp_path / "set" / "frames"), "--record-detail", "most"])

@@ -27,7 +27,9 @@ Layout::
     reference/chosen_patch   Boxes2D of the written patch at this step
     sources/<name>/image     static JPEG
     sources/<name>/candidates  candidates of the current decision, coloured by cluster
-    sources/<name>/chosen_patch  Boxes2D of q* in that source
+                             (every decision at detail "full"; at "default" probes,
+                             sampled static ones and dynamic ones at x, y % 4 == 0)
+    sources/<name>/chosen_patch  Boxes2D of q* in that source (same steps)
     sources/<name>/chunk_matches  correspondences updated in the previous chunk (dim)
     scan_maps/*              per scan, at its last step, lossless: M (uint16, M·10⁴,
                              65535 = undecided), verdict, chosen_source,
@@ -47,6 +49,7 @@ Layout::
     errors/background        |clean - ground truth| (at the end)
     result/clean             lossless (PNG) final image, result/dynamic: final L
     events/decisions|replacements|updates   raw event records, lossless columns
+                             (one row per flush, each event with its own step)
     run/info, run/params, run/coverage      static run description
     log                      TextLog
 """

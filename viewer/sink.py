@@ -6,18 +6,30 @@ entities (``viewer.paths``) on two sequence timelines: ``scan`` and ``step``
 
 * an explicit ``rr.RecordingStream``, never the global recording;
 * O(chunks) calls, never one per pixel: per-step overlays go through one
-  ``send_columns`` per entity and chunk, partitioned by step with ``pa.ListArray``;
+  ``send_columns`` per entity and scan, partitioned by step with ``pa.ListArray``;
 * every array handed to rerun is freshly built (the batcher keeps references);
 * images are JPEG (cv2) except label maps (uint8, compressed by the file's LZ4)
   and the final clean image (PNG, lossless, so a replay can be checked);
-* raw events are also logged losslessly under ``events/*`` (one row per step,
-  one list entry per event) so that ``viewer.inspect`` can read them back
-  (those step-indexed columns are built in ``viewer.sink_columns``);
-* ``rec.flush()`` once per scan, so a killed run leaves readable data.
+* raw events are also logged losslessly under ``events/*`` (one row per flush,
+  one list entry per event, each with its own ``step``) so that
+  ``viewer.inspect`` can read them back (those columns are built in
+  ``viewer.sink_columns``);
+* every recorded decision gets its per-step overlays on the reference (current
+  marker with its attributes, verdict label, chosen patch); a *detail* level
+  sets which also get them in the source views (candidates, q* boxes):
+  ``"full"`` every one, ``"default"`` the probes, the sampled static decisions
+  and the dynamic decisions on a grid of pixels (:data:`STEP_GRID`), so that the
+  web viewer loads a 7 × 854×480 recording well under a minute
+  (recordings/README.md); every decision stays in ``events/*``, the chunk
+  entities and ``scan_maps/*`` either way;
+* step-indexed columns are sent once per scan (few, large Arrow chunks: the
+  web viewer's load time grows with the number of chunks) and ``rec.flush()``
+  follows once per scan, so a killed run leaves readable data.
 """
 
 from __future__ import annotations
 
+import datetime
 import json
 import time
 import uuid
@@ -52,6 +64,10 @@ _STAT_STYLE = {  # name: (RGB, label)
     "dynamic_px": ((255, 90, 160), "|L| (running)"),
     "jaccard": ((40, 200, 90), "Jaccard vs ground truth"),
 }
+
+
+DETAIL_LEVELS = ("default", "full")
+STEP_GRID = 4  # default detail: source overlays for dynamic decisions at x, y % 4 == 0
 
 
 def _summary_record(summary: np.ndarray) -> np.void:
@@ -104,19 +120,37 @@ class RerunSink(StepColumns):
         Skip the reference JPEG of a snapshot when no Replacement happened since
         the previous one (the viewer shows the latest image anyway). L is only
         logged when it changed; M, stats and errors follow the cadence exactly.
+    detail : {"default", "full"}
+        Which recorded decisions also get the per-step overlays of the source
+        views (``sources/<name>/candidates`` and ``chosen_patch``; those on the
+        reference, ``reference/current``, its label and
+        ``reference/chosen_patch``, are logged for every one). ``"full"``: every
+        one (teaching demos, small scenes). ``"default"``: probes, sampled static
+        decisions and the dynamic decisions at pixels with
+        ``x % STEP_GRID == 0 and y % STEP_GRID == 0``. Either way every recorded
+        decision, replacement and update is in ``events/*`` and on its chunk's
+        ``reference/decisions/...`` entity, and every pixel's decision in
+        ``scan_maps/*``: ``inspect`` answers the same.
     """
 
     enabled = True
-    MAX_PENDING_EVENTS = 200_000  # flush buffered columns earlier than the cadence
+    MAX_PENDING_EVENTS = 200_000  # send buffered columns before the scan ends (memory)
+    # log() rows are batched into one Arrow chunk per entity until rec.flush() (once
+    # per scan) or 64 MiB, not every 200 ms (rerun's default): fewer, larger chunks
+    BATCHER = dict(flush_tick=datetime.timedelta(seconds=30), flush_num_bytes=64 << 20)
 
     def __init__(self, path: str | Path | None, *, application_id: str = "dynremove",
                  recording_id: str | None = None, record_every_rows: int | None = None,
                  gt_mask: np.ndarray | None = None,
                  gt_background: np.ndarray | None = None, root: str = "",
                  rec: rr.RecordingStream | None = None, jpeg_quality: int = 90,
-                 skip_unchanged_images: bool = True) -> None:
+                 skip_unchanged_images: bool = True, detail: str = "default") -> None:
         if rec is None and path is None:
             raise ValueError("path is required unless rec is given")
+        if detail not in DETAIL_LEVELS:
+            raise ValueError(f"detail must be one of {DETAIL_LEVELS}, got {detail!r}")
+        self.detail = detail
+        self.step_grid = STEP_GRID if detail == "default" else 1
         if record_every_rows is not None and record_every_rows < 1:
             raise ValueError(f"record_every_rows must be >= 1, got {record_every_rows}")
         self.path = None if path is None else Path(path)
@@ -201,7 +235,8 @@ class RerunSink(StepColumns):
         if self._opened or not self._owns_rec:
             self._opened = True
             return
-        self.rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id)
+        self.rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id,
+                                      batcher_config=rr.ChunkBatcherConfig(**self.BATCHER))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         bp = None if src_names is None else make_blueprint(src_names, root=self.p.root,
                                                            size=size)
@@ -308,7 +343,6 @@ class RerunSink(StepColumns):
         before = self._rows_done // self.every
         self._rows_done += rows
         if self._rows_done // self.every > before:
-            self._flush_pending()
             self._snapshot(state, scan, last)
         elif self._pending_n > self.MAX_PENDING_EVENTS:
             self._flush_pending()
@@ -455,7 +489,14 @@ class RerunSink(StepColumns):
               "* sources: " + ", ".join(f"s={s} `{info.names[i]}`"
                                         for s, i in enumerate(info.source_indices)),
               f"* probes: {info.probes or 'none'}",
-              f"* snapshots every {self.every} rows", "", "| parameter | value |", "|---|---|"]
+              f"* snapshots every {self.every} rows",
+              f"* detail: **{self.detail}** (" + (
+                  "candidates and q* in the sources at every recorded decision"
+                  if self.detail == "full" else
+                  "candidates and q* in the sources at probes, sampled static decisions "
+                  f"and dynamic decisions at x, y multiples of {self.step_grid}; "
+                  "`--record-detail full` for every one") + ")",
+              "", "| parameter | value |", "|---|---|"]
         md += [f"| {k} | {v} |" for k, v in params.items()]
         md += ["", "| package | version |", "|---|---|"]
         md += [f"| {k} | {v} |" for k, v in info.versions.items()]
@@ -464,7 +505,8 @@ class RerunSink(StepColumns):
                              names=list(info.names), source_names=self.src_names,
                              source_indices=list(info.source_indices),
                              preset=info.preset, recording_id=self.recording_id,
-                             record_every_rows=self.every,
+                             record_every_rows=self.every, record_detail=self.detail,
+                             step_grid=self.step_grid,
                              versions=json.dumps(info.versions),
                              params=json.dumps(params, default=str),
                              probes=json.dumps([list(map(int, q)) for q in info.probes])),
@@ -508,9 +550,15 @@ class RerunSink(StepColumns):
     def _flush_pending(self) -> None:
         """Send the buffered step-indexed columns (raw events, per-step overlays).
 
-        They carry their own ``step`` index, so sending them once per snapshot
-        interval instead of once per chunk changes nothing in the recording but
-        the number of Arrow chunks (each costs ~0.5 KB of schema in the file).
+        They carry their own ``step`` index, so sending them once per scan (or
+        every ``MAX_PENDING_EVENTS`` events) instead of once per chunk changes
+        nothing in the recording but the number of Arrow chunks. That number is
+        what the web viewer's load time grows with most: camel's recording with
+        the columns sent at every snapshot (~50 per scan) had 1,235 chunks and
+        loaded in 102–149 s; sent once per scan (and ``log()`` rows batched until
+        the scan's ``rec.flush()``, :attr:`BATCHER`), 178 chunks, 23–37 s
+        (recordings/README.md). A run killed mid-scan loses that scan's columns
+        and batched rows; Ctrl-C / SIGTERM send them (``interrupted``).
         """
         if not self._pending:
             return
@@ -690,7 +738,8 @@ def open_compare_stream(path: str | Path, source_names: list[str], *, roots: lis
 
     The caller passes it as ``rec`` to one RerunSink per run and disconnects it.
     """
-    rec = rr.RecordingStream(application_id, recording_id=f"dynremove-{uuid.uuid4().hex[:12]}")
+    rec = rr.RecordingStream(application_id, recording_id=f"dynremove-{uuid.uuid4().hex[:12]}",
+                             batcher_config=rr.ChunkBatcherConfig(**RerunSink.BATCHER))
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     rec.save(Path(path), default_blueprint=make_compare_blueprint(source_names, roots))
     return rec

@@ -3,8 +3,10 @@
 Mixed into :class:`viewer.sink.RerunSink`. Every method sends whole columns
 (``send_columns``, one call per entity and flush, partitioned by step with
 ``pa.ListArray``), never one call per pixel: the lossless ``events/*`` tables
-that ``viewer.inspect`` reads back, the per-step decisions and replacements,
-the matches of correspondence updates and the probe pixels' stories.
+that ``viewer.inspect`` reads back (one row per flush), the per-step decisions
+and replacements (every recorded one, or the subset the sink's ``detail``
+selects: :meth:`StepColumns._overlay_mask`), the matches of correspondence
+updates and the probe pixels' stories.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from dynremove.events import WHY_PROBE
+from dynremove.events import WHY_PROBE, WHY_SAMPLE
 from viewer import paths as P
 from viewer._images import REASON_NAMES, cluster_colors
 
@@ -71,20 +73,26 @@ class StepColumns:
                 columns=rr.TextLog.columns(text=texts, level=["INFO"] * len(texts)))
 
     def _log_table(self, rel: str, arr: np.ndarray, scan: int) -> None:
-        """Log structured records losslessly: one row per step, a list per field."""
+        """Log structured records losslessly: ONE row per flush, a list per field.
+
+        Each record keeps its own ``step`` field; the row sits at the last of
+        them (flushes cover disjoint step ranges, so rows never share a step).
+        One row per step held the same data in 40k rows per table on camel,
+        which the web viewer has to index; ``viewer.inspect`` reads either
+        layout (it flattens the lists in step order).
+        """
         if len(arr) == 0:
             return
-        order = np.argsort(arr["step"], kind="stable")
-        steps, counts = np.unique(arr["step"][order], return_counts=True)
+        arr = arr[np.argsort(arr["step"], kind="stable")]
         cols = {}
         for name in arr.dtype.names:
-            vals = arr[name][order]
+            vals = arr[name].copy()  # a fresh, aligned array (a field view may not be)
             width = int(np.prod(vals.shape[1:], dtype=np.int64))
-            cols[name] = _list_column(vals.reshape(-1), _offsets(counts * width))
+            cols[name] = _list_column(vals.reshape(-1), _offsets(np.array([len(arr) * width])))
         self.rec.send_columns(
             self.p(rel),
-            indexes=[rr.TimeColumn("scan", sequence=np.full(len(steps), scan, np.int64)),
-                     rr.TimeColumn("step", sequence=steps.astype(np.int64))],
+            indexes=[rr.TimeColumn("scan", sequence=np.array([scan], np.int64)),
+                     rr.TimeColumn("step", sequence=np.array([arr["step"][-1]], np.int64))],
             columns=rr.AnyValues.columns(**cols))
 
     def _decision_attrs(self, d: np.ndarray) -> dict[str, Any]:
@@ -136,11 +144,30 @@ class StepColumns:
                                  show_labels=False, radii=rr.Radius.ui_points(2.5)),
                      rr.AnyValues(**attrs))
 
+    def _overlay_mask(self, d: np.ndarray) -> np.ndarray:
+        """Which recorded decisions get the per-source overlays (the sink's ``detail``):
+        their candidates and q* box in every source view.
+
+        ``"full"`` (``step_grid`` 1): all. ``"default"``: every decision that is
+        not (only) dynamic, i.e. probes and sampled static ones, plus the dynamic
+        ones at pixels with ``x % step_grid == 0 and y % step_grid == 0``: a
+        fixed grid, the same pixels in every scan and direction.
+        """
+        g = int(self.step_grid)
+        if g <= 1:
+            return np.ones(len(d), bool)
+        return (((d["why"] & (WHY_PROBE | WHY_SAMPLE)) != 0) | ~d["dynamic"]
+                | ((d["x"] % g == 0) & (d["y"] % g == 0)))
+
     def _log_per_step(self, d: np.ndarray, r: np.ndarray, scan: int) -> None:
         """Overlays that explain one step: current decision, candidates, chosen patch.
 
         Logged partitioned by step; an empty partition at ``step + 1`` clears them.
-        The per-source entities get rows only where they change (``own_rows``).
+        On the reference (the current marker with its attributes, its verdict
+        label, the chosen patch): every recorded decision and replacement. In the
+        source views (candidates, q* boxes), only at the steps of the decisions
+        :meth:`_overlay_mask` selects; those entities get rows only where they
+        change (``own_rows``).
         """
         shown = d  # every recorded decision gets its marker: dynamic, probe, sampled
         if len(shown) == 0 and len(r) == 0:
@@ -194,7 +221,8 @@ class StepColumns:
                     labels=[f"({x},{y}) {v}" for x, y, v in zip(
                         c["x"].tolist(), c["y"].tolist(), attrs["verdict"])]
                 ).partition(lens)])
-            # candidates, per source: flatten the K slots
+            # candidates, per source: flatten the K slots (of the selected decisions)
+            c = c[self._overlay_mask(c)]
             src = c["cand_src"].reshape(-1)
             cxy = c["cand_xy"].reshape(-1, 2)
             ccl = c["cand_cluster"].reshape(-1)
@@ -235,8 +263,12 @@ class StepColumns:
                     labels=[f"from {n} ({sx},{sy}) score {sc:.2f}" for n, sx, sy, sc in
                             zip(names, c["src_x"].tolist(), c["src_y"].tolist(),
                                 c["score"].tolist())]).partition(lens)])
+            if self.step_grid > 1:  # q* in the sources: at the selected decisions only
+                sel = np.isin(c["step"], shown["step"][self._overlay_mask(shown)])
+            else:
+                sel = np.ones(len(c), bool)
             for s, name in enumerate(self.src_names):
-                m = c["src"] == s
+                m = (c["src"] == s) & sel
                 if not m.any():
                     continue
                 cs = c[m]
