@@ -454,7 +454,10 @@ def write_photo(path: str | os.PathLike, img: np.ndarray, *, like: str | os.Path
     buf = _io.BytesIO()
     fmt = {".jpg": "JPEG", ".jpeg": "JPEG", ".png": "PNG", ".tif": "TIFF",
            ".tiff": "TIFF"}.get(p.suffix.lower(), "PNG")
-    extra = {"quality": 95} if fmt == "JPEG" else {}
+    # zlib level 1 for PNG (Pillow's default is 6): 12 MP of real photo content in
+    # 1.0 s instead of 3.6 s, for a file 8 % larger (13.0 vs 12.0 MiB; level 3:
+    # 1.4 s, 12.2 MiB); without metadata OpenCV writes it (0.6 s, 17 MiB)
+    extra = {"JPEG": {"quality": 95}, "PNG": {"compress_level": 1}}.get(fmt, {})
     Image.fromarray(np.ascontiguousarray(img[..., ::-1])).save(buf, format=fmt, **meta, **extra)
     _atomic_write_bytes(p, buf.getvalue())
 

@@ -106,6 +106,7 @@ class Params:
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
     select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
+    select_search_de: float = 8.0  # where the parallax exceeds select_parallax_px, a pixel of L is also explained by its best match on its epipolar line in a source: CIE76 ΔE, mean over ~10 px, under this (0 = off)
     select_sweep: bool = False  # above that parallax, matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
@@ -142,7 +143,7 @@ class Params:
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
-                     "select_parallax_px", "select_margin_px"):
+                     "select_parallax_px", "select_margin_px", "select_search_de"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.fuse_combine not in ("median", "medoid"):

@@ -99,3 +99,30 @@ def test_bench_times_the_large_photo_path_not_a_full_size_analysis():
     # the scan's rate is over the analysed pixels
     s = out["scans"][0]
     assert s["px_per_s"] == pytest.approx(160 * 120 / s["seconds"], rel=1e-6)
+
+
+def test_full_resolution_equals_the_dense_computation():
+    """The sparse full-size step gives the bytes the dense one gives
+    (``tests/naive.py``), blend and inpainting included, at a scale that is not
+    an integer."""
+    import dataclasses
+
+    import naive
+
+    from dynremove.pipeline import remove_dynamic
+    from dynremove.refine.upsample import full_resolution
+
+    sc = synth.make_scene(seed=0, n_views=4, size=(360, 480))
+    work = [cv2.resize(im, (210, 158), interpolation=cv2.INTER_AREA) for im in sc.images]
+    res = remove_dynamic(work, ref=sc.ref_index)
+    sel = res.selection
+    assert sel is not None and len(np.unique(sel.label[sel.label >= 1])) >= 2
+    ref = sc.images[res.ref_index]
+    srcs = [sc.images[i] for i in res.source_indices]
+    no_source = sel.no_source | (sel.label >= 1) & (np.arange(210) < 105)[None]
+    for s in (sel, dataclasses.replace(sel, no_source=no_source)):
+        clean, dyn = full_resolution(ref, srcs, res.clean, res.dynamic, s)
+        clean_d, dyn_d = naive.full_resolution(ref, srcs, res.clean, res.dynamic, s)
+        np.testing.assert_array_equal(dyn, dyn_d)
+        np.testing.assert_array_equal(clean, clean_d)
+        assert (clean != ref).any()

@@ -165,3 +165,37 @@ def test_a_planar_scene_is_not_identifiable():
         flat.append(np.stack([fx, fy], -1).astype(np.float32))
     assert px.fit_parallax(flat, views, np.ones((H, W), bool)) is None
     assert px.fit_parallax(fields, views, np.ones((H, W), bool)) is not None
+
+
+def test_epipolar_search_finds_static_structure_and_not_a_mover():
+    """A reference pixel of static 3-D structure (part of a block, off every
+    plane, at a depth the visible pixels span) has a match on its epipolar line
+    in each source; a pixel of a mover pasted into the reference only has none."""
+    tex, gamma, views, fields, sources = _scene()
+    ref = tex.copy()
+    rng = np.random.default_rng(7)
+    mover = (slice(60, 100), slice(115, 150))
+    blob = cv2.GaussianBlur(rng.uniform(0, 255, (40, 35, 3)).astype(np.float32), (0, 0), 2.0)
+    ref[mover] = cv2.normalize(blob, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    region = np.zeros((H, W), bool)
+    region[45:75, 65:85] = True  # inside the block of γ = 6 (its rest stays visible)
+    region[mover] = True
+    lab_r = blurred_lab(ref, 1.0)
+    block = np.zeros((H, W), bool)
+    block[47:73, 67:83] = True  # away from the block's depth edges
+    core = np.zeros((H, W), bool)
+    core[65:95, 120:145] = True
+    for k in range(4):
+        cost, mu = px.epipolar_search(lab_r, blurred_lab(sources[k], 1.0), views[k], fields[k],
+                                      ~region, region)
+        assert np.all(np.isinf(cost[~region]))
+        assert np.median(cost[block]) < 4.0, (k, np.median(cost[block]))
+        assert np.median(cost[core]) > 12.0, (k, np.median(cost[core]))
+        # and at the right depth: μ within a pixel or two of the true match's
+        true_mu = px._mu_of(views[k].H, px.epipole(views[k].F), *np.nonzero(block)[::-1],
+                            fields[k][block][:, 0], fields[k][block][:, 1])
+        e = px.epipole(views[k].F)
+        gy_, gx_ = np.nonzero(block)
+        p1 = px.project(views[k].H, e, mu[block].astype(np.float64), gx_, gy_)
+        p0 = px.project(views[k].H, e, true_mu, gx_, gy_)
+        assert np.median(np.hypot(p1[0] - p0[0], p1[1] - p0[1])) < 2.0

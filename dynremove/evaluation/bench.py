@@ -29,6 +29,23 @@ def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def _new_peak_window() -> float | None:
+    """Start a new peak-RSS window; return the peak of the one that ends (MB).
+
+    Linux resets the process's high-water mark on ``5`` written to
+    ``/proc/self/clear_refs``; the peak of a window is then ``VmHWM``. None
+    where that is not possible (the windows are then not reported).
+    """
+    try:
+        with open("/proc/self/status") as f:
+            hwm = next(int(line.split()[1]) for line in f if line.startswith("VmHWM:"))
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except (OSError, StopIteration, ValueError):
+        return None
+    return hwm / 1024.0
+
+
 def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
               size: tuple[int, int] = (854, 480), views: int = 7, repeat: int = 1,
               max_side: int | None = None,
@@ -63,8 +80,12 @@ def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
     """
     W, H = size
     say = (lambda m: None) if quiet else (lambda m: print(m, file=sys.stderr))
+    _new_peak_window()
     scene = synth.make_scene(seed=0, n_views=views, size=(H, W))
     ref = scene.ref_index
+    # peak RSS of the parts of the bench (each includes what the process holds:
+    # the scene, the JIT-compiled code); "peak_rss_mb" is the whole run's
+    peaks = {"scene": _new_peak_window()}
     say(f"bench: {views} synthetic views {W}x{H}, preset {preset_name}; warm-up (JIT) ...")
     t = time.perf_counter()
     small = [im[: min(H, 64), : min(W, 96)].copy() for im in scene.images]
@@ -79,6 +100,7 @@ def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
     work = (scene.images if s >= 1 else
             [cv2.resize(im, (round(W * s), round(H * s)), interpolation=cv2.INTER_AREA)
              for im in scene.images])
+    peaks["warm-up"] = _new_peak_window()
     runs = []
     for i in range(max(1, repeat)):
         t = time.perf_counter()
@@ -93,6 +115,7 @@ def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
         wall = time.perf_counter() - t
         runs.append((wall, res, full))
         say(f"  run {i + 1}: {wall:.2f} s")
+    peaks["timed runs"] = _new_peak_window()  # the pipeline a user runs, timed
     wall, res, full_res = min(runs, key=lambda r: r[0])
     if full_res:
         full_res["full_output_end_to_end_s"] = wall
@@ -104,6 +127,7 @@ def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
     t = time.perf_counter()
     median_baseline(scene.images, ref, align="homography")
     wall_median = time.perf_counter() - t
+    peaks["median stack"] = _new_peak_window()
     # recording cost with an in-memory sink (events only, no Rerun)
     t = time.perf_counter()
     remove_dynamic(work, ref=ref, params=params, sink=MemorySink(), sample_static=0.002)
@@ -122,6 +146,10 @@ def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
     }
     if reference:
         out["kernel_vs_reference"] = _kernel_ratio(scene, params)
+    peaks["rest"] = _new_peak_window()
+    if all(v is not None for v in peaks.values()):
+        out["peak_rss_mb_by_part"] = peaks
+        out["peak_rss_mb"] = max(out["peak_rss_mb"], _peak_rss_mb(), *peaks.values())
     _print_table(out)
     if json_path:
         io.write_json(json_path, out)
@@ -179,6 +207,9 @@ def _print_table(out: dict) -> None:
         print(f"{s['scan']:<6}{s['seconds']:>9.2f}{s['px_per_s'] / 1e6:>9.2f}{s['dynamic_px']:>12}")
     print(f"\npeak RSS {out['peak_rss_mb']:.0f} MB; JIT warm-up {out['warmup_s']:.1f} s; "
           f"with MemorySink {out['memory_sink_end_to_end_s']:.2f} s")
+    if "peak_rss_mb_by_part" in out:
+        print("peak RSS by part: " + ", ".join(
+            f"{k} {v:.0f} MB" for k, v in out["peak_rss_mb_by_part"].items()))
     if "rerun_end_to_end_s" in out:
         print(f"with a Rerun recording {out['rerun_end_to_end_s']:.2f} s "
               f"(x{out['rerun_end_to_end_s'] / out['end_to_end_s']:.2f}), "

@@ -23,20 +23,23 @@ import numpy.typing as npt
 from dynremove.method.correspondence import pixel_grid
 
 
-def interpolate_field(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_]
-                      ) -> npt.NDArray[np.float32]:
+def interpolate_field(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *,
+                      need: npt.NDArray[np.bool_] | None = None) -> npt.NDArray[np.float32]:
     """Fill ``field`` (H, W, C) where ``hole``: normalised Gaussian convolution.
 
     A quick, smooth, but biased estimate; ``harmonic_fill`` uses it as the
-    coarsest level.
+    coarsest level. A hole pixel takes its value at the first, smallest blur
+    that reaches it; with ``need`` (H, W) bool, the blurs stop once every hole
+    pixel of ``need`` has one (the others may stay unfilled).
     """
     out = field.copy()
     valid = (~hole).astype(np.float32)
     todo = hole.copy()
     if not valid.any():
         return out
+    need = hole if need is None else need
     for sigma in (2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0):
-        if not todo.any():
+        if not (todo & need).any():
             break
         k = int(6 * sigma) | 1
         w = cv2.GaussianBlur(valid, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
@@ -55,44 +58,118 @@ _CROSS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.float32)
 
 
 def harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *,
-                  iters: int = 40) -> npt.NDArray[np.float32]:
+                  iters: int = 40, need: npt.NDArray[np.bool_] | None = None
+                  ) -> npt.NDArray[np.float32]:
     """Fill ``field`` (H, W, C) where ``hole`` with the membrane (Laplace) solution.
 
     Coarse to fine: the field is area-averaged over its valid pixels to half
     size (a coarse pixel is a hole if any of its fine pixels is), solved there,
     upsampled as the starting point, and relaxed by ``iters`` Jacobi sweeps.
     Valid pixels are never changed.
+
+    With ``need``, the result is that solve's only at the pixels of ``need``
+    (bit for bit): at each level the Jacobi sweeps run only inside boxes around
+    the pixels that decide ``need``: after ``iters`` sweeps a
+    pixel depends on the pixels within ``iters`` steps of it, and on the coarse
+    solution under them. A box edge that the full solve does not have is
+    ``iters + 1`` px or more from every pixel kept. Elsewhere the values are
+    left as the coarse start (not the membrane).
+
+    Parameters
+    ----------
+    field : (H, W, C) float32 ndarray
+    hole : (H, W) bool ndarray
+    need : (H, W) bool ndarray, optional
+        Where the result must be the solve's (default: every pixel).
+
+    Returns
+    -------
+    out : (H, W, C) float32 ndarray
     """
     H, W = hole.shape
+    need = hole if need is None else need
     if not hole.any() or hole.all():
         return field.copy()
     if min(H, W) < 24:
-        return interpolate_field(field, hole)
+        return interpolate_field(field, hole, need=need)
     valid = (~hole).astype(np.float32)
     h2, w2 = (H + 1) // 2, (W + 1) // 2
     cvalid = cv2.resize(valid, (w2, h2), interpolation=cv2.INTER_AREA)
     chole = cvalid < 0.999
     if chole.all():
-        return interpolate_field(field, hole)
+        return interpolate_field(field, hole, need=need)
     cfield = np.empty((h2, w2, field.shape[2]), np.float32)
     for c in range(field.shape[2]):
         cfield[..., c] = cv2.resize(field[..., c] * valid, (w2, h2),
                                     interpolation=cv2.INTER_AREA) / np.maximum(cvalid, 1e-6)
+    del valid
+    # the sweeps' box in harmonic_fill: the holes' bounding box, 1 px wider
+    rows, cols = np.flatnonzero(hole.any(1)), np.flatnonzero(hole.any(0))
+    y0, y1 = max(rows[0] - 1, 0), min(rows[-1] + 2, H)
+    x0, x1 = max(cols[0] - 1, 0), min(cols[-1] + 2, W)
+    boxes = mask_boxes(need & hole, iters + 1, (y0, y1, x0, x1))
+    if not boxes:  # every pixel of need is a valid one: never changed
+        return field.copy()
+    # the coarse pixels the bilinear start reads inside the boxes
+    cneed = np.zeros((h2, w2), bool)
+    for (by0, by1, bx0, bx1), _ in boxes:
+        cneed[max(by0 // 2 - 2, 0):(by1 + 1) // 2 + 2,
+              max(bx0 // 2 - 2, 0):(bx1 + 1) // 2 + 2] = True
     coarse = harmonic_fill(np.where(chole[..., None], 0, cfield).astype(np.float32), chole,
-                           iters=iters)
-    up = cv2.resize(coarse, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, -1)
-    out = np.where(hole[..., None], up, field).astype(np.float32)
-    # relax only inside the holes' bounding box
-    ys, xs = np.nonzero(hole)
-    y0, y1 = max(ys.min() - 1, 0), min(ys.max() + 2, H)
-    x0, x1 = max(xs.min() - 1, 0), min(xs.max() + 2, W)
-    sub_hole = hole[y0:y1, x0:x1]
-    for c in range(out.shape[2]):
-        sub = np.ascontiguousarray(out[y0:y1, x0:x1, c])
-        for _ in range(iters):
-            sm = cv2.filter2D(sub, -1, _CROSS, borderType=cv2.BORDER_REPLICATE)
-            sub[sub_hole] = sm[sub_hole]
-        out[y0:y1, x0:x1, c] = sub
+                          iters=iters, need=cneed)
+    out = cv2.resize(coarse, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, -1)
+    vy, vx = np.nonzero(~hole)
+    out[vy, vx] = field[vy, vx]
+    for (by0, by1, bx0, bx1), keep in boxes:
+        # a sweep moves the holes' pixels only: sweep every pixel, put the others back
+        fy, fx = np.nonzero(~hole[by0:by1, bx0:bx1])
+        for c in range(out.shape[2]):
+            sub = np.ascontiguousarray(out[by0:by1, bx0:bx1, c])
+            fixed = sub[fy, fx]
+            sm = np.empty_like(sub)
+            for _ in range(iters):
+                cv2.filter2D(sub, -1, _CROSS, dst=sm, borderType=cv2.BORDER_REPLICATE)
+                sm[fy, fx] = fixed
+                sub, sm = sm, sub
+            np.copyto(out[by0:by1, bx0:bx1, c], sub, where=keep)
+    return out
+
+
+def mask_boxes(need: npt.NDArray[np.bool_], margin: int, bounds: tuple[int, int, int, int],
+               *, block: int = 8) -> list[tuple[tuple[int, int, int, int], np.ndarray]]:
+    """Boxes (inside ``bounds`` = y0, y1, x0, x1) that hold ``need`` with ``margin``.
+
+    For local operations on a sparse mask (``need`` inside ``bounds``): a box
+    edge that is not one of ``bounds`` is at least ``margin`` px from the pixels
+    the box keeps. ``need`` is grouped on a grid of ``block`` px, and blocks
+    within ``margin`` of each other share a box.
+
+    Returns
+    -------
+    boxes : list of ((y0, y1, x0, x1), (h, w) bool ndarray)
+        Each box, and the pixels of ``need`` it keeps (box coordinates); every
+        pixel of ``need`` is kept by exactly one box.
+    """
+    H, W = need.shape
+    if not need.any():
+        return []
+    nb_y, nb_x = -(-H // block), -(-W // block)
+    pad = np.zeros((nb_y * block, nb_x * block), bool)
+    pad[:H, :W] = need
+    blocks = pad.reshape(nb_y, block, nb_x, block).any(axis=(1, 3)).astype(np.uint8)
+    r = -(-margin // block)
+    grown = cv2.dilate(blocks, np.ones((2 * r + 1, 2 * r + 1), np.uint8))
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
+    Y0, Y1, X0, X1 = bounds
+    out = []
+    for i in range(1, n):
+        bx, by, bw, bh = stats[i, :4]
+        y0, y1 = max(by * block, Y0), min((by + bh) * block, Y1)
+        x0, x1 = max(bx * block, X0), min((bx + bw) * block, X1)
+        mine = np.repeat(np.repeat(comp[by:by + bh, bx:bx + bw] == i, block, 0), block, 1)
+        keep = need[y0:y1, x0:x1] & mine[y0 - by * block:y1 - by * block,
+                                         x0 - bx * block:x1 - bx * block]
+        out.append(((y0, y1, x0, x1), keep))
     return out
 
 
@@ -140,5 +217,6 @@ def source_votes(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8
     return D
 
 
-__all__ = ["interpolate_field", "harmonic_fill", "background_field", "sample_bilinear",
+__all__ = ["interpolate_field", "harmonic_fill", "mask_boxes", "background_field",
+           "sample_bilinear",
            "blurred_lab", "source_votes"]

@@ -45,7 +45,8 @@ def pairwise_distance(colours: np.ndarray) -> np.ndarray:
 def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32], *,
                      beta: float, cycles: int = 2,
                      init: npt.NDArray[np.intp] | None = None,
-                     distance: npt.NDArray[np.float32] | None = None) -> npt.NDArray[np.intp]:
+                     distance: npt.NDArray[np.float32] | None = None,
+                     forbidden: float | None = None) -> npt.NDArray[np.intp]:
     """Alpha-expansion of the photomontage energy on a 4-connected grid.
 
     Parameters
@@ -63,53 +64,73 @@ def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32
         Starting labelling (default: the cheapest label per pixel).
     distance : (L, L, H, W) float32 ndarray, optional
         ``pairwise_distance(colours)`` if the caller has it already.
+    forbidden : float, optional
+        A data cost at or above it marks the label as not allowed at that pixel.
+        Such pixels keep their label in that label's move, so they are left out
+        of its graph and their seam terms with the pixels that may move become
+        data terms (the same energy, a smaller min-cut). It must exceed any
+        sum of seam costs, as a cost that forbids a label does.
 
     Returns
     -------
     labels : (H, W) intp ndarray
     """
     nl, H, W = D.shape
-    lab = np.argmin(D, 0) if init is None else init.astype(np.intp).copy()
+    lab = (np.argmin(D, 0) if init is None else init.astype(np.intp).copy()).ravel()
     # V(a, b) at each pixel; an edge sums it over both its pixels
     pair = beta * (pairwise_distance(colours) if distance is None else distance)
-    yy, xx = np.mgrid[0:H, 0:W]
+    pair = pair.reshape(nl * nl, H * W)
+    Df = D.reshape(nl, H * W)
+    idx = np.arange(H * W).reshape(H, W)
+    ep = np.concatenate([idx[:-1].ravel(), idx[:, :-1].ravel()])  # p of each edge
+    eq = np.concatenate([idx[1:].ravel(), idx[:, 1:].ravel()])  # its neighbour q
+
+    def V(u, v, p, q):  # seam cost of labels u at p and v at q, per edge (p, q)
+        k = u * nl + v
+        return pair[k, p] + pair[k, q]
+
     for _ in range(cycles):
         changed = False
         for a in range(nl):
-            cost1 = D[a].astype(np.float64).copy()  # x_p = 1: p takes label a
-            cost0 = np.take_along_axis(D, lab[None], 0)[0].astype(np.float64)
+            # p may move to a (x_p = 1) unless a is forbidden there or p has it already
+            free = lab != a
+            if forbidden is not None:
+                free &= Df[a] < forbidden
+            if not free.any():
+                continue
+            node = np.full(H * W, -1, np.intp)
+            node[free] = np.arange(int(free.sum()))
+            cost1 = Df[a].astype(np.float64)  # x_p = 1: p takes label a
+            cost0 = Df[lab, np.arange(H * W)].astype(np.float64)
+            # only edges touching a pixel that may move carry a term
+            e = free[ep] | free[eq]
+            p, q = ep[e], eq[e]
+            lp, lq = lab[p], lab[q]
+            A, B, C = V(lp, lq, p, q), V(lp, a, p, q), V(a, lq, p, q)
+            # E(x_p, x_q) = A + (C - A) x_p - C x_q + (B + C - A)(1 - x_p) x_q;
+            # a fixed pixel has x = 0
+            fp, fq = free[p], free[q]
+            both = fp & fq
+            only_q = fq & ~fp
+            n = H * W
+            cost1 += np.bincount(p[fp], (C - A)[fp], n)
+            cost1 -= np.bincount(q[both], C[both], n)
+            cost1 += np.bincount(q[only_q], (B - A)[only_q], n)
             g = maxflow.Graph[float]()
-            nodes = g.add_grid_nodes((H, W))
-            for axis in (0, 1):
-                if (H, W)[axis] < 2:
-                    continue
-                sp = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
-                sq = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
-                lp, lq = lab[sp], lab[sq]
-                yp, xp, yq, xq = yy[sp], xx[sp], yy[sq], xx[sq]
-
-                def V(u, v):  # seam cost of labels u at p and v at q (per edge)
-                    return pair[u, v, yp, xp] + pair[u, v, yq, xq]
-
-                A, B, C = V(lp, lq), V(lp, a), V(a, lq)
-                # E(x_p, x_q) = A + (C - A) x_p - C x_q + (B + C - A)(1 - x_p) x_q
-                w = np.zeros((H, W))
-                w[sp] = np.maximum(B + C - A, 0.0)
-                cost1[sp] += C - A
-                cost1[sq] -= C
-                st = np.zeros((3, 3))
-                st[1 + (axis == 0), 1 + (axis == 1)] = 1
-                g.add_grid_edges(nodes, weights=w, structure=st, symmetric=False)
-            m = np.minimum(cost0, cost1)
-            g.add_grid_tedges(nodes, cost1 - m, cost0 - m)
+            g.add_nodes(int(free.sum()))
+            g.add_edges(node[p[both]], node[q[both]],
+                        np.maximum(B + C - A, 0.0)[both], np.zeros(int(both.sum())))
+            c1, c0 = cost1[free], cost0[free]
+            m = np.minimum(c0, c1)
+            g.add_grid_tedges(np.arange(len(c1)), c1 - m, c0 - m)
             g.maxflow()
-            take = g.get_grid_segments(nodes) & (lab != a)
+            take = g.get_grid_segments(np.arange(len(c1)))
             if take.any():
                 changed = True
-                lab[take] = a
+                lab[np.flatnonzero(free)[take]] = a
         if not changed:
             break
-    return lab
+    return lab.reshape(H, W)
 
 
 def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.uint8],
@@ -136,24 +157,64 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
     -------
     out : (H, W, 3) uint8 ndarray
         ``reference`` outside ``replaced``.
+
+    Notes
+    -----
+    Only the ring and the replaced pixels are read, and the offset is solved
+    only where it decides the replaced pixels (``ring_offset``).
     """
-    out = reference.astype(np.float32)
+    out = reference.copy()
     ring = dilate_disc(replaced, ring_px) & ~replaced
+    ry, rx = np.nonzero(ring)
+    ref_ring = reference[ry, rx].astype(np.float32)
     for lbl in np.unique(labels[replaced]):
         if lbl == 0:
             continue
-        src = candidates[lbl].astype(np.float32)
-        d = reference.astype(np.float32) - src
-        good = ring & usable[lbl] & (distance_to_ref[lbl] < max_de)
         sel = replaced & (labels == lbl)
-        if good.sum() < 20:  # too little ring: one global offset (or none)
-            off = np.zeros_like(d)
-            if good.any():
-                off[:] = np.median(d[good], axis=0)
-        else:
-            off = harmonic_fill(np.where(good[..., None], d, 0).astype(np.float32), ~good)
-        out[sel] = src[sel] + off[sel]
-    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
+        good = usable[lbl, ry, rx] & (distance_to_ref[lbl, ry, rx] < max_de)
+        good_mask = np.zeros(ring.shape, bool)
+        good_mask[ry[good], rx[good]] = True
+        d = ref_ring[good] - candidates[lbl, ry[good], rx[good]].astype(np.float32)
+        sy, sx = np.nonzero(sel)
+        out[sy, sx] = add_offset(candidates[lbl, sy, sx], ring_offset(d, good_mask, sel))
+    return out
 
 
-__all__ = ["expansion_labels", "offset_blend", "pairwise_distance"]
+def add_offset(source: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32]
+               ) -> npt.NDArray[np.uint8]:
+    """``source + offset`` rounded to uint8 (``(N, 3)`` arrays), as ``offset_blend`` writes."""
+    v = source.astype(np.float32) + offset
+    v += 0.5
+    return np.clip(v, 0, 255, out=v).astype(np.uint8)
+
+
+def ring_offset(d: npt.NDArray[np.float32], good: npt.NDArray[np.bool_],
+                sel: npt.NDArray[np.bool_], *, min_ring_px: int = 20) -> npt.NDArray[np.float32]:
+    """The offset ``reference - source`` at the pixels of ``sel``, from the ring.
+
+    Parameters
+    ----------
+    d : (N, 3) float32 ndarray
+        ``reference - source`` at the ``N`` pixels of ``good``, row-major order.
+    good : (H, W) bool ndarray
+        Ring pixels where the source agrees with the reference.
+    sel : (H, W) bool ndarray
+        Pixels that take the source.
+
+    Returns
+    -------
+    offset : (M, 3) float32 ndarray
+        At the ``M`` pixels of ``sel`` (row-major): the membrane (harmonic)
+        interpolation of ``d`` (``fields.harmonic_fill``), or the median of
+        ``d`` (0 without any) when ``good`` has fewer than ``min_ring_px`` pixels.
+    """
+    m = int(np.count_nonzero(sel))
+    if len(d) < min_ring_px:  # too little ring: one global offset (or none)
+        off = np.median(d, axis=0) if len(d) else np.zeros(d.shape[1:], np.float32)
+        return np.broadcast_to(off.astype(np.float32), (m,) + d.shape[1:])
+    field = np.zeros(good.shape + d.shape[1:], np.float32)
+    field[good] = d
+    return harmonic_fill(field, ~good, need=sel)[sel]
+
+
+__all__ = ["add_offset", "expansion_labels", "offset_blend", "pairwise_distance", "ring_offset"]

@@ -297,4 +297,108 @@ def sweep_fields(src_labs: list[np.ndarray], views: list[TwoView], model: Parall
     return out, gamma
 
 
-__all__ = ["ParallaxModel", "epipole", "fit_parallax", "project", "sgm", "sweep_fields"]
+def _remap_points(img: np.ndarray, fx: np.ndarray, fy: np.ndarray, width: int = 1024
+                  ) -> np.ndarray:
+    """Bilinear samples of ``img`` (H, W, C) at n points → (n, C); OpenCV's remap
+    takes at most 32767 rows, so the points are laid out in rows of ``width``."""
+    n = len(fx)
+    rows = -(-n // width)
+    mx = np.zeros(rows * width, np.float32)
+    my = np.zeros(rows * width, np.float32)
+    mx[:n], my[:n] = fx, fy
+    out = cv2.remap(img, mx.reshape(rows, width), my.reshape(rows, width), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(rows * width, -1)[:n]
+
+
+def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np.ndarray,
+                    visible: np.ndarray, region: np.ndarray, *, scale: float = 0.5,
+                    box: int = 5, step_px: float = 1.0, line_px: float = 1.5,
+                    max_steps: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """Best colour match of each ``region`` pixel along its epipolar line in one source.
+
+    A static reference point lies, in the source, on its epipolar line at
+    x_s(μ) = π(H x̃ + μ ẽ) for some μ within the range the visible scene shows
+    (the μ of the visible flow matches on their lines, 1st–99th percentile,
+    widened by 10 %). For each μ of that range (steps of about ``step_px`` in
+    the source), the cost is the CIE76 distance between the reference and the
+    source sampled there (both Lab, already blurred), capped at 30 and
+    averaged over a ``box`` × ``box`` window of a coarse grid (``scale`` of the
+    image; only the region's cells are sampled). This is a plane sweep in one
+    source (Collins, CVPR 1996), without the cross-source γ of ``sweep_fields``,
+    so it needs no parallax model.
+
+    lab_r, lab_s : (H, W, 3) float32 Lab; view : TwoView with F; field : (H, W, 2)
+    float32 flow matches; visible, region : (H, W) bool.
+
+    Returns
+    -------
+    cost : (H, W) float32
+        The best window cost (ΔE) at each pixel of ``region`` (inf elsewhere, or
+        where the source has no F or too few visible matches on their lines).
+    mu : (H, W) float32
+        The μ of that best match (NaN elsewhere).
+    """
+    Hh, Ww = region.shape
+    cost = np.full((Hh, Ww), np.inf, np.float32)
+    best_mu = np.full((Hh, Ww), np.nan, np.float32)
+    if view.F is None or not region.any():
+        return cost, best_mu
+    e = epipole(view.F)
+    ys, xs = np.nonzero(visible)
+    if len(ys) > 40000:
+        pick = np.random.default_rng(0).choice(len(ys), 40000, replace=False)
+        ys, xs = ys[pick], xs[pick]
+    gx, gy = xs.astype(np.float64), ys.astype(np.float64)
+    m = field[ys, xs].astype(np.float64)
+    good = sampson_sq(view.F, np.stack([gx, gy], -1), m) <= line_px ** 2
+    if good.sum() < 200:
+        return cost, best_mu
+    mus = _mu_of(view.H, e, gx[good], gy[good], m[good, 0], m[good, 1])
+    lo, hi = np.percentile(mus, [1, 99])
+    span = max(hi - lo, 1e-9)
+    lo, hi = lo - 0.1 * span, hi + 0.1 * span
+    # the coarse grid over the whole image; only the region's cells (and their
+    # windows) are sampled
+    hh, ww = max(1, int(round(Hh * scale))), max(1, int(round(Ww * scale)))
+    rc = cv2.resize(region.astype(np.float32), (ww, hh), interpolation=cv2.INTER_AREA) > 0
+    # cells whose cost is needed (the region's, and one ring for the bilinear
+    # upsampling), and the cells their windows read
+    rc = cv2.dilate(rc.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    win = cv2.dilate(rc.astype(np.uint8), np.ones((box, box), np.uint8)) > 0
+    py, px = np.nonzero(win)
+    qy, qx = np.nonzero(rc)
+    CX = (px + 0.5) * Ww / ww - 0.5
+    CY = (py + 0.5) * Hh / hh - 0.5
+    ref_c = cv2.resize(lab_r, (ww, hh), interpolation=cv2.INTER_AREA)[py, px]
+    ry, rx = np.nonzero(region)
+    pa = project(view.H, e, np.array([lo, hi]), np.array([rx.mean()]), np.array([ry.mean()]))
+    span_px = float(np.hypot(pa[0][1] - pa[0][0], pa[1][1] - pa[1][0]))
+    n_steps = int(np.clip(np.ceil(span_px / step_px) + 1, 2, max_steps))
+    Hs, Ws = lab_s.shape[:2]
+    c_best = np.full(len(qy), np.inf, np.float32)
+    m_best = np.full(len(qy), np.nan, np.float32)
+    buf = np.full((hh, ww), _CAP, np.float32)
+    for g in np.linspace(lo, hi, n_steps):
+        fx, fy = project(view.H, e, g, CX, CY)
+        smp = _remap_points(lab_s, fx, fy)
+        inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
+        d = np.minimum(np.linalg.norm(smp - ref_c, axis=-1), _CAP)
+        buf[py, px] = np.where(inside, d, _CAP)
+        bf = cv2.boxFilter(buf, -1, (box, box))[qy, qx]
+        better = bf < c_best
+        c_best[better] = bf[better]
+        m_best[better] = g
+    cimg = np.full((hh, ww), _CAP, np.float32)
+    cimg[qy, qx] = c_best
+    mimg = np.full((hh, ww), np.nan, np.float32)
+    mimg[qy, qx] = m_best
+    cu = cv2.resize(cimg, (Ww, Hh), interpolation=cv2.INTER_LINEAR)
+    mu_u = cv2.resize(mimg, (Ww, Hh), interpolation=cv2.INTER_NEAREST)
+    cost[region] = cu[region]
+    best_mu[region] = mu_u[region]
+    return cost, best_mu
+
+
+__all__ = ["ParallaxModel", "epipolar_search", "epipole", "fit_parallax", "project", "sgm",
+           "sweep_fields"]

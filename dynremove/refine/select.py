@@ -14,6 +14,10 @@ that the scan flagged with doubled content.
    inliers; a rotation or a planar scene allows ~1 px, a wide baseline tens).
    Pixels of L explained by at least half of the sources are static 3-D
    structure that the scan's homography-gated matches could not follow.
+   Where the set has parallax, a pixel whose flow match failed (thin
+   structure against the sky, far off the plane) may instead be found by a
+   search along its epipolar line (``parallax.epipolar_search``); that weaker
+   evidence counts where at least two sources, and half of them, explain it.
 2. **Background candidates.** Every source is sampled through its field,
    re-interpolated across the rest of L (``fields.background_field``); where
    the set has parallax, found instead by a plane + parallax sweep for the
@@ -49,7 +53,7 @@ from dynremove.method.geometry import TwoView, sampson_sq
 from dynremove.params import Params
 from dynremove.refine.fields import background_field, blurred_lab, sample_bilinear
 from dynremove.refine.fill import median_fill, realign_fields
-from dynremove.refine.parallax import fit_parallax, sweep_fields
+from dynremove.refine.parallax import epipolar_search, fit_parallax, sweep_fields
 from dynremove.refine.montage import expansion_labels, offset_blend, pairwise_distance
 from dynremove.refine.morphology import dilate_disc
 
@@ -127,19 +131,28 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     near = dilate_disc(mask, P.select_grow_px) & ~mask
     if S < 2 or not near.any():
         return np.zeros(mask.shape, bool)
-    ys, xs = np.nonzero(near)
     ring = dilate_disc(mask, 2 * P.select_grow_px) & ~mask
+    # only the box of the ring (which holds ``near``) is sampled, 8 px wider so
+    # that the 1 px blur there equals the whole image's
+    ry, rx = np.nonzero(ring | near)
+    y0, y1 = max(ry.min() - 8, 0), min(ry.max() + 9, mask.shape[0])
+    x0, x1 = max(rx.min() - 8, 0), min(rx.max() + 9, mask.shape[1])
+    box = (slice(y0, y1), slice(x0, x1))
+    ys, xs = np.nonzero(near[box])
+    ring_b = ring[box]
+    lab_rb = lab_r[box]
     labs, ok = [], []
     for k in range(S):
-        warped, ins = sample_bilinear(sources[k], base[k])
+        f = np.ascontiguousarray(base[k][box])
+        warped, ins = sample_bilinear(sources[k], f)
         if valid is not None:
-            ins &= _valid_at(valid[k], base[k])
+            ins &= _valid_at(valid[k], f)
         lab_k = blurred_lab(warped, 1.0)
         # exposure and white balance: the source's median Lab offset to the
         # reference around L, so a darker reference is not a "difference"
-        around = ring & ins
+        around = ring_b & ins
         if around.sum() > 50:
-            lab_k = lab_k + np.median(lab_r[around] - lab_k[around], axis=0)
+            lab_k = lab_k + np.median(lab_rb[around] - lab_k[around], axis=0)
         labs.append(lab_k[ys, xs])
         ok.append(ins[ys, xs])
     labs, ok = np.stack(labs), np.stack(ok)  # (S, n, 3), (S, n)
@@ -150,10 +163,10 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     best = np.argmax(count, 0)
     n_best = count[best, np.arange(len(ys))]
     cons = labs[best, np.arange(len(ys))]
-    d_ref = np.linalg.norm(lab_r[ys, xs] - cons, axis=-1)
+    d_ref = np.linalg.norm(lab_rb[ys, xs] - cons, axis=-1)
     need = max(2, int(np.ceil(0.5 * S - 1e-6)))
     hit = np.zeros(mask.shape, np.uint8)
-    hit[ys, xs] = (n_best >= need) & (d_ref >= tau)
+    hit[ys + y0, xs + x0] = (n_best >= need) & (d_ref >= tau)
     hit = cv2.morphologyEx(hit, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     n, lab = cv2.connectedComponents((hit | mask).astype(np.uint8), connectivity=8)
     # a component grows by at most its own detected area (a shadow is no larger
@@ -238,6 +251,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
     # 1. flow matches and the pixels of L they explain
     votes = np.zeros((S, H, W), np.float32)
+    matched = np.zeros((S, H, W), bool)  # explained by the flow match
+    searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
     base = []
     for k in range(S):
         v = views[k]
@@ -258,6 +273,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         if v.F is not None and P.select_epipolar_px > 0:
             ok &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
         votes[k] = ok * (1.0 - _mover_probability(lab_r, mask, lab_w))
+        if mode == "parallax" and P.select_search_de > 0:
+            # static 3-D structure whose flow match failed (thin, or far off the
+            # plane): its best match along the epipolar line in this source
+            cost, _ = epipolar_search(lab_r, blurred_lab(sources[k], 1.0), v, nf,
+                                      ~dilate_disc(mask, 4), mask & ~ok)
+            matched[k], searched[k] = ok, cost < P.select_search_de
     grown = np.zeros((H, W), bool)
     if P.select_grow_px > 0:
         grown = _consensus_growth(lab_r, sources, base, mask, valid, P)
@@ -265,6 +286,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         region = dilate_disc(mask, P.select_margin_px)
     p_ref = _mover_probability(lab_r, mask, lab_r)
     need = max(1, int(np.ceil(0.5 * S - 1e-6)))
+    if searched.any():
+        # the epipolar search is weaker evidence (any colour on the line may
+        # match): it counts where at least two sources, and half of them, agree
+        found = searched & ((matched | searched).sum(0) >= max(2, need))[None]
+        votes = np.maximum(votes, found.astype(np.float32))
     explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5)
     core = mask & ~explained
 
@@ -335,7 +361,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
     # 4. graph cut, 5. blend
     lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2,
-                           distance=dist)
+                           distance=dist, forbidden=_FORBIDDEN)
     rep = lab != 0
     movers = np.zeros((S, H, W), bool)
     mv = usable[1:] & (p_mover[1:] > 0.5) & (np.linalg.norm(labs[1:] - cons[None], axis=-1) > tau)

@@ -1,0 +1,174 @@
+"""Readable references the fast code is tested against (stumpy's ``tests/naive.py``).
+
+Each computes on every pixel of the box, densely, as the code did before it
+was made sparse; the fast version must give the same bytes.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+
+from dynremove.refine.fields import blurred_lab
+from dynremove.refine.morphology import dilate_disc
+from dynremove.refine.select import member_median
+
+
+# the membrane fill as it was written before it was made sparse (dense, every pixel)
+def interpolate_field(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_]
+                      ) -> npt.NDArray[np.float32]:
+    """Fill ``field`` (H, W, C) where ``hole``: normalised Gaussian convolution (dense).
+
+    A quick, smooth, but biased estimate; ``harmonic_fill`` uses it as the
+    coarsest level.
+    """
+    out = field.copy()
+    valid = (~hole).astype(np.float32)
+    todo = hole.copy()
+    if not valid.any():
+        return out
+    for sigma in (2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0):
+        if not todo.any():
+            break
+        k = int(6 * sigma) | 1
+        w = cv2.GaussianBlur(valid, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
+        ok = todo & (w > 1e-3)
+        if not ok.any():
+            continue
+        for c in range(field.shape[2]):
+            num = cv2.GaussianBlur(field[..., c] * valid, (k, k), sigma,
+                                   borderType=cv2.BORDER_CONSTANT)
+            out[..., c][ok] = num[ok] / w[ok]
+        todo &= ~ok
+    return out
+
+
+_CROSS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.float32)
+
+
+def harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *,
+                  iters: int = 40) -> npt.NDArray[np.float32]:
+    """Fill ``field`` (H, W, C) where ``hole`` with the membrane (Laplace) solution.
+
+    Coarse to fine: the field is area-averaged over its valid pixels to half
+    size (a coarse pixel is a hole if any of its fine pixels is), solved there,
+    upsampled as the starting point, and relaxed by ``iters`` Jacobi sweeps.
+    Valid pixels are never changed.
+    """
+    H, W = hole.shape
+    if not hole.any() or hole.all():
+        return field.copy()
+    if min(H, W) < 24:
+        return interpolate_field(field, hole)
+    valid = (~hole).astype(np.float32)
+    h2, w2 = (H + 1) // 2, (W + 1) // 2
+    cvalid = cv2.resize(valid, (w2, h2), interpolation=cv2.INTER_AREA)
+    chole = cvalid < 0.999
+    if chole.all():
+        return interpolate_field(field, hole)
+    cfield = np.empty((h2, w2, field.shape[2]), np.float32)
+    for c in range(field.shape[2]):
+        cfield[..., c] = cv2.resize(field[..., c] * valid, (w2, h2),
+                                    interpolation=cv2.INTER_AREA) / np.maximum(cvalid, 1e-6)
+    coarse = harmonic_fill(np.where(chole[..., None], 0, cfield).astype(np.float32), chole,
+                           iters=iters)
+    up = cv2.resize(coarse, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, -1)
+    out = np.where(hole[..., None], up, field).astype(np.float32)
+    # relax only inside the holes' bounding box
+    ys, xs = np.nonzero(hole)
+    y0, y1 = max(ys.min() - 1, 0), min(ys.max() + 2, H)
+    x0, x1 = max(xs.min() - 1, 0), min(xs.max() + 2, W)
+    sub_hole = hole[y0:y1, x0:x1]
+    for c in range(out.shape[2]):
+        sub = np.ascontiguousarray(out[y0:y1, x0:x1, c])
+        for _ in range(iters):
+            sm = cv2.filter2D(sub, -1, _CROSS, borderType=cv2.BORDER_REPLICATE)
+            sub[sub_hole] = sm[sub_hole]
+        out[y0:y1, x0:x1, c] = sub
+    return out
+
+
+def offset_blend(reference, candidates, labels, replaced, usable, distance_to_ref, *,
+                 ring_px=3, max_de=15.0):
+    """``montage.offset_blend`` on whole images."""
+    out = reference.astype(np.float32)
+    ring = dilate_disc(replaced, ring_px) & ~replaced
+    for lbl in np.unique(labels[replaced]):
+        if lbl == 0:
+            continue
+        src = candidates[lbl].astype(np.float32)
+        d = reference.astype(np.float32) - src
+        good = ring & usable[lbl] & (distance_to_ref[lbl] < max_de)
+        sel = replaced & (labels == lbl)
+        if good.sum() < 20:
+            off = np.zeros_like(d)
+            if good.any():
+                off[:] = np.median(d[good], axis=0)
+        else:
+            off = harmonic_fill(np.where(good[..., None], d, 0).astype(np.float32), ~good)
+        out[sel] = src[sel] + off[sel]
+    return np.clip(out + 0.5, 0, 255).astype(np.uint8)
+
+
+def full_resolution(reference, sources, clean_working, dynamic, selection):
+    """``upsample.full_resolution`` on the whole bounding box of the replaced region."""
+    Hf, Wf = reference.shape[:2]
+    h, w = dynamic.shape
+    size = (Wf, Hf)
+    dyn_full = cv2.resize(dynamic.astype(np.float32), size,
+                          interpolation=cv2.INTER_LINEAR) >= 0.5
+    clean = reference.copy()
+    if selection is None or not (selection.label >= 1).any() or not selection.fields:
+        if dyn_full.any():
+            up = cv2.resize(clean_working, size, interpolation=cv2.INTER_CUBIC)
+            clean[dyn_full] = up[dyn_full]
+        return clean, dyn_full
+    sx, sy = Wf / w, Hf / h
+    label = cv2.resize(selection.label.astype(np.int16), size,
+                       interpolation=cv2.INTER_NEAREST).astype(np.intp)
+    rep = label >= 1
+    ring_px = max(3, int(round(3 * max(sx, sy))))
+    ys, xs = np.nonzero(dilate_disc(rep, ring_px + 1))
+    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+    roi = (slice(y0, y1), slice(x0, x1))
+    gx, gy = np.meshgrid(np.arange(x0, x1, dtype=np.float32),
+                         np.arange(y0, y1, dtype=np.float32))
+    wx, wy = (gx + 0.5) / sx - 0.5, (gy + 0.5) / sy - 0.5
+    S = len(sources)
+    cand = np.empty((S + 1, y1 - y0, x1 - x0, 3), np.uint8)
+    cand[0] = reference[roi]
+    usable = np.ones((S + 1, y1 - y0, x1 - x0), bool)
+    members = np.zeros((S, y1 - y0, x1 - x0), bool)
+    for k in range(S):
+        f = selection.fields[k]
+        fx = cv2.remap(np.ascontiguousarray(f[..., 0]), wx, wy, cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+        fy = cv2.remap(np.ascontiguousarray(f[..., 1]), wx, wy, cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_REPLICATE)
+        mx, my = (fx + 0.5) * sx - 0.5, (fy + 0.5) * sy - 0.5
+        Hs, Ws = sources[k].shape[:2]
+        cand[k + 1] = cv2.remap(sources[k], mx, my, cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)
+        usable[k + 1] = (mx >= 0) & (mx <= Ws - 1) & (my >= 0) & (my <= Hs - 1)
+        if selection.members is not None:
+            members[k] = cv2.remap(selection.members[k].astype(np.uint8), wx, wy,
+                                   cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                                   borderValue=0) > 0
+    lab = label[roi]
+    rep_roi = rep[roi]
+    py, px = np.nonzero(rep_roi)
+    chosen = lab[py, px]
+    member = members[:, py, px] & usable[1:, py, px]
+    member[chosen - 1, np.arange(len(py))] = True
+    cand[chosen, py, px] = member_median(cand[1:, py, px], member)
+    labs = np.stack([blurred_lab(c, max(sx, sy)) for c in cand])
+    d_ref = np.linalg.norm(labs - labs[0][None], axis=-1)
+    out = offset_blend(reference[roi], cand, lab, rep_roi, usable, d_ref, ring_px=ring_px)
+    no_src = cv2.resize(selection.no_source.astype(np.uint8), size,
+                        interpolation=cv2.INTER_NEAREST)[roi] > 0
+    if no_src.any():
+        out = cv2.inpaint(np.ascontiguousarray(out), (no_src & rep_roi).astype(np.uint8),
+                          int(5 * max(sx, sy)), cv2.INPAINT_TELEA)
+    clean[roi][rep_roi] = out[rep_roi]
+    return clean, dyn_full

@@ -1,0 +1,95 @@
+"""The blend's sparse computation equals the dense one (``tests/naive.py``)."""
+
+from __future__ import annotations
+
+import cv2
+import naive
+import numpy as np
+import pytest
+
+from dynremove.refine.fields import harmonic_fill, mask_boxes
+from dynremove.refine.montage import offset_blend
+from dynremove.refine.select import member_median
+from dynremove.refine.upsample import _median_of_members
+
+
+def _blobs(rng, H, W, n):
+    m = np.zeros((H, W), np.uint8)
+    for _ in range(n):
+        centre = (int(rng.integers(0, W)), int(rng.integers(0, H)))
+        axes = (int(rng.integers(3, W // 3 + 4)), int(rng.integers(3, H // 3 + 4)))
+        cv2.ellipse(m, centre, axes, float(rng.uniform(0, 180)), 0, 360, 1, -1)
+    return m.astype(bool)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_harmonic_fill_equals_the_dense_solve_where_needed(seed):
+    """Bit for bit at ``need`` (everywhere without it), except below float32's
+    normal range: 0.25·x of a subnormal x rounds, and filter2D's vector and
+    scalar paths round it apart."""
+    rng = np.random.default_rng(seed)
+    H, W = (int(v) for v in rng.integers(30, 400, 2))
+    C = 1 + seed % 3
+    rep = _blobs(rng, H, W, 1 + seed % 4)
+    r = 2 + seed
+    ring = cv2.dilate(rep.astype(np.uint8), np.ones((2 * r + 1,) * 2, np.uint8)) > 0
+    good = ring & ~rep & (rng.random((H, W)) < 0.9)
+    field = np.zeros((H, W, C), np.float32)
+    field[good] = rng.normal(size=(int(good.sum()), C)) * 10 + np.arange(C)
+    need = rep & (rng.random((H, W)) < 0.7) if seed % 2 else rep
+    ref = naive.harmonic_fill(field, ~good)
+    out = harmonic_fill(field, ~good, need=need)
+    np.testing.assert_allclose(out[need], ref[need], rtol=0, atol=1e-30)
+    np.testing.assert_allclose(harmonic_fill(field, ~good), ref, rtol=0, atol=1e-30)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_offset_blend_equals_the_dense_blend(seed):
+    rng = np.random.default_rng(seed)
+    H, W = (int(v) for v in rng.integers(40, 200, 2))
+    L = 2 + seed % 3
+    bg = cv2.GaussianBlur(rng.integers(0, 256, (H, W, 3)).astype(np.uint8), (0, 0), 2)
+    cand = np.stack([np.clip(bg.astype(int) + rng.integers(-40, 40, 3)
+                             + rng.integers(-5, 5, (H, W, 3)), 0, 255).astype(np.uint8)
+                     for _ in range(L)])
+    rep = np.zeros((H, W), np.uint8)
+    for _ in range(1 + seed % 3):
+        cv2.circle(rep, (int(rng.integers(0, W)), int(rng.integers(0, H))),
+                   int(rng.integers(2, 40)), 1, -1)
+    rep = rep.astype(bool)
+    labels = np.where(rep, rng.integers(1, L, (H, W)) if seed % 3 else 1, 0)
+    usable = rng.random((L, H, W)) < 0.95
+    dist = (rng.random((L, H, W)) * (16 if seed == 5 else 30)).astype(np.float32)
+    ring_px = 2 + seed % 4
+    np.testing.assert_array_equal(
+        offset_blend(cand[0], cand, labels, rep, usable, dist, ring_px=ring_px),
+        naive.offset_blend(cand[0], cand, labels, rep, usable, dist, ring_px=ring_px))
+
+
+def test_mask_boxes_keep_every_pixel_once_and_far_from_their_edges():
+    rng = np.random.default_rng(3)
+    need = _blobs(rng, 300, 500, 5) & (rng.random((300, 500)) < 0.5)
+    bounds = (5, 290, 0, 500)
+    need[:bounds[0]] = need[bounds[1]:] = False
+    margin = 23
+    kept = np.zeros(need.shape, int)
+    for (y0, y1, x0, x1), keep in mask_boxes(need, margin, bounds):
+        assert bounds[0] <= y0 < y1 <= bounds[1] and bounds[2] <= x0 < x1 <= bounds[3]
+        ys, xs = np.nonzero(keep)
+        for lo, hi, v, edge in ((y0, y1, ys + y0, bounds[:2]), (x0, x1, xs + x0, bounds[2:])):
+            if lo != edge[0]:
+                assert (v - lo >= margin).all()
+            if hi != edge[1]:
+                assert (hi - 1 - v >= margin).all()
+        kept[y0:y1, x0:x1] += keep
+    np.testing.assert_array_equal(kept, need.astype(int))
+    assert mask_boxes(np.zeros((10, 10), bool), 3, (0, 10, 0, 10)) == []
+
+
+def test_median_of_members_equals_member_median():
+    rng = np.random.default_rng(0)
+    values = rng.integers(0, 256, (5, 4000, 3)).astype(np.uint8)
+    member = rng.random((5, 4000)) < 0.5
+    member[rng.integers(0, 5, 4000), np.arange(4000)] = True
+    np.testing.assert_array_equal(_median_of_members(values, member),
+                                  member_median(values, member))
