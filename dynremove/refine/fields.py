@@ -121,16 +121,13 @@ def harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *
     vy, vx = np.nonzero(~hole)
     out[vy, vx] = field[vy, vx]
     for (by0, by1, bx0, bx1), keep in boxes:
-        # a sweep moves the holes' pixels only: sweep every pixel, put the others back
-        fy, fx = np.nonzero(~hole[by0:by1, bx0:bx1])
+        sub_hole = hole[by0:by1, bx0:bx1]  # a sweep moves the holes' pixels only
         for c in range(out.shape[2]):
             sub = np.ascontiguousarray(out[by0:by1, bx0:bx1, c])
-            fixed = sub[fy, fx]
             sm = np.empty_like(sub)
             for _ in range(iters):
                 cv2.filter2D(sub, -1, _CROSS, dst=sm, borderType=cv2.BORDER_REPLICATE)
-                sm[fy, fx] = fixed
-                sub, sm = sm, sub
+                np.copyto(sub, sm, where=sub_hole)
             np.copyto(out[by0:by1, bx0:bx1, c], sub, where=keep)
     return out
 
