@@ -128,8 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("images", nargs="+",
                    help="a folder of images (sorted by name), image files, or one video")
     r.add_argument("--ref", default=None,
-                   help="reference: index, file name or 'auto' (the sharpest frame with the "
-                        "most keypoint matches); default: the middle image")
+                   help="reference: index (0-based, in input order; negative counts from "
+                        "the end, -1 = the last), file name or 'auto' (the sharpest frame with "
+                        "the most keypoint matches); default: the middle image. The run "
+                        "names the one it takes")
     r.add_argument("--out", default="out/run", help="output folder (default: out/run)")
     r.add_argument("--max-side", type=int, default=None, metavar="PX",
                    help="downscale so the longer side is at most PX (default: only above "
@@ -150,7 +152,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sample-static", type=float, default=0.002, metavar="F",
                    help="fraction of static decisions recorded (default 0.002)")
     r.add_argument("--gt", default=None, metavar="MASK",
-                   help="ground-truth mask of the reference (0/255) for error overlays")
+                   help="true mask of the reference (0/255, white = moving) at the "
+                        "photo's full size: the result is scored against it (Jaccard, "
+                        "printed and in report.json as jaccard_vs_gt) and a --record shows "
+                        "the errors")
     r.add_argument("--compare", default=None, metavar="PARAMS",
                    help="also run with other parameters (a preset name or field=value,...) "
                         "and log both side by side in the --record file")
@@ -174,7 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
     bt.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                     help="run the sets on this Dask cluster (extra dynremove[dask])")
     bt.add_argument("--ref", default=None,
-                    help="reference of every set: index, file name or 'auto' (default: middle)")
+                    help="reference of every set: index (0-based; negative counts from the "
+                         "end), file name or 'auto' (default: middle)")
     bt.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
                     help="downscale to at most PX ('none' = full size; default: only "
                          "above 1280 px)")
@@ -232,7 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="downscale to at most PX ('none' = full size; default: only "
                         "above 1280 px)")
     e.add_argument("--ref", default=None,
-                   help="reference: index or file name (default: the middle frame)")
+                   help="reference: index (0-based; negative counts from the end) or file "
+                        "name (default: the middle frame)")
     e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
                    help=f"comma-separated subset of {','.join(METHODS)}")
     e.add_argument("--ablation", action="store_true",

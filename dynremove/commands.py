@@ -16,6 +16,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 
 from dynremove import io
@@ -66,7 +67,8 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     t0 = time.perf_counter()
-    where = _Where(_bar(args))  # the progress bar, and where the run is for an interruption
+    # the progress bar, and where the run is for an interruption
+    where = _Where(_bar(args, params))
     iset: io.ImageSet | None = None
     ref: int | None = None
     rec = sink = sink_b = None
@@ -76,15 +78,19 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                  span=args.span, pick=args.pick)
         where.stage = "while choosing the reference"
         ref, ref_info, ref_notes = choose_reference(args.ref, iset)
-        iset.notes.extend(ref_notes)
         t_load = time.perf_counter() - t0
-        for n in iset.notes:
+        for n in [*iset.notes, reference_note(args.ref, ref, ref_info, iset.names),
+                  *ref_notes]:
             _note(args, n)
-        gt = None
+        iset.notes.extend(ref_notes)
+        gt_full = gt = None
         if args.gt:
             where.stage = "while reading the ground truth"
-            H, W = iset.images[0].shape[:2]
-            gt = io.read_mask(args.gt, (W, H))
+            gt_full, gt_note = read_gt(args.gt, iset, ref)
+            if gt_note:
+                _note(args, gt_note)
+                iset.notes.append(gt_note)
+            gt = _resized_mask(gt_full, iset.images[0].shape[:2])  # the analysis size
         compare = parse_compare(args.compare, params) if args.compare else None
         if compare is not None and not args.record:
             raise InputError("--compare needs --record FILE.rrd (the two runs go into one "
@@ -128,15 +134,80 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.disconnect()
     res.timings["load"] = t_load
     res = at_output_size(res, iset, args.output_size)
-    if gt is not None and gt.shape != res.dynamic.shape:
-        gt = io.read_mask(args.gt, res.dynamic.shape[::-1])
-    write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
-                  record=args.record, reference=ref_info)
+    if gt_full is not None:
+        gt = _resized_mask(gt_full, res.dynamic.shape)  # the output's size
+    report = write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
+                           record=args.record, reference=ref_info)
+    score = (f"J {report['jaccard_vs_gt']:.3f} against the given mask, "
+             if "jaccard_vs_gt" in report else "")
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
          + (f" and {args.record}" if args.record else "")
-         + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, "
+         + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, {score}"
          f"{res.timings['total'] + t_load:.1f} s)")
     return EXIT_OK
+
+
+def reference_note(ref_arg: str | None, ref: int, info: dict, names: list[str]) -> str:
+    """One line naming the reference and how it was chosen (middle, given, auto)."""
+    how = {"middle": "the middle image", "auto": "chosen by --ref auto"}.get(
+        info.get("chosen_by", ""), f"given by --ref {ref_arg}")
+    return f"reference: {names[ref]} (index {ref} of 0..{len(names) - 1}, {how})"
+
+
+# PIL's transposition for each EXIF orientation that turns the frame by 90° (as
+# ImageOps.exif_transpose; OpenCV applies the same on reading)
+_EXIF_TURNS = {5: "TRANSPOSE", 6: "ROTATE_270", 7: "TRANSVERSE", 8: "ROTATE_90"}
+
+
+def read_gt(path: str, iset: io.ImageSet, ref: int) -> tuple[np.ndarray, str | None]:
+    """``--gt``: the reference's true mask at the reference's full (displayed) size.
+
+    Returns ``(mask, note)``: mask is (H0, W0) bool, ``iset.original_size`` being
+    (W0, H0). A mask of the transposed size, for a reference whose EXIF
+    orientation turns it by 90°, was drawn on the stored pixels: it is turned
+    the same way, with a note. Any other size is an InputError: scoring it
+    would compare different framings.
+    """
+    m = io.read_mask(path)
+    W0, H0 = iset.original_size
+    h, w = m.shape
+    if (w, h) == (W0, H0):
+        return m, None
+    name = iset.names[ref]
+    if (w, h) == (H0, W0):
+        orientation = None if iset.video else _exif_orientation(iset.paths[ref])
+        if orientation in _EXIF_TURNS:
+            from PIL import Image
+
+            how = getattr(Image.Transpose, _EXIF_TURNS[orientation])
+            turned = np.asarray(Image.fromarray(m.astype(np.uint8) * 255).transpose(how))
+            return turned > 127, (f"--gt {path}: {w}x{h}, turned as the EXIF orientation "
+                                  f"of {name} says (the mask was drawn on its stored "
+                                  "pixels)")
+        raise InputError(f"--gt {path}: is {w}x{h}, turned against the reference {name} "
+                         f"({W0}x{H0}) and {name} has no EXIF orientation to turn it back "
+                         "by; give the mask upright")
+    raise InputError(f"--gt {path}: is {w}x{h} but the reference {name} is {W0}x{H0}; "
+                     "the mask must have the reference's size")
+
+
+def _exif_orientation(path: Path) -> int | None:
+    """The EXIF orientation tag of an image file, None if it has none or is unreadable."""
+    try:
+        from PIL import Image
+
+        with Image.open(path) as im:
+            return im.getexif().get(0x0112)
+    except Exception:  # noqa: BLE001 - no tag to apply
+        return None
+
+
+def _resized_mask(mask: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``mask`` at (H, W) = ``shape[:2]`` (nearest), itself when already that size."""
+    H, W = shape[:2]
+    if mask.shape == (H, W):
+        return mask
+    return cv2.resize(mask.astype(np.uint8), (W, H), interpolation=cv2.INTER_NEAREST) > 0
 
 
 class _Where:
@@ -148,7 +219,8 @@ class _Where:
         self.stage = "while loading the images"
 
     def __call__(self, stage: str, frac: float) -> None:
-        self.stage = f"during {stage}" if frac < 1.0 else f"after {stage}"
+        label = self.bar.label(stage)
+        self.stage = f"during {label}" if frac < 1.0 else f"after {label}"
         self.bar(stage, frac)
 
     def close(self) -> None:
@@ -219,7 +291,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         args.record = record
         args.record_every_rows = None
     sink = _make_sink(args, iset, gt, gt_background=scene.background) if record else None
-    bar = _bar(args)
+    bar = _bar(args, params)
     _note_compile(args)
     try:
         res = remove_dynamic(scene.images, ref=scene.ref_index, params=params, sink=sink,
@@ -402,8 +474,18 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
                      gt_mask=gt, gt_background=gt_background, rec=rec, root=root)
 
 
-def _bar(args: argparse.Namespace):
-    return ProgressBar(enabled=not getattr(args, "quiet", False))
+def stage_labels(params: Params) -> dict[str, str]:
+    """The progress bar's names of the pipeline's stages, by what runs.
+
+    The pipeline reports both fills as "fusion" (report.json keeps that key in
+    ``seconds``); the bar names the fill the parameters choose.
+    """
+    return {"fusion": "fill by selection" if params.fill == "select" else "fused fill"}
+
+
+def _bar(args: argparse.Namespace, params: Params | None = None) -> ProgressBar:
+    return ProgressBar(enabled=not getattr(args, "quiet", False),
+                       labels=stage_labels(params) if params is not None else None)
 
 
 def _note(args: argparse.Namespace, msg: str) -> None:

@@ -4,20 +4,30 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import TextIO
+from typing import Mapping, TextIO
 
 
 class ProgressBar:
-    """Call with (stage, fraction); redraws at most every 0.1 s, newline per stage."""
+    """Call with (stage, fraction); redraws at most every 0.1 s, newline per stage.
 
-    def __init__(self, *, enabled: bool = True, stream: TextIO | None = None, width: int = 28):
+    ``labels`` renames stages on screen (e.g. the pipeline's "fusion" as the fill
+    that runs); other stages are shown by their own name.
+    """
+
+    def __init__(self, *, enabled: bool = True, stream: TextIO | None = None, width: int = 28,
+                 labels: Mapping[str, str] | None = None):
         self.enabled = enabled
         self.stream = stream or sys.stderr
         self.width = width
+        self.labels = dict(labels or {})
         self.stage: str | None = None
         self.t_stage = time.perf_counter()
         self.t_draw = 0.0
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+
+    def label(self, stage: str) -> str:
+        """The name ``stage`` is shown by."""
+        return self.labels.get(stage, stage)
 
     def __call__(self, stage: str, frac: float) -> None:
         if not self.enabled:
@@ -33,7 +43,7 @@ class ProgressBar:
             return  # logs get one line per stage
         n = int(round(self.width * min(max(frac, 0.0), 1.0)))
         bar = "#" * n + "-" * (self.width - n)
-        line = f"{stage:<16} [{bar}] {100 * frac:5.1f} %  {now - self.t_stage:6.1f} s"
+        line = f"{self.label(stage):<17} [{bar}] {100 * frac:5.1f} %  {now - self.t_stage:6.1f} s"
         self.stream.write(("\r" if self.tty else "") + line + ("" if self.tty else "\n"))
         self.stream.flush()
 

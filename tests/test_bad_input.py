@@ -22,6 +22,7 @@ import pytest
 
 from dynremove import io, preset, remove_dynamic
 from dynremove.evaluation import synth
+from dynremove.evaluation.metrics import jaccard
 from dynremove.cli import main
 from dynremove.params import Params
 from dynremove.errors import InputError
@@ -306,6 +307,80 @@ def test_bad_max_side(tmp_path, capsys, scene, max_side):
     assert_input_error(rc, err, f"--max-side {max_side}", out=out)
 
 
+# --- the true mask (--gt) ---------------------------------------------------------------
+def write_mask(path: Path, mask: np.ndarray) -> Path:
+    assert cv2.imwrite(str(path), mask.astype(np.uint8) * 255)
+    return path
+
+
+@pytest.mark.parametrize("size", [(W - 4, H), (2 * W, 2 * H + 2), (854, 480)],
+                         ids=["size", "aspect", "davis"])
+def test_gt_of_another_size(tmp_path, capsys, scene, size):
+    """A mask that is not the reference's size is refused (it used to be resized
+    silently and scored), before any work, leaving no output folder."""
+    write_set(tmp_path / "s", scene.images[:3])
+    gt = write_mask(tmp_path / "gt.png", cv2.resize(scene.masks[1].astype(np.uint8), size,
+                                                    interpolation=cv2.INTER_NEAREST))
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--gt", gt, "--out", out, *FAST)
+    assert_input_error(rc, err, f"--gt {gt}", f"{size[0]}x{size[1]}", "view1.png",
+                       f"{W}x{H}", "reference's size", out=out)
+    assert not out.exists()
+
+
+def test_gt_turned_without_exif_is_refused(tmp_path, capsys, scene):
+    write_set(tmp_path / "s", scene.images[:3])
+    gt = write_mask(tmp_path / "gt.png", scene.masks[1].T)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--gt", gt, "--out", out, *FAST)
+    assert_input_error(rc, err, f"--gt {gt}", f"{H}x{W}", "turned", "EXIF orientation",
+                       out=out)
+
+
+def test_gt_at_full_size_when_the_run_analyses_smaller(tmp_path, capsys, scene):
+    """--max-side below the photo's size: the full-size mask is accepted and scored
+    at the size of the output (full, or the analysis size with --output-size working)."""
+    write_set(tmp_path / "s", scene.images)
+    ref = scene.ref_index  # the middle of 4
+    gt = write_mask(tmp_path / "gt.png", scene.masks[ref])
+    for extra in ([], ["--output-size", "working"]):
+        out = tmp_path / f"out{len(extra)}"
+        rc, _, err = run_cli(capsys, tmp_path / "s", "--gt", gt, "--out", out,
+                             "--max-side", "32", "--max-scans", "1", *extra)
+        report = assert_ok_run(rc, err, out)
+        w = W if not extra else 32
+        assert report["size"]["working_width"] == 32 and report["size"]["width"] == w
+        dyn = cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 127
+        truth = cv2.resize(scene.masks[ref].astype(np.uint8), dyn.shape[::-1],
+                           interpolation=cv2.INTER_NEAREST) > 0
+        assert report["jaccard_vs_gt"] == pytest.approx(jaccard(dyn, truth))
+
+
+def test_gt_drawn_on_the_stored_pixels_of_an_exif_rotated_photo(tmp_path, capsys, scene):
+    """Photos stored landscape and tagged "rotate 90° CW" are processed upright; a
+    mask drawn on the stored (landscape) pixels is turned the same way, with a note,
+    and scores as the upright mask does."""
+    d = tmp_path / "s"
+    d.mkdir()
+    for i, im in enumerate(scene.images):
+        (d / f"view{i}.jpg").write_bytes(jpeg_bytes(im, orientation=6))
+    truth = scene.masks[scene.ref_index]  # the middle of 4
+    stored = write_mask(tmp_path / "stored.png", truth)  # W x H, as stored
+    upright = write_mask(tmp_path / "upright.png",
+                         cv2.rotate(truth.astype(np.uint8), cv2.ROTATE_90_CLOCKWISE))
+    scores = []
+    for gt in (stored, upright):
+        out = tmp_path / gt.stem
+        rc, _, err = run_cli(capsys, d, "--gt", gt, "--out", out, *FAST)
+        report = assert_ok_run(rc, err, out)
+        turned = [n for n in notes_of(err) if f"--gt {gt}" in n]
+        assert bool(turned) == (gt == stored), err
+        if turned:
+            assert "EXIF orientation" in turned[0] and f"{W}x{H}" in turned[0]
+        scores.append(report["jaccard_vs_gt"])
+    assert scores[0] == scores[1] and scores[0] > 0.3, scores
+
+
 # --- formats that are converted, with a note --------------------------------------
 @pytest.mark.parametrize("kind", ["gray", "rgba", "palette", "16bit", "16bit-gray"])
 def test_converted_formats_run_with_a_note(tmp_path, capsys, scene, kind):
@@ -513,6 +588,19 @@ def test_subprocess_exit_codes(tmp_path, scene, case):
     assert len(lines) == 1 and lines[0].startswith("dynremove: error: "), r.stderr
     if case != "out-is-file":
         assert files_under(out) == []
+
+
+def test_subprocess_gt_of_another_size(tmp_path, scene):
+    """The trial's case in a real process: a mask of another photo's size."""
+    write_set(tmp_path / "s", scene.images[:3])
+    gt = tmp_path / "gt.png"
+    assert cv2.imwrite(str(gt), np.zeros((480, 854), np.uint8))
+    out = tmp_path / "out"
+    r = subprocess.run([sys.executable, "-m", "dynremove.cli", "run", str(tmp_path / "s"),
+                        "--gt", str(gt), "--out", str(out)], capture_output=True, text=True,
+                       timeout=120, env={**os.environ, "DYNREMOVE_DEBUG": ""})
+    assert_input_error(r.returncode, r.stderr, "854x480", f"{W}x{H}", out=out)
+    assert r.stdout == ""
 
 
 def test_cli_bad_flags_exit_2_and_leave_no_folder(tmp_path, capsys):
