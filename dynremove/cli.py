@@ -119,6 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
         prog="dynremove",
         description="Detect moving objects in a set of hand-held photos of a scene and "
                     "replace them with the background they hide (Kanojia & Raman, WACV).")
+    from dynremove import __version__
+
+    ap.add_argument("--version", action="version", version=f"dynremove {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     r = sub.add_parser("run", help="remove dynamic objects from a reference image",

@@ -405,12 +405,32 @@ def _recording(path: str) -> Path:
     return p
 
 
+def _port_in_use(port: int) -> bool:
+    """True when a server already listens on 127.0.0.1:``port``."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(("127.0.0.1", port))
+        except OSError:
+            return True
+    return False
+
+
 def cmd_view(args: argparse.Namespace) -> int:
-    proc = args.viewer("serve").view(_recording(args.recording), web=args.web, port=args.port,
-                web_port=args.web_port)
+    rec = _recording(args.recording)
+    if args.web:  # (the native viewer sends to a viewer already listening: no check)
+        for flag, port in (("--port", args.port), ("--web-port", args.web_port)):
+            if _port_in_use(port):
+                raise InputError(f"port {port} on 127.0.0.1 is in use (another viewer "
+                                 f"still running?): choose another with {flag}")
+    proc = args.viewer("serve").view(rec, web=args.web, port=args.port,
+                                     web_port=args.web_port)
     if proc.returncode is not None and proc.returncode > 0:
-        print(f"dynremove: the viewer exited with code {proc.returncode}; without a "
-              "display, try --web", file=sys.stderr)
+        hint = ("" if args.web else "; without a display, try --web")
+        print(f"dynremove: the viewer exited with code {proc.returncode}{hint}",
+              file=sys.stderr)
         return EXIT_INTERNAL
     return EXIT_OK
 

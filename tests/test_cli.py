@@ -133,3 +133,12 @@ def test_run_progress_and_report_keys(tmp_path, capsys, folder, fill, label):
     assert label in stages and "fusion" not in stages, err
     # report.json keeps the pipeline's key
     assert "fusion" in json.loads((out / "report.json").read_text())["seconds"]
+
+
+def test_version(capsys):
+    from dynremove import __version__
+
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0
+    assert capsys.readouterr().out.strip() == f"dynremove {__version__}"

@@ -290,6 +290,24 @@ def test_view_without_display_says_so(fabricated, monkeypatch, capsys):
     assert "--web" in err and len(err.strip().splitlines()) == 1
 
 
+def test_view_web_on_a_busy_port_names_it(fabricated, capsys):
+    """A second `view --web` while another viewer holds the port: one line that names
+    the port and the flag, exit 2, and no viewer started."""
+    import socket
+
+    from test_viewer import _free_port
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        taken = busy.getsockname()[1]
+        code = main(["view", str(fabricated["path"]), "--web", "--port", str(_free_port()),
+                     "--web-port", str(taken)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert str(taken) in err[0] and "--web-port" in err[0] and "display" not in err[0]
+
+
 def test_export_refuses_other_suffixes(fabricated, tmp_path, capsys):
     assert main(["export", str(fabricated["path"]), "--gif", str(tmp_path / "x.txt")]) == 2
     assert not (tmp_path / "x.txt").exists()

@@ -213,7 +213,7 @@ def _print_table(out: dict) -> None:
     if "rerun_end_to_end_s" in out:
         print(f"with a Rerun recording {out['rerun_end_to_end_s']:.2f} s "
               f"(x{out['rerun_end_to_end_s'] / out['end_to_end_s']:.2f}), "
-              f".rrd {out['rrd_mb']:.1f} MB")
+              f".rrd {out['rrd_mb']:.1f} MiB")
     if "kernel_vs_reference" in out:
         k = out["kernel_vs_reference"]
         print(f"scan on a {k['crop_px']} px crop: numba {k['numba_s'] * 1e3:.1f} ms, "
