@@ -106,12 +106,16 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
 
     t = time.perf_counter()
     Ns = []
+    # the ungated homography + flow matches, kept for the fill by selection
+    flows = (np.empty((len(srcs),) + g8[ref].shape + (2,), np.float32)
+             if params.correspondence in ("homography+flow", "gated") else None)
     for k, s in enumerate(srcs):
         Ns.append(correspondence.dense_correspondence(
             g8[ref], g8[s], views[k].H, method=params.correspondence,
             flow_preset=params.flow_preset,
             gate_px=params.flow_gate * max(g8[ref].shape),
-            F=views[k].F, epipolar_px=params.flow_gate_epipolar_px))
+            F=views[k].F, epipolar_px=params.flow_gate_epipolar_px,
+            flow_out=None if flows is None else flows[k]))
         if progress:
             progress("correspondence", (k + 1) / len(srcs))
     Nf = np.ascontiguousarray(np.stack(Ns))
@@ -132,7 +136,8 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
         src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
         fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
         fg_s=np.ascontiguousarray(np.stack([fg[s] for s in srcs])),
-        N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF, sift_unit=unit, Nf=Nf)
+        N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF, sift_unit=unit, Nf=Nf,
+        Nf_flow=flows)
     t = time.perf_counter()
     pf, pi = pack_params(params, sift_unit=unit)
     st.C = kn._similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F, st.hasF, pf, pi)
@@ -258,7 +263,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         if progress:
             progress("fusion", 0.0)
         selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=None if
-                                valid_masks is None else np.stack([valid_masks[s] for s in srcs]))
+                                valid_masks is None else np.stack([valid_masks[s] for s in srcs]),
+                                flows=st.Nf_flow)
         clean = selection.clean
         dyn = stages["select"] = selection.replaced
         n_ns = int(selection.no_source.sum())

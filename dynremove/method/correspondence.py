@@ -39,7 +39,9 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
                          H_rs: npt.NDArray[np.float64], *, method: str = "homography+flow",
                          flow_preset: str = "medium",
                          gate_px: float = 0.0, F: npt.NDArray[np.float64] | None = None,
-                         epipolar_px: float = 0.0) -> npt.NDArray[np.float32]:
+                         epipolar_px: float = 0.0,
+                         flow_out: npt.NDArray[np.float32] | None = None
+                         ) -> npt.NDArray[np.float32]:
     """Dense map N_{r→s}: for each reference pixel, its match in the source.
 
     Parameters
@@ -53,6 +55,10 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
         moving object) the homography's match is used. With ``F`` and
         ``epipolar_px`` > 0, flow within ``epipolar_px`` of its epipolar line is
         kept as well (parallax of a 3-D scene).
+    flow_out : (H, W, 2) float32 ndarray, optional
+        With "homography+flow" or "gated": receives the homography + flow
+        matches before any gate (what "homography+flow" returns), so a later
+        step that needs them does not run the flow again.
 
     Returns
     -------
@@ -74,6 +80,8 @@ def dense_correspondence(ref_gray: npt.NDArray[np.uint8], src_gray: npt.NDArray[
                                      borderMode=cv2.BORDER_REPLICATE)
         f = dis_flow(ref_gray, warped, preset=flow_preset)
         mx, my = apply_homography(H_rs, xs + f[..., 0], ys + f[..., 1])
+        if flow_out is not None:
+            flow_out[..., 0], flow_out[..., 1] = mx, my
         if method == "gated":
             hx, hy = apply_homography(H_rs, xs, ys)
             far = np.hypot(mx - hx, my - hy) > gate_px

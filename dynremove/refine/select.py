@@ -204,7 +204,8 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
 
 def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
                 views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params, *,
-                valid: npt.NDArray[np.bool_] | None = None) -> Selection:
+                valid: npt.NDArray[np.bool_] | None = None,
+                flows: npt.NDArray[np.float32] | None = None) -> Selection:
     """Fill ``mask`` by selecting, per region, one source that is free there.
 
     Parameters
@@ -221,6 +222,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         Where each *source* has content (False: a transparent or empty border of
         a pre-aligned frame). Sampling a source where it is not valid counts as
         outside its frame: never evidence, never fill.
+    flows : (S, H, W, 2) float32 ndarray, optional
+        Each source's homography + flow matches (``dense_correspondence(...,
+        method="homography+flow")`` of the gray images), if the caller has them
+        (the pipeline keeps them from its correspondence stage); computed here
+        otherwise.
 
     Returns
     -------
@@ -256,8 +262,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     base = []
     for k in range(S):
         v = views[k]
-        nf = dense_correspondence(g_r, src_gray[k], v.H, method="homography+flow",
-                                  flow_preset=P.flow_preset)
+        nf = (flows[k] if flows is not None else
+              dense_correspondence(g_r, src_gray[k], v.H, method="homography+flow",
+                                   flow_preset=P.flow_preset))
         hx, hy = apply_homography(v.H, gx, gy)
         bound = (v.parallax_px if np.isfinite(v.parallax_px) else 0.0) + 2.0
         off_h = np.hypot(nf[..., 0] - hx, nf[..., 1] - hy)

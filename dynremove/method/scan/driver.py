@@ -52,6 +52,7 @@ class ScanInputs:
     hasF: np.ndarray
     sift_unit: float
     Nf: np.ndarray | None = None  # (S, H, W, 2) float32 sub-pixel initial matches (not scanned)
+    Nf_flow: np.ndarray | None = None  # (S, H, W, 2) float32 the same before the gate (the fill's)
 
     @property
     def shape(self) -> tuple[int, int]:
