@@ -12,6 +12,7 @@ is an internal error like any other, never a missing sub-command.
 from __future__ import annotations
 
 import argparse
+import re
 import dataclasses
 import os
 import signal
@@ -38,7 +39,10 @@ def add_param_flags(ap: argparse.ArgumentParser) -> None:
         flag = "--" + f.name.replace("_", "-")
         d, pp = getattr(DEFAULT, f.name), getattr(PAPER, f.name)
         used = f"(default {d})" if d == pp else f"(default {d}; paper {pp})"
-        help_ = (docs.get(f.name, "") + " " + used).strip().replace("%", "%%")
+        # the paper preset's value is in ``used``: not again from the comment
+        doc = re.sub(r"\s*\(paper preset [^()]*\)|;\s*paper preset [^;()]*(?=\))", "",
+                     docs.get(f.name, ""))
+        help_ = (doc + " " + used).strip().replace("%", "%%")
         if f.type in ("bool", bool):
             g.add_argument(flag, dest=f"p_{f.name}", action=argparse.BooleanOptionalAction,
                            default=None, help=help_)
@@ -47,8 +51,8 @@ def add_param_flags(ap: argparse.ArgumentParser) -> None:
                            metavar="{" + ",".join(FIELD_CHOICES[f.name]) + "}")
         else:
             typ = {"int": int, "float": float, "str": str}.get(str(f.type), str)
-            g.add_argument(flag, dest=f"p_{f.name}", type=typ, default=None, metavar="V",
-                           help=help_)
+            g.add_argument(flag, dest=f"p_{f.name}", type=typ, default=None,
+                           metavar={int: "INT", float: "FLOAT"}.get(typ, "V"), help=help_)
 
 
 def parse_xy(s: str) -> tuple[int, int]:

@@ -79,7 +79,8 @@ def test_run_help_shows_the_values_a_plain_run_uses(capsys):
         main(["run", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert DEFAULT.patch_size != PAPER.patch_size
-    assert "--patch-size V p : patch side" in out
+    assert "--patch-size INT p : patch side" in out and "--t-r FLOAT" in out
+    assert "paper preset" not in out  # the paper's value is said once, by "(default …; paper …)"
     assert f"(default {DEFAULT.patch_size}; paper {PAPER.patch_size})" in out
     assert f"(default {DEFAULT.snap}; paper {PAPER.snap})" in out
     assert "--write {patch,pixel}" in out
