@@ -378,17 +378,31 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     Hs, Ws = lab_s.shape[:2]
     c_best = np.full(len(qy), np.inf, np.float32)
     m_best = np.full(len(qy), np.nan, np.float32)
-    buf = np.full((hh, ww), _CAP, np.float32)
-    for g in np.linspace(lo, hi, n_steps):
-        fx, fy = project(view.H, e, g, CX, CY)
-        smp = _remap_points(lab_s, fx, fy)
+    steps = np.linspace(lo, hi, n_steps)
+    n, chunk = len(py), 32  # steps per pass: the window sums run on one image of
+    # `chunk` channels, over the box of the sampled cells (box // 2 wider, so that
+    # the sums at the region's cells read what the whole image's would)
+    r = box // 2
+    by0, by1 = max(int(py.min()) - r, 0), min(int(py.max()) + r + 1, hh)
+    bx0, bx1 = max(int(px.min()) - r, 0), min(int(px.max()) + r + 1, ww)
+    bh, bw = by1 - by0, bx1 - bx0
+    py_b, px_b, qy_b, qx_b = py - by0, px - bx0, qy - by0, qx - bx0
+    buf = np.full((bh, bw, chunk), _CAP, np.float32)
+    for i0 in range(0, n_steps, chunk):
+        gs = steps[i0:i0 + chunk]
+        k = len(gs)
+        fx, fy = project(view.H, e, gs[:, None], CX[None], CY[None])  # (k, n)
+        smp = _remap_points(lab_s, fx.ravel(), fy.ravel()).reshape(k, n, 3)
         inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
-        d = np.minimum(np.linalg.norm(smp - ref_c, axis=-1), _CAP)
-        buf[py, px] = np.where(inside, d, _CAP)
-        bf = cv2.boxFilter(buf, -1, (box, box))[qy, qx]
-        better = bf < c_best
-        c_best[better] = bf[better]
-        m_best[better] = g
+        diff = smp - ref_c[None]
+        d = np.minimum(np.sqrt(np.einsum("knc,knc->kn", diff, diff)), _CAP)
+        buf[py_b, px_b, :k] = np.where(inside, d, _CAP).T
+        bf = cv2.boxFilter(buf[..., :k], -1, (box, box)).reshape(bh, bw, k)[qy_b, qx_b]
+        j = np.argmin(bf, axis=1)  # the first of equal costs, as a sequential sweep
+        c = bf[np.arange(len(qy)), j]
+        better = c < c_best
+        c_best[better] = c[better]
+        m_best[better] = gs[j[better]]
     cimg = np.full((hh, ww), _CAP, np.float32)
     cimg[qy, qx] = c_best
     mimg = np.full((hh, ww), np.nan, np.float32)
