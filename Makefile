@@ -5,11 +5,17 @@ BIN := $(VENV)/bin
 
 .PHONY: demo test lint test-nojit bench eval clean
 
+# the package (what `make demo` needs) ...
 $(BIN)/dynremove: pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e ".[test,heic,dask,notebook]"
+	$(BIN)/python -m pip install -q -e .
 	touch $(BIN)/dynremove
+
+# ... and what the tests also exercise: pytest, HEIC input, Dask, the notebook
+$(VENV)/.test-extras: $(BIN)/dynremove
+	$(BIN)/python -m pip install -q -e ".[test,heic,dask,notebook]"
+	touch $(VENV)/.test-extras
 
 # the total time, install included (the first run also compiles the kernels, once)
 demo:
@@ -17,15 +23,15 @@ demo:
 	$(MAKE) --no-print-directory $(BIN)/dynremove && $(BIN)/dynremove demo && \
 	echo "make demo: $$(( $$(date +%s) - start )) s in all, install included"
 
-test: $(BIN)/dynremove
+test: $(VENV)/.test-extras
 	$(BIN)/python -m pytest -q
 
-lint: $(BIN)/dynremove
+lint: $(VENV)/.test-extras
 	$(BIN)/python -m ruff check .
 
 # The scan's kernels run as plain Python (numba off), as in stumpy's coverage run:
 # the equations, the hand-made cases and the kernel-vs-reference test.
-test-nojit: $(BIN)/dynremove
+test-nojit: $(VENV)/.test-extras
 	NUMBA_DISABLE_JIT=1 $(BIN)/python -m pytest -q -p no:cacheprovider \
 		tests/test_scan_cases.py tests/test_equations.py tests/test_dbscan.py \
 		"tests/test_kernel.py::test_kernel_equals_reference[paper]" \
