@@ -12,7 +12,6 @@ import numpy.typing as npt
 
 from dynremove.refine.fields import blurred_lab
 from dynremove.refine.morphology import dilate_disc
-from dynremove.refine.select import member_median
 
 
 # the membrane fill as it was written before it was made sparse (dense, every pixel)
@@ -87,6 +86,12 @@ def harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *
             sub[sub_hole] = sm[sub_hole]
         out[y0:y1, x0:x1, c] = sub
     return out
+
+
+def member_median(values, member):
+    """The per-channel median as first written: NaN median of the members, + 0.5."""
+    vals = np.where(member[..., None], values.astype(np.float32), np.nan)
+    return np.clip(np.nanmedian(vals, axis=0) + 0.5, 0, 255).astype(np.uint8)
 
 
 def offset_blend(reference, candidates, labels, replaced, usable, distance_to_ref, *,

@@ -186,6 +186,24 @@ def sample_bilinear(src: npt.NDArray[np.uint8], field: npt.NDArray[np.float32]):
     return warped, inside
 
 
+def remap_points(src: np.ndarray, mx: np.ndarray, my: np.ndarray,
+                 interpolation: int = cv2.INTER_LINEAR, *, cols: int = 4096, **kw
+                 ) -> np.ndarray:
+    """``cv2.remap`` of ``src`` at a list of ``N`` points (``mx``, ``my``): (N,) or
+    (N, C), the values the dense remap gives there. OpenCV's remap takes fewer than
+    32767 rows, so the points are laid out in rows of ``cols``; ``kw`` goes to it
+    (``borderMode``, ``borderValue``)."""
+    n = len(mx)
+    rows = max(1, -(-n // cols))
+    maps = []
+    for m in (mx, my):
+        block = np.zeros(rows * cols, np.float32)
+        block[:n] = m
+        maps.append(block.reshape(rows, cols))
+    out = cv2.remap(src, maps[0], maps[1], interpolation, **kw)
+    return out.reshape((rows * cols,) + out.shape[2:])[:n]
+
+
 def blurred_lab(img: npt.NDArray[np.uint8], blur_sigma: float) -> npt.NDArray[np.float32]:
     if blur_sigma > 0:
         img = cv2.GaussianBlur(img, (0, 0), blur_sigma)
@@ -215,5 +233,5 @@ def source_votes(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8
 
 
 __all__ = ["interpolate_field", "harmonic_fill", "mask_boxes", "background_field",
-           "sample_bilinear",
+           "remap_points", "sample_bilinear",
            "blurred_lab", "source_votes"]

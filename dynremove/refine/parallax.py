@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.method.geometry import TwoView, sampson_sq
+from dynremove.refine.fields import remap_points
 
 _CAP = 30.0  # ΔE cap of one source's distance to the median in the sweep cost
 
@@ -297,20 +298,6 @@ def sweep_fields(src_labs: list[np.ndarray], views: list[TwoView], model: Parall
     return out, gamma
 
 
-def _remap_points(img: np.ndarray, fx: np.ndarray, fy: np.ndarray, width: int = 1024
-                  ) -> np.ndarray:
-    """Bilinear samples of ``img`` (H, W, C) at n points → (n, C); OpenCV's remap
-    takes at most 32767 rows, so the points are laid out in rows of ``width``."""
-    n = len(fx)
-    rows = -(-n // width)
-    mx = np.zeros(rows * width, np.float32)
-    my = np.zeros(rows * width, np.float32)
-    mx[:n], my[:n] = fx, fy
-    out = cv2.remap(img, mx.reshape(rows, width), my.reshape(rows, width), cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_REPLICATE)
-    return out.reshape(rows * width, -1)[:n]
-
-
 def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np.ndarray,
                     visible: np.ndarray, region: np.ndarray, *, scale: float = 0.5,
                     box: int = 5, step_px: float = 1.0, line_px: float = 1.5,
@@ -392,7 +379,8 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
         gs = steps[i0:i0 + chunk]
         k = len(gs)
         fx, fy = project(view.H, e, gs[:, None], CX[None], CY[None])  # (k, n)
-        smp = _remap_points(lab_s, fx.ravel(), fy.ravel()).reshape(k, n, 3)
+        smp = remap_points(lab_s, fx.ravel(), fy.ravel(),
+                           borderMode=cv2.BORDER_REPLICATE).reshape(k, n, 3)
         inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
         diff = smp - ref_c[None]
         d = np.minimum(np.sqrt(np.einsum("knc,knc->kn", diff, diff)), _CAP)

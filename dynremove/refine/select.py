@@ -178,11 +178,18 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     return ok[lab] & (hit > 0)
 
 
-def member_median(values: np.ndarray, member: np.ndarray) -> np.ndarray:
-    """Per-channel median of ``values`` (S, n, 3) over the sources ``member`` (S, n)
-    marks (at least one per column), as uint8 (n, 3)."""
-    vals = np.where(member[..., None], values.astype(np.float32), np.nan)
-    return np.clip(np.nanmedian(vals, axis=0) + 0.5, 0, 255).astype(np.uint8)
+def member_median(values: npt.NDArray[np.uint8], member: npt.NDArray[np.bool_]
+                  ) -> npt.NDArray[np.uint8]:
+    """Per-channel median of ``values`` (S, n, 3) uint8 over the sources ``member``
+    (S, n) marks (at least one per column), as uint8 (n, 3): of an even count,
+    the middle pair's mean rounded half up. Computed in integers (sorting, no
+    NaN median)."""
+    v = np.where(member[..., None], values, np.uint16(512)).astype(np.uint16)
+    v.sort(axis=0)
+    m = member.sum(0)
+    i = np.arange(values.shape[1])
+    lo, hi = v[(m - 1) // 2, i], v[m // 2, i]
+    return ((lo + hi + 1) // 2).astype(np.uint8)
 
 
 def _cluster_median(cand_img, labs, lab, rep, free, tau):

@@ -33,13 +33,12 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from dynremove.refine.fields import mask_boxes
+from dynremove.refine.fields import mask_boxes, remap_points
 from dynremove.refine.montage import add_offset, ring_offset
 from dynremove.refine.morphology import dilate_disc
-from dynremove.refine.select import Selection
+from dynremove.refine.select import Selection, member_median
 
 _MAX_DE = 15.0  # offset_blend's max_de: ring pixels farther (CIE76) do not set the offset
-_REMAP_COLS = 4096  # pixel lists are remapped as rows of this length (cv2: < 32767)
 
 
 def _resize_nearest(a: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -49,33 +48,6 @@ def _resize_nearest(a: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 def upsample_mask(mask: npt.NDArray[np.bool_], size: tuple[int, int]) -> npt.NDArray[np.bool_]:
     """(h, w) bool → (H, W) bool at ``size`` = (W, H), smooth edges (linear, ≥ 0.5)."""
     return cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_LINEAR) >= 0.5
-
-
-def _remap_points(src: np.ndarray, mx: np.ndarray, my: np.ndarray, interpolation: int,
-                  **kw) -> np.ndarray:
-    """``cv2.remap`` at a list of ``N`` points: (N,) or (N, C), as the dense remap gives."""
-    n = len(mx)
-    rows = max(1, -(-n // _REMAP_COLS))
-    maps = []
-    for m in (mx, my):
-        block = np.zeros(rows * _REMAP_COLS, np.float32)
-        block[:n] = m
-        maps.append(block.reshape(rows, _REMAP_COLS))
-    out = cv2.remap(src, maps[0], maps[1], interpolation, **kw)
-    return out.reshape((rows * _REMAP_COLS,) + out.shape[2:])[:n]
-
-
-def _median_of_members(values: npt.NDArray[np.uint8], member: npt.NDArray[np.bool_]
-                       ) -> npt.NDArray[np.uint8]:
-    """``select.member_median`` in integers: the per-channel median of ``values``
-    (S, N, 3) over ``member`` (S, N) (at least one per column), the middle pair's
-    mean rounded half up, as uint8 (N, 3)."""
-    v = np.where(member[..., None], values, np.uint16(512)).astype(np.uint16)
-    v.sort(axis=0)
-    m = member.sum(0)
-    i = np.arange(values.shape[1])
-    lo, hi = v[(m - 1) // 2, i], v[m // 2, i]
-    return ((lo + hi + 1) // 2).astype(np.uint8)
 
 
 def _lab(pixels: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
@@ -152,7 +124,7 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     chosen = lab[qy, qx].astype(np.intp)
     member = members & usable[1:, rep_i]
     member[chosen - 1, np.arange(len(qy))] = True
-    cand[chosen, rep_i] = _median_of_members(cand[1:, rep_i], member)
+    cand[chosen, rep_i] = member_median(cand[1:, rep_i], member)
     del members, member
     d_ref = _ring_distance(reference[y0:y1, x0:x1], cand, (py, px), ring, blur)
     # each source plus its offset to the reference, measured on the ring
@@ -200,18 +172,18 @@ def _sample_sources(reference: np.ndarray, sources: list[np.ndarray], selection:
     members = np.zeros((S, len(rep_i)), bool)
     for k in range(S):
         f = selection.fields[k]
-        mx = _remap_points(np.ascontiguousarray(f[..., 0]), wx, wy, cv2.INTER_LINEAR,
+        mx = remap_points(np.ascontiguousarray(f[..., 0]), wx, wy, cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_REPLICATE)
-        my = _remap_points(np.ascontiguousarray(f[..., 1]), wx, wy, cv2.INTER_LINEAR,
+        my = remap_points(np.ascontiguousarray(f[..., 1]), wx, wy, cv2.INTER_LINEAR,
                            borderMode=cv2.BORDER_REPLICATE)
         mx = (mx + 0.5) * sx - 0.5  # full-size coordinates
         my = (my + 0.5) * sy - 0.5
         Hs, Ws = sources[k].shape[:2]
-        cand[k + 1] = _remap_points(sources[k], mx, my, cv2.INTER_LINEAR,
+        cand[k + 1] = remap_points(sources[k], mx, my, cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REPLICATE)
         usable[k + 1] = (mx >= 0) & (mx <= Ws - 1) & (my >= 0) & (my <= Hs - 1)
         if selection.members is not None:
-            members[k] = _remap_points(selection.members[k].view(np.uint8), wx[rep_i],
+            members[k] = remap_points(selection.members[k].view(np.uint8), wx[rep_i],
                                        wy[rep_i], cv2.INTER_NEAREST,
                                        borderMode=cv2.BORDER_CONSTANT, borderValue=0) > 0
     return cand, usable, members
