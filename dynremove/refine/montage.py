@@ -166,17 +166,15 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
     out = reference.copy()
     ring = dilate_disc(replaced, ring_px) & ~replaced
     ry, rx = np.nonzero(ring)
-    ref_ring = reference[ry, rx].astype(np.float32)
+    ref_ring = reference[ry, rx]
     for lbl in np.unique(labels[replaced]):
         if lbl == 0:
             continue
         sel = replaced & (labels == lbl)
         good = usable[lbl, ry, rx] & (distance_to_ref[lbl, ry, rx] < max_de)
-        good_mask = np.zeros(ring.shape, bool)
-        good_mask[ry[good], rx[good]] = True
-        d = ref_ring[good] - candidates[lbl, ry[good], rx[good]].astype(np.float32)
         sy, sx = np.nonzero(sel)
-        out[sy, sx] = add_offset(candidates[lbl, sy, sx], ring_offset(d, good_mask, sel))
+        off = ring_offset(ref_ring, candidates[lbl, ry, rx], good, (ry, rx), sel)
+        out[sy, sx] = add_offset(candidates[lbl, sy, sx], off)
     return out
 
 
@@ -188,16 +186,20 @@ def add_offset(source: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32]
     return np.clip(v, 0, 255, out=v).astype(np.uint8)
 
 
-def ring_offset(d: npt.NDArray[np.float32], good: npt.NDArray[np.bool_],
-                sel: npt.NDArray[np.bool_], *, min_ring_px: int = 20) -> npt.NDArray[np.float32]:
+def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8],
+                good: npt.NDArray[np.bool_], ring: tuple[np.ndarray, np.ndarray],
+                sel: npt.NDArray[np.bool_], *, min_ring_px: int = 20
+                ) -> npt.NDArray[np.float32]:
     """The offset ``reference - source`` at the pixels of ``sel``, from the ring.
 
     Parameters
     ----------
-    d : (N, 3) float32 ndarray
-        ``reference - source`` at the ``N`` pixels of ``good``, row-major order.
-    good : (H, W) bool ndarray
-        Ring pixels where the source agrees with the reference.
+    ref_ring, src_ring : (R, 3) ndarrays
+        The reference and the source at the ``R`` ring pixels.
+    good : (R,) bool ndarray
+        Ring pixels where the source agrees with the reference (the others do
+        not set the offset).
+    ring : (ys, xs) of the ring pixels, row-major, in the image of ``sel``.
     sel : (H, W) bool ndarray
         Pixels that take the source.
 
@@ -205,16 +207,19 @@ def ring_offset(d: npt.NDArray[np.float32], good: npt.NDArray[np.bool_],
     -------
     offset : (M, 3) float32 ndarray
         At the ``M`` pixels of ``sel`` (row-major): the membrane (harmonic)
-        interpolation of ``d`` (``fields.harmonic_fill``), or the median of
-        ``d`` (0 without any) when ``good`` has fewer than ``min_ring_px`` pixels.
+        interpolation of the good ring's ``reference - source``
+        (``fields.harmonic_fill``), or its median (0 without any) when fewer
+        than ``min_ring_px`` ring pixels are good.
     """
+    d = ref_ring[good].astype(np.float32) - src_ring[good].astype(np.float32)
     m = int(np.count_nonzero(sel))
     if len(d) < min_ring_px:  # too little ring: one global offset (or none)
         off = np.median(d, axis=0) if len(d) else np.zeros(d.shape[1:], np.float32)
         return np.broadcast_to(off.astype(np.float32), (m,) + d.shape[1:])
-    field = np.zeros(good.shape + d.shape[1:], np.float32)
-    field[good] = d
-    return harmonic_fill(field, ~good, need=sel)[sel]
-
+    field = np.zeros(sel.shape + d.shape[1:], np.float32)
+    field[ring[0][good], ring[1][good]] = d
+    known = np.zeros(sel.shape, bool)
+    known[ring[0][good], ring[1][good]] = True
+    return harmonic_fill(field, ~known, need=sel)[sel]
 
 __all__ = ["add_offset", "expansion_labels", "offset_blend", "pairwise_distance", "ring_offset"]

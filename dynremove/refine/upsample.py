@@ -128,15 +128,12 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     del members, member
     d_ref = _ring_distance(reference[y0:y1, x0:x1], cand, (py, px), ring, blur)
     # each source plus its offset to the reference, measured on the ring
-    ref_ring = reference[ry + y0, rx + x0].astype(np.float32)
+    ref_ring = reference[ry + y0, rx + x0]
     out = np.empty((len(qy), 3), np.uint8)
     for lbl in np.unique(chosen):
         good = usable[lbl, ring_i] & (d_ref[lbl] < _MAX_DE)
-        good_mask = np.zeros(shape, bool)
-        good_mask[ry[good], rx[good]] = True
-        d = ref_ring[good] - cand[lbl, ring_i[good]].astype(np.float32)
         mine = chosen == lbl
-        off = ring_offset(d, good_mask, rep & (lab == lbl))
+        off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), rep & (lab == lbl))
         out[mine] = add_offset(cand[lbl, rep_i[mine]], off)
     no_src = _resize_nearest(selection.no_source.view(np.uint8), size)[y0:y1, x0:x1] > 0
     no_src &= rep
