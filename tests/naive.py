@@ -94,7 +94,7 @@ def member_median(values, member):
     return np.clip(np.nanmedian(vals, axis=0) + 0.5, 0, 255).astype(np.uint8)
 
 
-def offset_blend(reference, candidates, labels, replaced, usable, distance_to_ref, *,
+def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
                  ring_px=3, max_de=15.0):
     """``montage.offset_blend`` on whole images."""
     out = reference.astype(np.float32)
@@ -104,7 +104,10 @@ def offset_blend(reference, candidates, labels, replaced, usable, distance_to_re
             continue
         src = candidates[lbl].astype(np.float32)
         d = reference.astype(np.float32) - src
-        good = ring & usable[lbl] & (distance_to_ref[lbl] < max_de)
+        diff = labs[0] - labs[lbl]
+        on = ring & usable[lbl]
+        med = np.median(diff[on], axis=0) if on.any() else np.zeros(3, np.float32)
+        good = on & (np.linalg.norm(diff - med, axis=-1) < max_de)
         sel = replaced & (labels == lbl)
         if good.sum() < 20:
             off = np.zeros_like(d)
@@ -168,8 +171,7 @@ def full_resolution(reference, sources, clean_working, dynamic, selection):
     member[chosen - 1, np.arange(len(py))] = True
     cand[chosen, py, px] = member_median(cand[1:, py, px], member)
     labs = np.stack([blurred_lab(c, max(sx, sy)) for c in cand])
-    d_ref = np.linalg.norm(labs - labs[0][None], axis=-1)
-    out = offset_blend(reference[roi], cand, lab, rep_roi, usable, d_ref, ring_px=ring_px)
+    out = offset_blend(reference[roi], cand, lab, rep_roi, usable, labs, ring_px=ring_px)
     no_src = cv2.resize(selection.no_source.astype(np.uint8), size,
                         interpolation=cv2.INTER_NEAREST)[roi] > 0
     if no_src.any():

@@ -58,11 +58,13 @@ def test_offset_blend_equals_the_dense_blend(seed):
     rep = rep.astype(bool)
     labels = np.where(rep, rng.integers(1, L, (H, W)) if seed % 3 else 1, 0)
     usable = rng.random((L, H, W)) < 0.95
-    dist = (rng.random((L, H, W)) * (16 if seed == 5 else 30)).astype(np.float32)
+    # Lab values whose ring differences spread around an offset per candidate
+    labs = (rng.normal(size=(L, H, W, 3)) * (6 if seed == 5 else 12)
+            + rng.normal(size=(L, 1, 1, 3)) * 20).astype(np.float32)
     ring_px = 2 + seed % 4
     np.testing.assert_array_equal(
-        offset_blend(cand[0], cand, labels, rep, usable, dist, ring_px=ring_px),
-        naive.offset_blend(cand[0], cand, labels, rep, usable, dist, ring_px=ring_px))
+        offset_blend(cand[0], cand, labels, rep, usable, labs, ring_px=ring_px),
+        naive.offset_blend(cand[0], cand, labels, rep, usable, labs, ring_px=ring_px))
 
 
 def test_mask_boxes_keep_every_pixel_once_and_far_from_their_edges():

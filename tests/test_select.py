@@ -8,7 +8,7 @@ import pytest
 
 from dynremove import preset, remove_dynamic
 from dynremove.evaluation import synth
-from dynremove.refine.montage import expansion_labels, offset_blend
+from dynremove.refine.montage import expansion_labels, offset_blend, ring_agrees
 from dynremove.refine.morphology import dilate_disc
 
 
@@ -57,22 +57,22 @@ def test_expansion_never_takes_a_forbidden_label():
 
 
 # --------------------------------------------------------------------------- blend
-def test_offset_blend_matches_a_darker_reference():
-    """Source 30 levels brighter than the reference: the blend brings the fill to the
-    reference's level at the border (the issue's 'darker reference' criterion)."""
+@pytest.mark.parametrize("brighter", [30, 70])
+def test_offset_blend_matches_a_darker_reference(brighter):
+    """Source 30 (or 70: ΔE > 15 everywhere, as a glare or a much darker
+    reference) levels brighter than the reference: the blend brings the fill to
+    the reference's level at the border (the issue's 'darker reference' criterion)."""
     rng = np.random.default_rng(1)
     bg = cv2.GaussianBlur(rng.integers(60, 160, (64, 96, 3)).astype(np.uint8), (0, 0), 2)
     ref = bg.copy()
     ref[20:44, 30:66] = (20, 200, 20)  # the mover
-    src = np.clip(bg.astype(int) + 30, 0, 255).astype(np.uint8)
+    src = np.clip(bg.astype(int) + brighter, 0, 255).astype(np.uint8)
     rep = np.zeros(bg.shape[:2], bool)
     rep[18:46, 28:68] = True
     cand = np.stack([ref, src])
     labels = rep.astype(np.intp)
     usable = np.ones((2,) + rep.shape, bool)
-    d = np.stack([np.zeros(rep.shape, np.float32),
-                  np.linalg.norm(_lab(src) - _lab(ref), axis=-1)])
-    out = offset_blend(ref, cand, labels, rep, usable, d)
+    out = offset_blend(ref, cand, labels, rep, usable, np.stack([_lab(ref), _lab(src)]))
     inner = rep & ~cv2.erode(rep.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
     outer = dilate_disc(rep, 3) & ~rep
     de = np.linalg.norm(_lab(out)[inner].mean(0) - _lab(out)[outer].mean(0))
@@ -82,6 +82,19 @@ def test_offset_blend_matches_a_darker_reference():
     raw[rep] = src[rep]
     assert np.linalg.norm(_lab(raw)[inner].mean(0) - _lab(raw)[outer].mean(0)) > 5.0
     assert np.array_equal(out[~rep], ref[~rep])
+
+
+def test_ring_agrees_keeps_the_common_offset_and_drops_content():
+    """The ring's median difference is the photos' exposure offset, however large;
+    a pixel whose difference departs from it (another object) is not used."""
+    rng = np.random.default_rng(0)
+    diff = (np.array([25.0, -8.0, 12.0]) + rng.normal(size=(200, 3))).astype(np.float32)
+    diff[:30] += np.array([0.0, 40.0, 0.0], np.float32)  # content, not exposure
+    usable = np.ones(200, bool)
+    usable[-5:] = False
+    good = ring_agrees(diff, usable, 15.0)
+    assert not good[:30].any() and good[30:-5].all() and not good[-5:].any()
+    assert not ring_agrees(diff, np.zeros(200, bool)).any()
 
 
 # --------------------------------------------------------------------------- whole runs

@@ -135,7 +135,7 @@ def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32
 
 def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.uint8],
                  labels: npt.NDArray[np.intp], replaced: npt.NDArray[np.bool_],
-                 usable: npt.NDArray[np.bool_], distance_to_ref: npt.NDArray[np.float32], *,
+                 usable: npt.NDArray[np.bool_], labs: npt.NDArray[np.float32], *,
                  ring_px: int = 3, max_de: float = 15.0) -> npt.NDArray[np.uint8]:
     """Write each chosen source plus a smooth offset that matches the reference.
 
@@ -149,9 +149,9 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
         Pixels whose label is not 0.
     usable : (L, H, W) bool ndarray
         Where each candidate is inside its image.
-    distance_to_ref : (L, H, W) float32 ndarray
-        CIE76 distance of each candidate to the reference; ring pixels with
-        more than ``max_de`` are not used to measure the offset.
+    labs : (L, H, W, 3) float32 ndarray
+        Each candidate in CIE Lab (blurred, ``fields.blurred_lab``); on the
+        ring they decide which pixels set the offset (``ring_agrees``).
 
     Returns
     -------
@@ -171,11 +171,29 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
         if lbl == 0:
             continue
         sel = replaced & (labels == lbl)
-        good = usable[lbl, ry, rx] & (distance_to_ref[lbl, ry, rx] < max_de)
+        good = ring_agrees(labs[0, ry, rx] - labs[lbl, ry, rx], usable[lbl, ry, rx], max_de)
         sy, sx = np.nonzero(sel)
         off = ring_offset(ref_ring, candidates[lbl, ry, rx], good, (ry, rx), sel)
         out[sy, sx] = add_offset(candidates[lbl, sy, sx], off)
     return out
+
+
+def ring_agrees(difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool_],
+                max_de: float = 15.0) -> npt.NDArray[np.bool_]:
+    """Ring pixels whose reference − source difference may set the source's offset.
+
+    difference : (R, 3) float32, the reference's Lab minus the source's at the R
+    ring pixels (CIE76 units); usable : (R,) bool, where the source has content.
+    A pixel agrees when its difference lies within ``max_de`` of the usable
+    ring's median difference: the median is the photos' exposure and
+    white-balance offset (a darker reference, a glare that covers the ring), and
+    what departs from it is content (a misaligned edge, another mover).
+    Returns (R,) bool.
+    """
+    if not usable.any():
+        return usable.copy()
+    med = np.median(difference[usable], axis=0)
+    return usable & (np.linalg.norm(difference - med, axis=-1) < max_de)
 
 
 def add_offset(source: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32]
@@ -222,4 +240,5 @@ def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8]
     known[ring[0][good], ring[1][good]] = True
     return harmonic_fill(field, ~known, need=sel)[sel]
 
-__all__ = ["add_offset", "expansion_labels", "offset_blend", "pairwise_distance", "ring_offset"]
+__all__ = ["add_offset", "expansion_labels", "offset_blend", "pairwise_distance", "ring_agrees",
+           "ring_offset"]

@@ -385,7 +385,6 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     clean = reference.copy()
     members = np.zeros((S, H, W), bool)
     if rep.any():
-        d_ref = np.linalg.norm(labs - labs[0][None], axis=-1)
         if P.select_cluster_median:
             # where the scan is trusted, every free source is a witness of the
             # hidden background, not only those agreeing with the chosen one
@@ -396,7 +395,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         else:
             ly, lx = np.nonzero(rep)
             members[lab[ly, lx] - 1, ly + y0, lx + x0] = True
-        clean[roi] = offset_blend(reference[roi], cand_img, lab, rep, usable, d_ref)
+        clean[roi] = offset_blend(reference[roi], cand_img, lab, rep, usable, labs)
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)

@@ -34,11 +34,13 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import mask_boxes, remap_points
-from dynremove.refine.montage import add_offset, ring_offset
+from dynremove.refine.montage import add_offset, ring_agrees, ring_offset
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.select import Selection, member_median
 
-_MAX_DE = 15.0  # offset_blend's max_de: ring pixels farther (CIE76) do not set the offset
+# offset_blend's max_de: ring pixels departing farther (CIE76) from the ring's
+# median difference do not set the offset
+_MAX_DE = 15.0
 
 
 def _resize_nearest(a: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -126,12 +128,12 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     member[chosen - 1, np.arange(len(qy))] = True
     cand[chosen, rep_i] = member_median(cand[1:, rep_i], member)
     del members, member
-    d_ref = _ring_distance(reference[y0:y1, x0:x1], cand, (py, px), ring, blur)
+    diff = _ring_difference(reference[y0:y1, x0:x1], cand, (py, px), ring, blur)
     # each source plus its offset to the reference, measured on the ring
     ref_ring = reference[ry + y0, rx + x0]
     out = np.empty((len(qy), 3), np.uint8)
     for lbl in np.unique(chosen):
-        good = usable[lbl, ring_i] & (d_ref[lbl] < _MAX_DE)
+        good = ring_agrees(diff[lbl], usable[lbl, ring_i], _MAX_DE)
         mine = chosen == lbl
         off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), rep & (lab == lbl))
         out[mine] = add_offset(cand[lbl, rep_i[mine]], off)
@@ -186,9 +188,9 @@ def _sample_sources(reference: np.ndarray, sources: list[np.ndarray], selection:
     return cand, usable, members
 
 
-def _ring_distance(reference: np.ndarray, cand: np.ndarray, points: tuple[np.ndarray, ...],
-                   ring: np.ndarray, blur: float) -> np.ndarray:
-    """CIE76 distance of every candidate to the reference on the ring (S + 1, R),
+def _ring_difference(reference: np.ndarray, cand: np.ndarray, points: tuple[np.ndarray, ...],
+                     ring: np.ndarray, blur: float) -> np.ndarray:
+    """The reference's Lab minus every candidate's on the ring (S + 1, R, 3) float32,
     both blurred (``fields.blurred_lab``), the blur run on boxes around the ring.
 
     ``reference``: the box's reference; ``cand`` (S + 1, N, 3): the candidates at
@@ -208,7 +210,7 @@ def _ring_distance(reference: np.ndarray, cand: np.ndarray, points: tuple[np.nda
         for (b0, b1, c0, c1), i, keep in boxes:
             box = cv2.GaussianBlur(np.ascontiguousarray(img[b0:b1, c0:c1]), (0, 0), blur)
             lab_ring[k, i] = _lab(box[keep])
-    return np.linalg.norm(lab_ring - lab_ring[0][None], axis=-1)
+    return lab_ring[0][None] - lab_ring
 
 
 def _inpaint(out: np.ndarray, reference: np.ndarray, rep: np.ndarray, hole: np.ndarray,
