@@ -114,6 +114,8 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
                   for s in res.scans],
         "dynamic_fraction": float(res.dynamic.mean()),
         "uncovered_dynamic_px": int((res.dynamic & (res.coverage == 0)).sum()),
+        # coverage.png holds count × 255 / sources (uint8, truncated)
+        "coverage_png": {"sources": n_src, "value_per_source": round(255.0 / n_src, 4)},
         "geometry": res.geometry,
         "seconds": {k: round(float(v), 4) for k, v in res.timings.items()},
         "throughput": _throughput(res, iset),
@@ -166,7 +168,8 @@ class BatchSet:
 
 def _images_in(folder: Path) -> list[Path]:
     try:
-        files = sorted(q for q in folder.iterdir() if q.is_file() and not q.name.startswith("."))
+        files = sorted((q for q in folder.iterdir()
+                        if q.is_file() and not q.name.startswith(".")), key=io.natural_key)
     except OSError:
         return []
     return [q for q in files if q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q)]

@@ -74,9 +74,11 @@ def parse_max_side(s: str) -> int | None:
     try:
         v = int(t)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected pixels, 'none' or 'auto', got {s!r}") from None
+        raise argparse.ArgumentTypeError(f"--max-side {s}: expected pixels, 0, 'none' or "
+                                         "'auto'") from None
     if v < 0:
-        raise argparse.ArgumentTypeError(f"--max-side must be >= 0, got {v}")
+        raise argparse.ArgumentTypeError(f"--max-side {v}: must be 0 (keep the full size) "
+                                         "or a size in pixels")
     return v
 
 
@@ -118,8 +120,16 @@ def add_input_flags(ap: argparse.ArgumentParser, *, valid_mask: bool = True) -> 
 
 
 # --- parser --------------------------------------------------------------------------------
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: a mistyped flag or value is one line and a hint,
+    not the whole usage block (the sub-commands have ~50 flags)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
+    ap = _Parser(
         prog="dynremove",
         description="Detect moving objects in a set of hand-held photos of a scene and "
                     "replace them with the background they hide (Kanojia & Raman, WACV).")
@@ -133,16 +143,18 @@ def build_parser() -> argparse.ArgumentParser:
                                    "multi-view set. Writes clean.png, dynamic_mask.png, "
                                    "coverage.png and report.json to --out.")
     r.add_argument("images", nargs="+",
-                   help="a folder of images (sorted by name), image files, or one video")
+                   help="a folder of images (in name order, numbers by value: f8 before "
+                        "f10), image files, or one video")
     r.add_argument("--ref", default=None,
                    help="reference: index (0-based, in input order; negative counts from "
                         "the end, -1 = the last), file name or 'auto' (the sharpest frame with "
                         "the most keypoint matches); default: the middle image. The run "
                         "names the one it takes")
     r.add_argument("--out", default="out/run", help="output folder (default: out/run)")
-    r.add_argument("--max-side", type=int, default=None, metavar="PX",
-                   help="downscale so the longer side is at most PX (default: only above "
-                        "1280 px; 0 = never)")
+    r.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
+                   help="analyse a copy whose longer side is at most PX (default: only above "
+                        "1280 px; 0 or 'none' = never); clean.png keeps the full size "
+                        "unless --output-size working")
     r.add_argument("--output-size", choices=("full", "working"), default="full",
                    help="clean.png at the input's full resolution (default; only the "
                         "replaced pixels are recomputed) or at the analysis size")
@@ -155,7 +167,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "static and 1 in 16 dynamic decisions (default; a smaller file) "
                         "or at every recorded decision (full)")
     r.add_argument("--probe", type=parse_xy, action="append", metavar="X,Y",
-                   help="record every decision at this pixel (repeatable)")
+                   help="record every decision at this pixel of the photo (repeatable; "
+                        "scaled to the analysis image when the photos are downscaled)")
     r.add_argument("--sample-static", type=float, default=0.002, metavar="F",
                    help="fraction of static decisions recorded (default 0.002)")
     r.add_argument("--gt", default=None, metavar="MASK",
@@ -166,7 +179,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--compare", default=None, metavar="PARAMS",
                    help="also run with other parameters (a preset name or field=value,...) "
                         "and log both side by side in the --record file")
-    r.add_argument("--quiet", action="store_true", help="no progress bars or notes")
+    r.add_argument("--quiet", action="store_true",
+                   help="print nothing but errors (no progress bars, notes or summary line)")
     add_input_flags(r)
     add_param_flags(r)
     r.set_defaults(fn=cmd_run)
@@ -189,7 +203,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="reference of every set: index (0-based; negative counts from the "
                          "end), file name or 'auto' (default: middle)")
     bt.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
-                    help="downscale to at most PX ('none' = full size; default: only "
+                    help="downscale to at most PX (0 or 'none' = full size; default: only "
                          "above 1280 px)")
     bt.add_argument("--quiet", action="store_true", help="no per-set lines on stderr")
     add_input_flags(bt, valid_mask=False)
@@ -209,18 +223,28 @@ def build_parser() -> argparse.ArgumentParser:
     add_param_flags(d)
     d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002, compare=None)
 
-    b = sub.add_parser("bench", help="stage timings, throughput and peak memory")
+    b = sub.add_parser(
+        "bench", help="stage timings, throughput and peak memory",
+        description="Time the method on a synthetic scene (seed 0) after a warm-up that "
+                    "compiles the kernels: seconds per stage, each scan's Mpx/s, peak RSS, "
+                    "the median stack's time on the same views (and the ratio), the cost "
+                    "of a Rerun recording and the numba kernel against the readable "
+                    "reference. Prints a table and writes every figure to --json. Figures "
+                    "are ratios against baselines measured in the same run: the machine "
+                    "may be busy.")
     b.add_argument("--size", default="854x480", help="image size WxH (default 854x480)")
     b.add_argument("--views", type=int, default=7, help="number of images (default 7)")
-    b.add_argument("--json", default="out/bench.json", help="where to write the JSON")
-    b.add_argument("--repeat", type=int, default=1, help="timed runs after a warm-up")
+    b.add_argument("--json", default="out/bench.json", metavar="FILE",
+                   help="where to write the JSON (default out/bench.json)")
+    b.add_argument("--repeat", type=int, default=1, metavar="N",
+                   help="timed runs after the warm-up; the fastest is reported (default 1)")
     b.add_argument("--max-side", type=int, default=None, metavar="PX",
                    help="also time large photos as users run them: analysis at PX, the "
                         "clean photo at full size (e.g. --size 4032x3024 --views 5 "
                         "--max-side 1280)")
     b.add_argument("--no-reference", action="store_true",
                    help="skip the numba/reference speed ratio")
-    b.add_argument("--quiet", action="store_true")
+    b.add_argument("--quiet", action="store_true", help="only the table, no progress lines")
     add_param_flags(b)
     b.set_defaults(fn=cmd_bench)
 
@@ -242,11 +266,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sets in parallel (joblib; -1 = all cores; default 1)")
     e.add_argument("--json", default=None, metavar="FILE", help="write the report here")
     e.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
-                   help="downscale to at most PX ('none' = full size; default: only "
+                   help="downscale to at most PX (0 or 'none' = full size; default: only "
                         "above 1280 px)")
     e.add_argument("--ref", default=None,
-                   help="reference: index (0-based; negative counts from the end) or file "
-                        "name (default: the middle frame)")
+                   help="reference of every set: index (0-based; negative counts from the "
+                        "end), file name or 'auto' (as run --ref auto; its mask must exist "
+                        "in masks/) (default: the middle frame)")
     e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
                    help=f"comma-separated subset of {','.join(METHODS)}")
     e.add_argument("--ablation", action="store_true",
@@ -356,6 +381,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     old = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return int(args.fn(args) or 0)
+    except BrokenPipeError:
+        # the reader of our output went away (`inspect ... | head`): not an error; the
+        # exit status a process killed by SIGPIPE has, as git's, and nothing printed
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 141
     except KeyboardInterrupt:
         print("dynremove: interrupted", file=sys.stderr)
         return 130

@@ -11,6 +11,7 @@ import argparse
 import dataclasses
 import signal
 import sys
+import os
 import time
 import warnings
 from pathlib import Path
@@ -55,6 +56,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     created = not Path(args.out).exists()
     try:
         out = io.prepare_out_dir(args.out)
+        if args.record:
+            io.check_out_file(args.record, "--record")
         return _run(args, params, out)
     except BaseException:
         if created:  # bad input or interrupted: leave no empty folder behind
@@ -76,6 +79,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         iset = io.load_image_set(args.images, max_side=args.max_side,
                                  valid_mask=args.valid_mask, frames=args.frames,
                                  span=args.span, pick=args.pick)
+        _check_memory(args, iset)
         where.stage = "while choosing the reference"
         ref, ref_info, ref_notes = choose_reference(args.ref, iset)
         t_load = time.perf_counter() - t0
@@ -91,6 +95,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                 _note(args, gt_note)
                 iset.notes.append(gt_note)
             gt = _resized_mask(gt_full, iset.images[0].shape[:2])  # the analysis size
+        probes = _probes_at_analysis_size(args, iset)
         compare = parse_compare(args.compare, params) if args.compare else None
         if compare is not None and not args.record:
             raise InputError("--compare needs --record FILE.rrd (the two runs go into one "
@@ -107,14 +112,14 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             res = remove_dynamic(iset.images, ref=ref, params=params, sink=sink,
-                                 probes=args.probe or (), sample_static=args.sample_static,
+                                 probes=probes, sample_static=args.sample_static,
                                  names=iset.names, preset_name=args.preset, progress=where,
                                  valid_masks=iset.valid_masks)
             if compare is not None:
                 sink_b = _make_sink(args, iset, gt, rec=rec, root="runs/compare")
                 where.stage = "during features"
                 res_b = remove_dynamic(iset.images, ref=ref, params=compare, sink=sink_b,
-                                       probes=args.probe or (),
+                                       probes=probes,
                                        sample_static=args.sample_static, names=iset.names,
                                        preset_name="compare", progress=where,
                                        valid_masks=iset.valid_masks)
@@ -138,6 +143,9 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         gt = _resized_mask(gt_full, res.dynamic.shape)  # the output's size
     report = write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
                            record=args.record, reference=ref_info)
+    if not res.dynamic.any():
+        _note(args, "nothing was found moving in the reference: clean.png is the "
+              "reference unchanged")
     score = (f"J {report['jaccard_vs_gt']:.3f} against the given mask, "
              if "jaccard_vs_gt" in report else "")
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
@@ -145,6 +153,59 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
          + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, {score}"
          f"{res.timings['total'] + t_load:.1f} s)")
     return EXIT_OK
+
+
+# peak memory of a run ≈ _BASE_BYTES + _BYTES_PER_PX × views × analysed pixels: fitted
+# on `dynremove bench` (7 × 854×480: 1.9 GB) and 5 × 4032×3024 analysed at full size
+# (21.4 GB, /usr/bin/time -v); a rough figure, for the warning only
+_BASE_BYTES, _BYTES_PER_PX = 0.3e9, 350.0
+
+
+def _probes_at_analysis_size(args: argparse.Namespace, iset: io.ImageSet
+                             ) -> list[tuple[int, int]]:
+    """``--probe`` pixels are the photo's (as ``--gt``); the scan runs on the analysis
+    image, so they are scaled to it, with a note. InputError when outside the photo."""
+    W0, H0 = iset.original_size
+    out = []
+    for x, y in args.probe or ():
+        if not (0 <= x < W0 and 0 <= y < H0):
+            raise InputError(f"--probe {x},{y}: outside the {W0}x{H0} photo")
+        if iset.scale == 1.0:
+            out.append((x, y))
+            continue
+        H, W = iset.images[0].shape[:2]
+        xa = min(W - 1, max(0, int(round((x + 0.5) * W / W0 - 0.5))))
+        ya = min(H - 1, max(0, int(round((y + 0.5) * H / H0 - 0.5))))
+        _note(args, f"--probe {x},{y}: pixel ({xa}, {ya}) of the {W}x{H} analysis image "
+              "(the recording's and `inspect --pixel`'s coordinates)")
+        out.append((xa, ya))
+    return out
+
+
+def _physical_memory() -> float | None:
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _check_memory(args: argparse.Namespace, iset: io.ImageSet) -> None:
+    """A note when the analysis will need several GB, and an InputError when it needs
+    more than the machine has (``--max-side 0`` on phone photos)."""
+    H, W = iset.images[0].shape[:2]
+    n = len(iset.images)
+    need = _BASE_BYTES + _BYTES_PER_PX * n * H * W
+    if need < 4e9:
+        return
+    have = _physical_memory()
+    what = (f"analysing {n} images of {W}x{H} ({W * H / 1e6:.1f} MP) needs about "
+            f"{need / 1e9:.0f} GB of memory")
+    hint = ("--max-side 1280 (the default) analyses a smaller copy and still writes the "
+            "clean photo at full size")
+    if have is not None and need > have:
+        raise InputError(f"{what}, more than this machine's {have / 1e9:.0f} GB: use {hint}")
+    _note(args, f"{what}" + (f" (this machine has {have / 1e9:.0f} GB)" if have else "")
+          + f"; {hint}")
 
 
 def reference_note(ref_arg: str | None, ref: int, info: dict, names: list[str]) -> str:
@@ -171,8 +232,13 @@ def read_gt(path: str, iset: io.ImageSet, ref: int) -> tuple[np.ndarray, str | N
     m = io.read_mask(path)
     W0, H0 = iset.original_size
     h, w = m.shape
+    raw = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+    grey = float(((raw > 16) & (raw < 240)).mean()) if raw is not None else 0.0
+    odd = (f"--gt {path}: {100 * grey:.0f} % of its pixels are neither black nor white: "
+           "is it a mask (0 = static, 255 = moving)? Scored as pixels > 127"
+           if grey > 0.05 else None)
     if (w, h) == (W0, H0):
-        return m, None
+        return m, odd
     name = iset.names[ref]
     if (w, h) == (H0, W0):
         orientation = None if iset.video else _exif_orientation(iset.paths[ref])
@@ -281,6 +347,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.scene_seed < 0:
         raise InputError(f"--scene-seed must be >= 0, got {args.scene_seed}")
     out = io.prepare_out_dir(args.out)
+    if not args.no_record:
+        io.check_out_file(args.record, "--record")
     scene = synth.make_scene(seed=args.scene_seed, n_views=6, size=(360, 640))
     synth.write_scene(scene, out / "scene")
     iset = io.ImageSet(paths=[out / "scene" / "frames" / n for n in scene.names],

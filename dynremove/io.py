@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -141,7 +142,8 @@ def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str
                 entries = list(p.iterdir())
             except OSError as e:
                 raise InputError(f"{p}: cannot list folder ({e.strerror or e})") from None
-            files = sorted(q for q in entries if q.is_file() and not q.name.startswith("."))
+            files = sorted((q for q in entries if q.is_file() and not q.name.startswith(".")),
+                           key=natural_key)
             imgs, videos, skipped = [], [], []
             for q in files:
                 if q.suffix.lower() in IMAGE_EXTS or is_image_file(q):
@@ -164,6 +166,17 @@ def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str
             paths.append(p)
         else:
             raise InputError(f"{p}: no such file or folder")
+    seen: dict[Path, Path] = {}
+    unique = []
+    for q in paths:
+        key = q.resolve()
+        if key in seen:
+            same = "" if str(q) == str(seen[key]) else f" (as {seen[key]})"
+            notes.append(f"{q} is given twice{same}: used once")
+        else:
+            seen[key] = q
+            unique.append(q)
+    paths = unique
     if len(paths) < 2:
         raise InputError(f"need at least 2 images, found {len(paths)}"
                          + (f" in {', '.join(str(a) for a in args)}" if args else "")
@@ -275,6 +288,33 @@ def _png_has_alpha(data: np.ndarray) -> bool:
             and data[12:16].tobytes() == b"IHDR" and int(data[25]) in (4, 6))
 
 
+def _grouped_notes(notes: list[str]) -> list[str]:
+    """Per-file notes "NAME: what" with the same "what" as one line naming every file
+    ("a.png, b.png: grayscale image expanded to 3 channels"), in first-seen order."""
+    groups: dict[str, list[str]] = {}
+    for n in notes:
+        name, sep, what = n.partition(": ")
+        groups.setdefault(what if sep else n, []).append(name if sep else "")
+    out = []
+    for what, names in groups.items():
+        names = [x for x in names if x]
+        if not names:
+            out.append(what)
+        elif len(names) <= 4:
+            out.append(f"{', '.join(names)}: {what}")
+        else:
+            out.append(f"{len(names)} images ({names[0]}, ..., {names[-1]}): {what}")
+    return out
+
+
+def natural_key(path: Path) -> tuple:
+    """Sort key of a file name as file managers order them: digit runs by value,
+    letters case-insensitively (f8 before f10; IMG_2 before img_10); the name breaks ties."""
+    parts = re.split(r"(\d+)", path.name)
+    return (tuple((0, int(t), "") if t.isdigit() else (1, 0, t.casefold()) for t in parts if t),
+            path.name)
+
+
 def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = None,
                    valid_mask: str | os.PathLike | None = None,
                    frames: int | None = None, span: str | None = None,
@@ -302,12 +342,13 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             raise InputError("--frames and --span take frames from a video; the inputs are "
                              "images")
         paths, notes = list_inputs(args)
-        images, valids = [], []
+        images, valids, per_file = [], [], []
         for p in paths:
             img, v, n = read_image_valid(p)
             images.append(img)
             valids.append(v)
-            notes.extend(n)
+            per_file.extend(n)
+        notes.extend(_grouped_notes(per_file))
     H0, W0 = images[0].shape[:2]
     for p, im in zip(paths, images):
         if im.shape[:2] != (H0, W0):
@@ -382,6 +423,21 @@ def prepare_out_dir(out: str | os.PathLike) -> Path:
         raise InputError(f"--out {p}: cannot create ({e.strerror or e})") from None
     if not os.access(p, os.W_OK):
         raise InputError(f"--out {p}: not writable")
+    return p
+
+
+def check_out_file(path: str | os.PathLike, flag: str) -> Path:
+    """Check that a file can be written at ``path`` (its folder is created); InputError
+    if it is a folder, or its folder cannot be created or written."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{flag} {p}: is a folder; give a file name (e.g. {p / 'run.rrd'})")
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{flag} {p}: cannot create its folder ({e.strerror or e})") from None
+    if not os.access(p.parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
+        raise InputError(f"{flag} {p}: not writable")
     return p
 
 

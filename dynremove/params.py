@@ -89,7 +89,7 @@ class Params:
     snap_inner_px: int = 6  # deeper than this inside the map: sure object
     snap_outer_px: int = 12  # ring of probable background around the map
     snap_iters: int = 3  # GrabCut iterations
-    fuse: bool = True  # refill L from all sources (refine.fill.fuse_background)
+    fuse: bool = True  # refill L after the scans, as --fill says (selection or median); off: keep the scans' patch writes (paper)
     fuse_margin_px: int = 2  # the fused region is L dilated by this
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
     fuse_realign: int = 2  # passes re-measuring the matches from the cleaned reference (paper preset 0)

@@ -206,10 +206,16 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
             st = _keep_sources(st, keep)
             views = [views[k] for k in keep]
             srcs = [srcs[k] for k in keep]
-    for k, v in enumerate(views):
-        if v.F is None:
-            msgs.append(f"{names[srcs[k]]}: only {v.n_matches} keypoint matches with the "
-                        "reference; no epipolar term and no homography pre-warp for it")
+    weak = [k for k, v in enumerate(views) if v.F is None]
+    for k in weak:
+        n = views[k].n_matches
+        msgs.append(f"{names[srcs[k]]}: only {n} keypoint match{'' if n == 1 else 'es'} with "
+                    "the reference; no epipolar term and no homography pre-warp for it")
+    if weak and 2 * len(weak) >= len(views):
+        msgs.append(f"{len(weak)} of {len(views)} sources could not be aligned to the "
+                    "reference: the result is unreliable (misaligned fill, missed or "
+                    "false detections). Photos of more overlap, or a larger --max-side "
+                    f"than the {W}x{H} analysed, give more matches")
     if len(images) == 2:
         msgs.append("only 2 photos: where they disagree, either may show the mover; the "
                     "reference is kept there unless the colours of the detected region "

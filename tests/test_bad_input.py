@@ -303,8 +303,34 @@ def test_tiny_images_api():
 def test_bad_max_side(tmp_path, capsys, scene, max_side):
     write_set(tmp_path / "s", scene.images[:3])
     out = tmp_path / "out"
+    if max_side == "-5":  # refused by the parser: one line, exit 2, nothing written
+        with pytest.raises(SystemExit) as e:
+            run_cli(capsys, tmp_path / "s", "--max-side", max_side, "--out", out)
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and not out.exists()
+        assert err.count("\n") == 1 and "--max-side -5: must be 0" in err, err
+        return
     rc, _, err = run_cli(capsys, tmp_path / "s", "--max-side", max_side, "--out", out)
     assert_input_error(rc, err, f"--max-side {max_side}", out=out)
+
+
+def test_a_mistyped_flag_value_is_one_line(capsys):
+    """argparse errors are one line and a pointer to --help, not the ~50-flag usage."""
+    with pytest.raises(SystemExit) as e:
+        main(["run", "x", "--output-size", "half"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2
+    assert err.count("\n") == 1 and "invalid choice: 'half'" in err
+    assert "see 'dynremove run --help'" in err
+
+
+def test_record_path_that_is_a_folder_is_bad_input(tmp_path, capsys, scene):
+    write_set(tmp_path / "s", scene.images[:3])
+    out = tmp_path / "out"
+    (tmp_path / "rec").mkdir()
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--record", tmp_path / "rec", "--out", out)
+    assert_input_error(rc, err, "--record", out=out)
+    assert "is a folder" in err
 
 
 # --- the true mask (--gt) ---------------------------------------------------------------

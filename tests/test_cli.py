@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from dynremove import commands, io
 from dynremove.cli import main
 from dynremove.commands import stage_labels
 from dynremove.evaluation import synth
@@ -142,3 +143,81 @@ def test_version(capsys):
         main(["--version"])
     assert e.value.code == 0
     assert capsys.readouterr().out.strip() == f"dynremove {__version__}"
+
+
+# --- what a new user ran into ----------------------------------------------------------
+def test_folder_order_counts_numbers_by_value(tmp_path, scene):
+    """f8 before f10, as file managers order them (the middle image is then the middle one)."""
+    d = tmp_path / "n"
+    d.mkdir()
+    names = ["f8.png", "f10.png", "F9.png", "f11.png"]
+    for n, im in zip(names, scene.images):
+        assert cv2.imwrite(str(d / n), im)
+    paths, _ = io.list_inputs([d])
+    assert [p.name for p in paths] == ["f8.png", "F9.png", "f10.png", "f11.png"]
+
+
+def test_the_same_file_twice_is_used_once(tmp_path, capsys, folder):
+    files = sorted(folder.iterdir())
+    paths, notes = io.list_inputs([files[0], *files, str(files[1])])
+    assert paths == files
+    assert len(notes) == 2 and all("given twice" in n and "used once" in n for n in notes)
+
+
+def test_per_file_notes_are_grouped(tmp_path, capsys, scene):
+    d = tmp_path / "g"
+    d.mkdir()
+    for i, im in enumerate(scene.images):
+        assert cv2.imwrite(str(d / f"v{i}.png"), cv2.cvtColor(im, cv2.COLOR_BGR2GRAY))
+    iset = io.load_image_set([d])
+    grey = [n for n in iset.notes if "grayscale" in n]
+    assert grey == ["v0.png, v1.png, v2.png, v3.png: grayscale image expanded to 3 channels"]
+
+
+def test_probe_is_a_photo_pixel_scaled_to_the_analysis_image(tmp_path, capsys, folder):
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--max-side", "32", "--max-scans",
+                         "1", "--probe", "40,30")
+    assert rc == 0, err
+    assert "--probe 40,30: pixel (20, 15) of the 32x24 analysis image" in err
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "64,10", *FAST)
+    assert rc == 2 and "--probe 64,10: outside the 64x48 photo" in err
+
+
+def test_a_run_that_finds_nothing_says_so(tmp_path, capsys, scene):
+    d = tmp_path / "still"
+    d.mkdir()
+    for i in range(3):  # the same static view three times, with a little noise
+        noisy = np.clip(scene.background.astype(int) + i, 0, 255).astype(np.uint8)
+        assert cv2.imwrite(str(d / f"v{i}.png"), noisy)
+    rc, _, err = run_cli(capsys, d, "--out", tmp_path / "out", *FAST)
+    assert rc == 0, err
+    assert "nothing was found moving in the reference" in err
+
+
+def test_gt_that_is_not_a_mask_gets_a_note(tmp_path, capsys, scene, folder):
+    out = tmp_path / "out"
+    photo = tmp_path / "photo.png"
+    assert cv2.imwrite(str(photo), scene.images[scene.ref_index])
+    rc, _, err = run_cli(capsys, folder, "--gt", photo, "--out", out, *FAST)
+    assert rc == 0, err
+    assert "are neither black nor white: is it a mask" in err
+    gt = tmp_path / "gt.png"
+    assert cv2.imwrite(str(gt), scene.masks[scene.ref_index].astype(np.uint8) * 255)
+    rc, _, err = run_cli(capsys, folder, "--gt", gt, "--out", out, *FAST)
+    assert rc == 0 and "neither black nor white" not in err
+
+
+def test_an_analysis_too_large_for_the_memory_is_refused(tmp_path, capsys, folder,
+                                                         monkeypatch):
+    """The estimate scales with views × analysed pixels; over the machine's memory it is
+    a one-line error naming --max-side, before any work."""
+    monkeypatch.setattr(commands, "_BYTES_PER_PX", 1e6)  # 4 views × 64×48 → ~12 GB
+    monkeypatch.setattr(commands, "_physical_memory", lambda: 8e9)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, folder, "--out", out, *FAST)
+    assert rc == 2 and "more than this machine's 8 GB: use --max-side 1280" in err, err
+    assert not out.exists()
+    monkeypatch.setattr(commands, "_physical_memory", lambda: 64e9)
+    rc, _, err = run_cli(capsys, folder, "--out", out, *FAST)
+    assert rc == 0 and "needs about 13 GB of memory (this machine has 64 GB)" in err, err

@@ -156,7 +156,8 @@ def image_files(folder: Path) -> list[Path]:
     an image when its suffix is a common image suffix or when OpenCV or Pillow
     recognise its content (AVIF, HEIC with the extra, no or odd suffix, ...).
     """
-    files = sorted(q for q in folder.iterdir() if q.is_file() and not q.name.startswith("."))
+    files = sorted((q for q in folder.iterdir() if q.is_file() and not q.name.startswith(".")),
+                   key=io.natural_key)
     return [q for q in files if q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q)]
 
 
@@ -206,7 +207,12 @@ def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None 
              ) -> LoadedSet:
     """Read the frames (downscaled as ``io.load_image_set``), the ref mask and background."""
     iset = io.load_image_set(list(es.frames), max_side=max_side)
-    r = io.resolve_ref(ref, iset.names)
+    if isinstance(ref, str) and ref.strip().lower() == "auto":
+        from dynremove.video import auto_reference
+
+        r, _, _ = auto_reference(iset.images, iset.names)
+    else:
+        r = io.resolve_ref(ref, iset.names)
     H, W = iset.images[0].shape[:2]
     mp = es.mask_path(es.frames[r])
     gt = io.read_mask(mp, (W, H)) if mp is not None else None
