@@ -380,7 +380,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     _quiet_opencv()
     old = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        return int(args.fn(args) or 0)
+        rc = int(args.fn(args) or 0)
+        sys.stdout.flush()  # here, so that a closed pipe is caught below, not at exit
+        return rc
     except BrokenPipeError:
         # the reader of our output went away (`inspect ... | head`): not an error; the
         # exit status a process killed by SIGPIPE has, as git's, and nothing printed

@@ -221,3 +221,21 @@ def test_an_analysis_too_large_for_the_memory_is_refused(tmp_path, capsys, folde
     monkeypatch.setattr(commands, "_physical_memory", lambda: 64e9)
     rc, _, err = run_cli(capsys, folder, "--out", out, *FAST)
     assert rc == 0 and "needs about 13 GB of memory (this machine has 64 GB)" in err, err
+
+
+def test_a_closed_pipe_is_not_an_error(tmp_path):
+    """`dynremove ... | head -1`: the reader goes away; exit 141 (as a process killed by
+    SIGPIPE), nothing on stderr, no traceback."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom dynremove import cli\n"
+            "def fn(args):\n    for _ in range(20000):\n        print('x' * 100)\n    return 0\n"
+            "cli.cmd_inspect = fn  # a command with much output\n"
+            "sys.exit(cli.main(['inspect', 'nothing.rrd']))\n")
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, cwd=tmp_path)
+    p.stdout.read(10)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait() == 141 and err == "", err
