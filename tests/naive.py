@@ -6,12 +6,15 @@ was made sparse; the fast version must give the same bytes.
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import blurred_lab
 from dynremove.refine.morphology import dilate_disc
+from dynremove.refine.upsample import grow_replaced
 
 
 # the membrane fill as it was written before it was made sparse (dense, every pixel)
@@ -133,8 +136,9 @@ def full_resolution(reference, sources, clean_working, dynamic, selection):
             clean[dyn_full] = up[dyn_full]
         return clean, dyn_full
     sx, sy = Wf / w, Hf / h
-    label = cv2.resize(selection.label.astype(np.int16), size,
-                       interpolation=cv2.INTER_NEAREST).astype(np.intp)
+    label = grow_replaced(cv2.resize(selection.label.astype(np.int16), size,
+                                     interpolation=cv2.INTER_NEAREST),
+                          math.ceil(max(Wf / w, Hf / h))).astype(np.intp)
     rep = label >= 1
     ring_px = max(3, int(round(3 * max(sx, sy))))
     ys, xs = np.nonzero(dilate_disc(rep, ring_px + 1))

@@ -127,3 +127,20 @@ def test_full_resolution_equals_the_dense_computation():
         np.testing.assert_array_equal(dyn, dyn_d)
         np.testing.assert_array_equal(clean, clean_d)
         assert (clean != ref).any()
+
+
+def test_the_full_size_fill_takes_one_working_pixel_more():
+    """grow_replaced: the replaced labels grow ``px`` pixels into the kept reference
+    (label 0), never into pixels outside the fill region (−1), taking a neighbour's
+    source: a rim one working pixel wide next to the mover is filled at full size."""
+    from dynremove.refine.upsample import grow_replaced
+
+    label = np.zeros((9, 12), np.int16)
+    label[:, :1] = -1  # outside the fill region
+    label[3:6, 4:7] = 2
+    out = grow_replaced(label, 2)
+    ys, xs = np.nonzero(out >= 1)
+    assert (ys.min(), ys.max(), xs.min(), xs.max()) == (1, 7, 2, 8)
+    assert set(np.unique(out[out >= 1])) == {2}
+    assert (out[:, :1] == -1).all() and (out[label == 2] == 2).all()
+    assert np.array_equal(grow_replaced(label, 0), label)
