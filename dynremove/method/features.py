@@ -92,9 +92,11 @@ def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int) -> npt.NDArray
     o0 = np.floor(o)
     w1 = o - o0
     o0 = o0.astype(np.int32) % 8
+    lo, hi = mag * (1.0 - w1), mag * w1  # the two bins' shares, the same for every k
+    o1 = (o0 + 1) % 8
     pooled = np.empty((8,) + gray.shape, np.float32)
     for k in range(8):
-        m = np.where(o0 == k, mag * (1.0 - w1), 0.0) + np.where((o0 + 1) % 8 == k, mag * w1, 0.0)
+        m = np.where(o0 == k, lo, 0.0) + np.where(o1 == k, hi, 0.0)
         pooled[k] = cv2.sepFilter2D(m.astype(np.float32), -1, tri, tri,
                                     borderType=cv2.BORDER_REFLECT_101)
     offs = np.array([int(math.floor((i - 1.5) * b + 0.5)) for i in range(4)], np.int64)
@@ -103,36 +105,74 @@ def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int) -> npt.NDArray
     return _assemble_sift(pooled, offs, cw.astype(np.float32))
 
 
-@numba.njit(cache=True, parallel=True, nogil=True)
+@numba.njit(cache=True, parallel=True, nogil=True, error_model="numpy")
 def _assemble_sift(pooled, offs, cw):
-    """pooled (8, H, W) float32, offs (4,) int64, cw (4, 4) float32 → (H, W, 128) uint8."""
+    """pooled (8, H, W) float32, offs (4,) int64 ascending, cw (4, 4) float32 → (H, W, 128) uint8.
+
+    Per pixel: d = the 16 cells' 8 pooled values × the cell weight (float32),
+    n = √Σ d² + 1e-12, d ← min(d / n, 0.2) (stored float32; Σ over the float64
+    values), again ÷ (√Σ + 1e-12), ×512, +0.5, saturated at 255 and truncated.
+    The sums run over the 128 values in order, each pixel on its own; a row is
+    done B pixels at a time with the pixel as the inner loop, so the divisions
+    and the B sums vectorise across pixels while every pixel's arithmetic stays
+    the same, bit for bit. error_model="numpy" drops the ZeroDivisionError
+    check that stops vectorisation (the divisors are ≥ 1e-12).
+    """
     _, H, W = pooled.shape
     out = np.empty((H, W, 128), np.uint8)
+    B = 32
     for y in numba.prange(H):
-        d = np.empty(128, np.float32)
-        for x in range(W):
+        d = np.empty((128, B), np.float32)
+        q = np.empty((128, B), np.uint8)
+        n = np.empty(B)
+        n2 = np.empty(B)
+        for x0 in range(0, W, B):
+            nbk = min(B, W - x0)
+            inner = x0 + offs[0] >= 0 and x0 + nbk - 1 + offs[3] <= W - 1  # no clamping
             k = 0
             for cy in range(4):
                 yy = min(max(y + offs[cy], 0), H - 1)
                 for cx in range(4):
-                    xx = min(max(x + offs[cx], 0), W - 1)
                     w = cw[cy, cx]
                     for o in range(8):
-                        d[k] = pooled[o, yy, xx] * w
+                        row = pooled[o, yy]
+                        dk = d[k]
+                        if inner:
+                            base = x0 + offs[cx]
+                            for p in range(nbk):
+                                dk[p] = row[base + p] * w
+                        else:
+                            for p in range(nbk):
+                                dk[p] = row[min(max(x0 + p + offs[cx], 0), W - 1)] * w
                         k += 1
-            n = 0.0
+            for p in range(nbk):
+                n[p] = 0.0
             for i in range(128):
-                n += d[i] * d[i]
-            n = math.sqrt(n) + 1e-12
-            n2 = 0.0
+                di = d[i]
+                for p in range(nbk):
+                    n[p] += di[p] * di[p]
+            for p in range(nbk):
+                n[p] = math.sqrt(n[p]) + 1e-12
+                n2[p] = 0.0
             for i in range(128):
-                v = min(d[i] / n, 0.2)
-                d[i] = v
-                n2 += v * v
-            n2 = math.sqrt(n2) + 1e-12
+                di = d[i]
+                for p in range(nbk):
+                    t = di[p] / n[p]
+                    v = 0.2 if 0.2 < t else t  # min(t, 0.2) without a branch
+                    di[p] = v
+                    n2[p] += v * v
+            for p in range(nbk):
+                n2[p] = math.sqrt(n2[p]) + 1e-12
             for i in range(128):
-                v = d[i] / n2 * 512.0
-                out[y, x, i] = np.uint8(min(v + 0.5, 255.0))
+                di = d[i]
+                qi = q[i]
+                for p in range(nbk):
+                    t = di[p] / n2[p] * 512.0 + 0.5
+                    qi[p] = np.uint8(255.0 if 255.0 < t else t)
+            for p in range(nbk):
+                op = out[y, x0 + p]
+                for i in range(128):
+                    op[i] = q[i, p]
     return out
 
 

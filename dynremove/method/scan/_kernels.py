@@ -90,15 +90,17 @@ def _lab_d2(a, ya, xa, b, yb, xb):
 
 
 @numba.njit(cache=True, nogil=True)
-def _sift_d2(a, ya, xa, b, yb, xb):
-    """Squared distance of two uint8 descriptors as an exact integer.
+def _sift_d2(a, b):
+    """Squared distance of two (G,) uint8 descriptors as an exact integer.
 
-    int32 lanes so the loop vectorises; exact, since 128 · 255² < 2³¹.
+    Every step is cast back to int32 (numba would widen int32 arithmetic to
+    int64), so the loop compiles to 16-bit differences and pmaddwd; exact, since
+    128 · 255² < 2³¹.
     """
     d = np.int32(0)
-    for k in range(a.shape[2]):
-        t = np.int32(a[ya, xa, k]) - np.int32(b[yb, xb, k])
-        d += t * t
+    for k in range(a.shape[0]):
+        t = np.int32(a[k]) - np.int32(b[k])
+        d = np.int32(d + np.int32(t * t))
     return np.int64(d)
 
 
@@ -112,7 +114,7 @@ def _sim_H(fc_r, fg_r, x, y, fc_s, fg_s, s, xs, ys, F, hasF, pf, pi):
     lam1, lam2, lam3 = pf[LAM1], pf[LAM2], pf[LAM3]
     u = pf[SIFT_UNIT]
     sc = _se(_lab_d2(fc_r, y, x, fc_s[s], ys, xs), pf[SIG_C])
-    sg = _se(float(_sift_d2(fg_r, y, x, fg_s[s], ys, xs)) * u * u, pf[SIG_G])
+    sg = _se(float(_sift_d2(fg_r[y, x], fg_s[s, ys, xs])) * u * u, pf[SIG_G])
     if pi[USE_EPI] != 0 and hasF[s]:
         return lam1 * sc + lam2 * sg + lam3 * _sf(F, hasF, s, x, y, xs, ys, pf)
     return (lam1 * sc + lam2 * sg) * (lam1 + lam2 + lam3) / (lam1 + lam2)
@@ -154,7 +156,7 @@ def _appearance_support(N, fc_r, fg_r, fc_s, fg_s, pf):
                 ys = N[s, y, x, 1]
                 if 0 <= xs < W and 0 <= ys < H:
                     m = pf[LAM4] * _se(_lab_d2(fc_r, y, x, fc_s[s], ys, xs), pf[SIG_C]) + \
-                        pf[LAM5] * _se(float(_sift_d2(fg_r, y, x, fg_s[s], ys, xs)) * u * u,
+                        pf[LAM5] * _se(float(_sift_d2(fg_r[y, x], fg_s[s, ys, xs])) * u * u,
                                        pf[SIG_G])
                     if m > pf[T_R]:
                         n += 1
@@ -166,7 +168,22 @@ def _appearance_support(N, fc_r, fg_r, fc_s, fg_s, pf):
 def _dbscan(D, n, eps, min_pts, labels, is_core, stack):
     """DBSCAN on the precomputed (n, n) distance D, exactly as scikit-learn does.
 
-    Neighbourhoods are ``D[i, j] <= eps`` (the point itself included) in index
+    Neighbourhoods are ``D[i, j] <= eps`` (the point itself included); the
+    clustering is ``_dbscan_adj`` on that graph. Writes labels (−1 = noise) and
+    returns the cluster count.
+    """
+    A = np.empty((n, n), np.bool_)
+    for i in range(n):
+        for j in range(n):
+            A[i, j] = D[i, j] <= eps
+    return _dbscan_adj(A, n, min_pts, labels, is_core, stack)
+
+
+@numba.njit(cache=True, nogil=True)
+def _dbscan_adj(A, n, min_pts, labels, is_core, stack):
+    """DBSCAN on the ε-neighbour graph A (n, n) bool, exactly as scikit-learn does.
+
+    Neighbourhoods are the rows of A (the point itself included) in index
     order; core points have at least ``min_pts`` neighbours; clusters grow by a
     depth-first search from each unlabelled core point in index order (a stack,
     neighbours pushed in index order), so border points join the first cluster
@@ -176,7 +193,7 @@ def _dbscan(D, n, eps, min_pts, labels, is_core, stack):
         labels[i] = -1
         c = 0
         for j in range(n):
-            if D[i, j] <= eps:
+            if A[i, j]:
                 c += 1
         is_core[i] = c >= min_pts
     k = 0
@@ -190,7 +207,7 @@ def _dbscan(D, n, eps, min_pts, labels, is_core, stack):
                 labels[i] = k
                 if is_core[i]:
                     for v in range(n):
-                        if D[i, v] <= eps and labels[v] == -1:
+                        if A[i, v] and labels[v] == -1:
                             stack[top] = v
                             top += 1
             if top == 0:
@@ -199,6 +216,56 @@ def _dbscan(D, n, eps, min_pts, labels, is_core, stack):
             i = stack[top]
         k += 1
     return k
+
+
+@numba.njit(cache=True, nogil=True)
+def _region_sum(lab, hb, hm, x0, y0, x1, y1, H1, W1, ulo, uhi, vlo, vhi, nb, gc, gh):
+    """Σ Lab and the HoG histogram (Σ magnitude per bin) of one image over an overlap region.
+
+    The region is the window offsets u ∈ [ulo, uhi], v ∈ [vlo, vhi] around (x0, y0)
+    in this image (lab (H, W, 3) float32, its gradient bins hb, hm of
+    ``_gradient_bins``); an offset is skipped where (x0 + u, y0 + v) falls
+    outside this image or (x1 + u, y1 + v) outside the other one's (H1, W1), so
+    both images of a region sum the same pixels. Sums in row-major offset order
+    into gc (3,) and gh (nb,) float64 (zeroed here); returns the pixel count.
+    """
+    H0, W0 = hb.shape
+    # the Lab sums in locals: gc could alias lab for all the compiler knows, so
+    # as array elements they would be stored and reloaded at every pixel
+    c0 = 0.0
+    c1 = 0.0
+    c2 = 0.0
+    for b in range(nb):
+        gh[b] = 0.0
+    cnt = 0
+    for v in range(vlo, vhi + 1):
+        ya = y0 + v
+        yb = y1 + v
+        if ya < 0 or ya >= H0 or yb < 0 or yb >= H1:
+            continue
+        for u in range(ulo, uhi + 1):
+            xa = x0 + u
+            xb = x1 + u
+            if xa < 0 or xa >= W0 or xb < 0 or xb >= W1:
+                continue
+            cnt += 1
+            c0 += lab[ya, xa, 0]
+            c1 += lab[ya, xa, 1]
+            c2 += lab[ya, xa, 2]
+            if hb[ya, xa] >= 0:
+                gh[hb[ya, xa]] += hm[ya, xa]
+    gc[0] = c0
+    gc[1] = c1
+    gc[2] = c2
+    return cnt
+
+
+@numba.njit(cache=True, nogil=True)
+def _region_mean(gc, gh, cnt, nb, hog_scale):
+    """g_c = Σ Lab / count and g_h = ``_hog_finish`` of a ``_region_sum`` (cnt > 0)."""
+    for c in range(3):
+        gc[c] /= cnt
+    _hog_finish(gh, nb, hog_scale)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -214,38 +281,77 @@ def _region_stats(lab, hb, hm, x0, y0, lab2, hb2, hm2, x1, y1, ulo, uhi, vlo, vh
     """
     H0, W0 = hb.shape
     H1, W1 = hb2.shape
-    for c in range(3):
-        gc0[c] = 0.0
-        gc1[c] = 0.0
-    for b in range(nb):
-        gh0[b] = 0.0
-        gh1[b] = 0.0
-    cnt = 0
-    for v in range(vlo, vhi + 1):
+    cnt = _region_sum(lab, hb, hm, x0, y0, x1, y1, H1, W1, ulo, uhi, vlo, vhi, nb, gc0, gh0)
+    _region_sum(lab2, hb2, hm2, x1, y1, x0, y0, H0, W0, ulo, uhi, vlo, vhi, nb, gc1, gh1)
+    if cnt > 0:
+        _region_mean(gc0, gh0, cnt, nb, hog_scale)
+        _region_mean(gc1, gh1, cnt, nb, hog_scale)
+    return cnt
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_sums(lab, hb, hm, x0, y0, x1, y1, H1, W1, h, rg, nb, gc, gh, cnt):
+    """``_region_sum`` of both overlap regions of the window around (x0, y0), in one pass.
+
+    rg (2, 4) int64: region t's offsets (ulo, uhi, vlo, vhi) within the window
+    [−h, h]² (uhi < ulo: no region). Writes gc (2, 3), gh (2, nb) float64 and
+    cnt (2,) int64. Each region's sums take its pixels in the same row-major
+    order as ``_region_sum``, so they are the same; the two regions share the
+    loads and their additions interleave (independent chains).
+    """
+    H0, W0 = hb.shape
+    a0 = 0.0
+    a1 = 0.0
+    a2 = 0.0
+    b0 = 0.0
+    b1 = 0.0
+    b2 = 0.0
+    na = 0
+    nb_ = 0
+    for t in range(2):
+        for b in range(nb):
+            gh[t, b] = 0.0
+    for v in range(-h, h + 1):
         ya = y0 + v
         yb = y1 + v
         if ya < 0 or ya >= H0 or yb < 0 or yb >= H1:
             continue
-        for u in range(ulo, uhi + 1):
+        ra = rg[0, 2] <= v <= rg[0, 3]
+        rb = rg[1, 2] <= v <= rg[1, 3]
+        if not (ra or rb):
+            continue
+        for u in range(-h, h + 1):
             xa = x0 + u
             xb = x1 + u
             if xa < 0 or xa >= W0 or xb < 0 or xb >= W1:
                 continue
-            cnt += 1
-            for c in range(3):
-                gc0[c] += lab[ya, xa, c]
-                gc1[c] += lab2[yb, xb, c]
-            if hb[ya, xa] >= 0:
-                gh0[hb[ya, xa]] += hm[ya, xa]
-            if hb2[yb, xb] >= 0:
-                gh1[hb2[yb, xb]] += hm2[yb, xb]
-    if cnt > 0:
-        for c in range(3):
-            gc0[c] /= cnt
-            gc1[c] /= cnt
-        _hog_finish(gh0, nb, hog_scale)
-        _hog_finish(gh1, nb, hog_scale)
-    return cnt
+            l0 = lab[ya, xa, 0]
+            l1 = lab[ya, xa, 1]
+            l2 = lab[ya, xa, 2]
+            bin_ = hb[ya, xa]
+            mag = hm[ya, xa]
+            if ra and rg[0, 0] <= u <= rg[0, 1]:
+                na += 1
+                a0 += l0
+                a1 += l1
+                a2 += l2
+                if bin_ >= 0:
+                    gh[0, bin_] += mag
+            if rb and rg[1, 0] <= u <= rg[1, 1]:
+                nb_ += 1
+                b0 += l0
+                b1 += l1
+                b2 += l2
+                if bin_ >= 0:
+                    gh[1, bin_] += mag
+    gc[0, 0] = a0
+    gc[0, 1] = a1
+    gc[0, 2] = a2
+    gc[1, 0] = b0
+    gc[1, 1] = b1
+    gc[1, 2] = b2
+    cnt[0] = na
+    cnt[1] = nb_
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -266,14 +372,83 @@ def _hog_bin(gray, x, y, nb):
 
 
 @numba.njit(cache=True, nogil=True)
-def _refresh_bins(gray, nb, hb, hm, x0, x1, y0, y1):
-    """Recompute the gradient bins on rows y0..y1, columns x0..x1 (clipped)."""
+def _mark_changes(gray, src_gray, s, qx, qy, x, y, half, chg):
+    """Before ``_write_patch``: which reference pixels the write will change.
+
+    chg (2·half + 3)² uint8, the refresh box of ``_refresh_written`` (centre at
+    (x, y)): 1 where the window's gray value differs from the source's, else 0.
+    Same window and border rule as ``_write_patch``. Returns the bounding box of
+    the changes as window offsets (v0, v1, w0, w1); v0 > v1 when none.
+    """
     H, W = gray.shape
-    for y in range(max(y0, 0), min(y1, H - 1) + 1):
-        for x in range(max(x0, 0), min(x1, W - 1) + 1):
-            b, m = _hog_bin(gray, x, y, nb)
-            hb[y, x] = b
-            hm[y, x] = m
+    o = half + 1
+    for i in range(2 * o + 1):
+        for j in range(2 * o + 1):
+            chg[i, j] = 0
+    v0, v1, w0, w1 = o, -o, o, -o
+    for v in range(-half, half + 1):
+        ry = y + v
+        sy = qy + v
+        if ry < 0 or ry >= H or sy < 0 or sy >= H:
+            continue
+        for w_ in range(-half, half + 1):
+            rx = x + w_
+            sx = qx + w_
+            if rx < 0 or rx >= W or sx < 0 or sx >= W:
+                continue
+            if gray[ry, rx] != src_gray[s, sy, sx]:
+                chg[v + o, w_ + o] = 1
+                v0 = min(v0, v)
+                v1 = max(v1, v)
+                w0 = min(w0, w_)
+                w1 = max(w1, w_)
+    return v0, v1, w0, w1
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _changed(chg, x, y, o, px, py):
+    """Whether ``_mark_changes`` marked (px, py); outside its box nothing changed."""
+    i = py - y + o
+    j = px - x + o
+    return 0 <= i <= 2 * o and 0 <= j <= 2 * o and chg[i, j] != 0
+
+
+@numba.njit(cache=True, nogil=True)
+def _refresh_written(gray, nb, hb, hm, hb_s, hm_s, s, qx, qy, x, y, half, chg, box):
+    """The gradient bins after a patch write: exactly those of ``_gradient_bins``
+    on the box of half + 1 around (x, y) (the pixels whose bin can change),
+    computing few of them.
+
+    A pixel's bin reads only its four (clamped) neighbours' gray values, so it is
+    kept where none of them changed (chg of ``_mark_changes``); where all four
+    are copies of the source's, unclamped on both sides (the window's interior,
+    away from both images' borders), it is the source's bin at the copied pixel
+    (hb_s, hm_s of source s, the same function of the same four values);
+    elsewhere it is recomputed. box: the changes' bounding box from
+    ``_mark_changes``; only pixels within one of it can need anything.
+    """
+    H, W = gray.shape
+    o = half + 1
+    v0, v1, w0, w1 = box
+    for ry in range(max(y + v0 - 1, 0), min(y + v1 + 1, H - 1) + 1):
+        for rx in range(max(x + w0 - 1, 0), min(x + w1 + 1, W - 1) + 1):
+            if not (_changed(chg, x, y, o, max(rx - 1, 0), ry)
+                    or _changed(chg, x, y, o, min(rx + 1, W - 1), ry)
+                    or _changed(chg, x, y, o, rx, max(ry - 1, 0))
+                    or _changed(chg, x, y, o, rx, min(ry + 1, H - 1))):
+                continue
+            v = ry - y
+            w_ = rx - x
+            sx = qx + w_
+            sy = qy + v
+            if (-half < v < half and -half < w_ < half and 0 < rx < W - 1 and 0 < ry < H - 1
+                    and 0 < sx < W - 1 and 0 < sy < H - 1):
+                hb[ry, rx] = hb_s[s, sy, sx]
+                hm[ry, rx] = hm_s[s, sy, sx]
+            else:
+                b, m = _hog_bin(gray, rx, ry, nb)
+                hb[ry, rx] = b
+                hm[ry, rx] = m
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
@@ -294,19 +469,37 @@ def _gradient_bins(gray, nb):
 
 @numba.njit(cache=True, nogil=True)
 def _hog_finish(h, nb, scale):
-    """Rotate so the dominant bin comes first (rotation invariance), L2 → ×scale."""
+    """Rotate so the dominant bin comes first (rotation invariance), L2 → ×scale.
+
+    The rotation is done in place (three reversals), so no temporary is allocated.
+    """
     best = 0
     for b in range(1, nb):
         if h[b] > h[best]:
             best = b
-    tmp = np.empty(nb)
+    if best > 0:
+        _reverse(h, 0, best)
+        _reverse(h, best, nb)
+        _reverse(h, 0, nb)
     n = 0.0
     for b in range(nb):
-        tmp[b] = h[(b + best) % nb]
-        n += tmp[b] * tmp[b]
+        n += h[b] * h[b]
     n = math.sqrt(n)
     for b in range(nb):
-        h[b] = tmp[b] / n * scale if n > 0.0 else 0.0
+        h[b] = h[b] / n * scale if n > 0.0 else 0.0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _reverse(h, lo, hi):
+    """Reverse h[lo:hi] in place."""
+    i = lo
+    j = hi - 1
+    while i < j:
+        t = h[i]
+        h[i] = h[j]
+        h[j] = t
+        i += 1
+        j -= 1
 
 
 # --- Sec. 3.2.1: candidates P, B ----------------------------------------------------
@@ -379,25 +572,68 @@ def _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy, cB, slot
 
 
 @numba.njit(cache=True, nogil=True)
-def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack):
+def _edge_bounds(pf):
+    """SIFT distances that settle an edge 𝓑 ≤ ε of the DBSCAN graph without f_c.
+
+    𝓑 = (1 − λ4 e_c) − λ5 e_g is computed left to right, with e_c = S_e(f_c),
+    e_g = S_e(f_g) in [0, 1]. Rounding is monotone, so 𝓑 ≤ 1 − λ5 e_g and
+    𝓑 ≥ (1 − λ4) − λ5 e_g, both evaluated with the same operations; e_g falls
+    as the integer SIFT distance g grows. Returns (g_in, g_out): g ≤ g_in ⇒
+    𝓑 ≤ ε (the upper bound is already ≤ ε) and g ≥ g_out ⇒ 𝓑 > ε (the lower
+    bound is already > ε), whatever f_c, so ``_cluster`` skips the Lab term and
+    both exponentials there: the same graph as from 𝓑 itself. Found by
+    bisection on the exact expressions, then moved 16 inwards, so no
+    one-ulp wobble of exp next to a threshold can matter.
+    """
+    lam4, lam5, eps, u = pf[LAM4], pf[LAM5], pf[EPS], pf[SIFT_UNIT]
+    gmax = np.int64(128 * 255 * 255)
+    lo, hi = np.int64(-1), gmax + 1  # g_in: the last g with 1 − λ5 e_g ≤ ε
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if 1.0 - lam5 * _se(float(mid) * u * u, pf[SIG_G]) <= eps:
+            lo = mid
+        else:
+            hi = mid
+    g_in = lo - 16
+    lo, hi = np.int64(-1), gmax + 1  # g_out: the first g with (1 − λ4) − λ5 e_g > ε
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if (1.0 - lam4) - lam5 * _se(float(mid) * u * u, pf[SIG_G]) > eps:
+            hi = mid
+        else:
+            lo = mid
+    return g_in, hi + 16
+
+
+@numba.njit(cache=True, nogil=True)
+def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, labels, is_core, stack):
     """DBSCAN of P on 𝓑(x1, x2) = 1 − λ4 S_e(f_c) − λ5 S_e(f_g), Eq. (DB_cost).
 
-    Mirrors ``reference.cluster``. Fills D (n × n) and labels (−1 = noise);
-    returns the number of clusters k.
+    Mirrors ``reference.cluster``. DBSCAN reads 𝓑 only as 𝓑 ≤ ε, so A (n × n
+    bool) gets that; 𝓑 itself is computed only where the SIFT distance alone
+    does not settle it (``_edge_bounds`` gives g_in, g_out), which is exact.
+    Fills A and labels (−1 = noise); returns the number of clusters k.
     """
     if n == 0:
         return 0
-    lam4, lam5 = pf[LAM4], pf[LAM5]
+    lam4, lam5, eps = pf[LAM4], pf[LAM5], pf[EPS]
     u = pf[SIFT_UNIT]
     for i in range(n):
-        D[i, i] = 1.0 - lam4 - lam5
+        A[i, i] = 1.0 - lam4 - lam5 <= eps
+        gi = fg_s[cs[i], cy[i], cx[i]]
         for j in range(i + 1, n):
-            dc = _lab_d2(fc_s[cs[i]], cy[i], cx[i], fc_s[cs[j]], cy[j], cx[j])
-            dg = float(_sift_d2(fg_s[cs[i]], cy[i], cx[i], fg_s[cs[j]], cy[j], cx[j]))
-            d = 1.0 - lam4 * _se(dc, pf[SIG_C]) - lam5 * _se(dg * u * u, pf[SIG_G])
-            D[i, j] = d
-            D[j, i] = d
-    return _dbscan(D, n, pf[EPS], pi[MIN_PTS], labels, is_core, stack)
+            g = _sift_d2(gi, fg_s[cs[j], cy[j], cx[j]])
+            if g <= g_in:
+                e = True
+            elif g >= g_out:
+                e = False
+            else:
+                dc = _lab_d2(fc_s[cs[i]], cy[i], cx[i], fc_s[cs[j]], cy[j], cx[j])
+                d = 1.0 - lam4 * _se(dc, pf[SIG_C]) - lam5 * _se(float(g) * u * u, pf[SIG_G])
+                e = d <= eps
+            A[i, j] = e
+            A[j, i] = e
+    return _dbscan_adj(A, n, pi[MIN_PTS], labels, is_core, stack)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -425,9 +661,10 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
     for i in range(n):
         if labels[i] == m:
             cnt += 1
+    G = fhat_g.shape[0]
     for c in range(3):
         fhat_c[c] = 0.0
-    for j in range(fhat_g.shape[0]):
+    for j in range(G):
         fhat_g[j] = 0.0
     for i in range(n):
         if labels[i] != m:
@@ -435,15 +672,18 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
         w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
         for c in range(3):
             fhat_c[c] += w * fc_s[cs[i], cy[i], cx[i], c]
-        for j in range(fhat_g.shape[0]):
-            fhat_g[j] += w * (fg_s[cs[i], cy[i], cx[i], j] * u)
+        # through a 1-D view: the loop then vectorises (same operations per element)
+        g = fg_s[cs[i], cy[i], cx[i]]
+        for j in range(G):
+            fhat_g[j] += w * (g[j] * u)
     dc = 0.0
     for c in range(3):
         t = fc_r[y, x, c] - fhat_c[c]
         dc += t * t
     dg = 0.0
-    for j in range(fhat_g.shape[0]):
-        t = fg_r[y, x, j] * u - fhat_g[j]
+    gr = fg_r[y, x]
+    for j in range(G):
+        t = gr[j] * u - fhat_g[j]
         dg += t * t
     M = pf[LAM4] * _se(dc, pf[SIG_C]) + pf[LAM5] * _se(dg, pf[SIG_G])
     return m, bm, M, dg
@@ -466,44 +706,86 @@ def _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf,
     Patches within ``tie_tol`` of the best tie; the tie goes to the smallest
     λ4‖f̂_c − f_c‖² + λ5‖f̂_g − f_g‖² (q̂), first in candidate order.
     Fills score[:n]; returns (index of q*, best score, number tied).
+
+    The reference's side of an overlap depends on q only through which pixels
+    fall outside q's source; for a q whose window lies inside its source it is
+    the same for every q, so it is computed once, and q's side of both
+    overlaps in one pass over its window (``_window_sums``; the same sums in
+    the same order: exact).
     """
     H, W = hb_r.shape
+    Hs, Ws = hb_s.shape[1], hb_s.shape[2]
     h = pi[P] // 2
     nb = pi[HOG_BINS]
     u = pf[SIFT_UNIT]
+    hog_scale = pf[HOG_SCALE]
     use_epi = pi[USE_EPI] != 0
     use_hog = pi[USE_HOG] != 0
+    # overlap t with the neighbour patch t: window offsets (ulo, uhi, vlo, vhi),
+    # empty (uhi < ulo) where the neighbour is outside the image
+    rg = np.empty((2, 4), np.int64)
+    for t in range(2):
+        dxn = ndx0 if t == 0 else ndx1
+        dyn = ndy0 if t == 0 else ndy1
+        rg[t, 0] = max(-h, dxn - h)
+        rg[t, 1] = min(h, dxn + h)
+        rg[t, 2] = max(-h, dyn - h)
+        rg[t, 3] = min(h, dyn + h)
+        if not (0 <= x + dxn < W and 0 <= y + dyn < H):
+            rg[t, 1] = rg[t, 0] - 1
+    # g_c, g_h and count per overlap: the reference's (for q inside its source), q's
+    ref_c = np.empty((2, 3))
+    ref_h = np.empty((2, nb))
+    ref_n = np.zeros(2, np.int64)
+    q_c = np.empty((2, 3))
+    q_h = np.empty((2, nb))
+    q_n = np.zeros(2, np.int64)
+    _window_sums(lab, hb_r, hm_r, x, y, x, y, H, W, h, rg, nb, ref_c, ref_h, ref_n)
+    for t in range(2):
+        if ref_n[t] > 0:
+            _region_mean(ref_c[t], ref_h[t], ref_n[t], nb, hog_scale)
     best = -1.0e300
     for i in range(n):
         score[i] = -1.0e300
         if labels[i] != m:
             continue
         s = cs[i]
+        inside = 0 <= cx[i] - h and cx[i] + h < Ws and 0 <= cy[i] - h and cy[i] + h < Hs
+        if inside:
+            _window_sums(src_lab[s], hb_s[s], hm_s[s], cx[i], cy[i], x, y, H, W, h, rg, nb,
+                         q_c, q_h, q_n)
         sc = 0.0
         wsum = 0.0
         for t in range(2):
-            dxn = ndx0 if t == 0 else ndx1
-            dyn = ndy0 if t == 0 else ndy1
-            if not (0 <= x + dxn < W and 0 <= y + dyn < H):
+            if rg[t, 1] < rg[t, 0]:
                 continue  # the neighbour patch does not exist at the border
-            ulo = max(-h, dxn - h)
-            uhi = min(h, dxn + h)
-            vlo = max(-h, dyn - h)
-            vhi = min(h, dyn + h)
-            cnt = _region_stats(src_lab[s], hb_s[s], hm_s[s], cx[i], cy[i], lab, hb_r, hm_r,
-                                x, y,
-                                ulo, uhi, vlo, vhi, nb, pf[HOG_SCALE], gc0, gh0, gc1, gh1)
+            if inside:
+                cnt = q_n[t]
+                gq_c = q_c[t]
+                gq_h = q_h[t]
+                if cnt > 0:
+                    _region_mean(gq_c, gq_h, cnt, nb, hog_scale)
+                rc = ref_c[t]
+                rh = ref_h[t]
+            else:
+                cnt = _region_stats(src_lab[s], hb_s[s], hm_s[s], cx[i], cy[i], lab, hb_r,
+                                    hm_r, x, y, rg[t, 0], rg[t, 1], rg[t, 2], rg[t, 3], nb,
+                                    hog_scale, gc0, gh0, gc1, gh1)
+                gq_c = gc0
+                gq_h = gh0
+                rc = gc1
+                rh = gh1
             if cnt == 0:
                 continue
             d = 0.0
             for c in range(3):
-                d += (gc0[c] - gc1[c]) ** 2
+                d += (gq_c[c] - rc[c]) ** 2
             sc += pf[LAM6] * _se(d, pf[SIG_C])
             wsum += pf[LAM6]
             if use_hog:
                 d = 0.0
                 for b in range(nb):
-                    d += (gh0[b] - gh1[b]) ** 2
+                    d += (gq_h[b] - rh[b]) ** 2
                 sc += pf[LAM7] * _se(d, pf[SIG_H])
                 wsum += pf[LAM7]
         if use_epi and hasF[s]:
@@ -647,10 +929,10 @@ def _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi, x, y,
 @numba.njit(cache=True, nogil=True)
 def _work_arrays(K, G):
     """Per-pixel work arrays of a decision: candidates (cs, cx, cy, cB, slot),
-    DBSCAN (D, labels, is_core, stack), b_k and f̂ (bk, fhat_c, fhat_g; G = the
+    DBSCAN (A, the ε-graph; labels, is_core, stack), b_k and f̂ (bk, fhat_c, fhat_g; G = the
     SIFT length), and the scan neighbours (nx_, ny_, ox_, oy_)."""
     return (np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64),
-            np.empty(K, np.float64), np.empty(K, np.int64), np.empty((K, K), np.float64),
+            np.empty(K, np.float64), np.empty(K, np.int64), np.empty((K, K), np.bool_),
             np.empty(K, np.int64), np.empty(K, np.bool_), np.empty(K * K + 1, np.int64),
             np.empty(K + 1, np.float64), np.empty(3, np.float64), np.empty(G, np.float64),
             np.empty(2, np.int64), np.empty(2, np.int64), np.empty(2, np.int64),
@@ -658,19 +940,20 @@ def _work_arrays(K, G):
 
 
 @numba.njit(cache=True, nogil=True)
-def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1, as_set,
-              work, Mmap, Bmap, Kmap):
+def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, ndx0, ndy0, ndx1,
+              ndy1, as_set, work, Mmap, Bmap, Kmap):
     """``_candidates`` → ``_cluster`` → ``_decide`` at (x, y); writes M, b_m and
-    (|P|, k, |A_m|, sources of A_m) into Mmap, Bmap, Kmap at (y, x).
+    (|P|, k, |A_m|, sources of A_m) into Mmap, Bmap, Kmap at (y, x). g_in, g_out
+    from ``_edge_bounds(pf)``.
 
     Returns (n, nn, k, m, b_m, M, ‖f_g(x_r) − f̂_g‖²); m = −1 and M = NaN when no
     cluster formed. The candidates, labels and f̂ stay in ``work``.
     """
-    (cs, cx, cy, cB, slot, D, labels, is_core, stack, bk, fhat_c, fhat_g,
+    (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
      nx_, ny_, ox_, oy_) = work
     n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
                         cB, slot, nx_, ny_, ox_, oy_)
-    k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, D, labels, is_core, stack)
+    k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, labels, is_core, stack)
     M = np.nan
     m = -1
     bm = 0.0
@@ -715,11 +998,12 @@ def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, pre
         ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
     else:
         ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
+    g_in, g_out = _edge_bounds(pf)
     for y in numba.prange(H):
         work = _work_arrays(K, fg_r.shape[2])
         for x in range(W):
-            _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1,
-                      as_set, work, preM, preB, preK)
+            _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, ndx0, ndy0,
+                      ndx1, ndy1, as_set, work, preM, preB, preK)
 
 
 # --- Algorithm 1: one chunk of rows of a scan ------------------------------------------
@@ -765,13 +1049,15 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
     # per-pixel work arrays
     work = _work_arrays(K, fg_r.shape[2])
-    (cs, cx, cy, cB, slot, D, labels, is_core, stack, bk, fhat_c, fhat_g,
+    g_in, g_out = _edge_bounds(pf)
+    (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
      nx_, ny_, ox_, oy_) = work
     score = np.empty(K, np.float64)
     gc0 = np.empty(3)
     gc1 = np.empty(3)
     gh0 = np.empty(nb)
     gh1 = np.empty(nb)
+    chg = np.empty((2 * half + 3, 2 * half + 3), np.uint8)
     # the two scan neighbours (x + dx, y + dy): left/up, or right/down
     if direction > 0:
         ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
@@ -810,9 +1096,9 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                         stats[2] += 1
                     continue
             # ---- decision (Sec. 3.2.1) --------------------------------------------
-            n, nn, k, m, bm, M, cdist = _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, x,
-                                                  y, ndx0, ndy0, ndx1, ndy1, as_set, work,
-                                                  Mmap, Bmap, Kmap)
+            n, nn, k, m, bm, M, cdist = _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in,
+                                                  g_out, x, y, ndx0, ndy0, ndx1, ndy1, as_set,
+                                                  work, Mmap, Bmap, Kmap)
             dynamic = k > 0 and M <= pf[T_R]
             if k == 0:
                 stats[2] += 1
@@ -828,10 +1114,11 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                 s = cs[ib]
                 qx = cx[ib]
                 qy = cy[ib]
+                box = _mark_changes(gray, src_gray, s, qx, qy, x, y, half, chg)
                 _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y,
                              half)
-                _refresh_bins(gray, nb, hb_r, hm_r, x - half - 1, x + half + 1,
-                              y - half - 1, y + half + 1)
+                _refresh_written(gray, nb, hb_r, hm_r, hb_s, hm_s, s, qx, qy, x, y, half, chg,
+                                 box)
                 for c in range(3):
                     fc_r[y, x, c] = fc_s[s, qy, qx, c]
                 for j in range(fg_r.shape[2]):
