@@ -328,7 +328,9 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("--pixel", type=parse_xy, metavar="X,Y", help="pixel to explain")
     i.add_argument("--failures", action="store_true", help="list the worst FP/FN regions")
     i.add_argument("--top", type=int, default=10, help="how many failures (default 10)")
-    i.add_argument("--root", default="", help="entity root of the run (--compare recordings)")
+    i.add_argument("--root", default="",
+                   help="which run of a --compare recording: runs/main or runs/compare (or "
+                        "main / compare); a plain recording has none")
     i.set_defaults(fn=cmd_inspect)
 
     x = sub.add_parser("export", help="render the progressive removal to a GIF or MP4",
@@ -341,7 +343,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output .gif or .mp4")
     x.add_argument("--fps", type=float, default=10.0, help="frames per second (default 10)")
     x.add_argument("--max-side", type=int, default=480, help="longest side in px (default 480)")
-    x.add_argument("--root", default="", help="entity root of the run")
+    x.add_argument("--root", default="",
+                   help="which run of a --compare recording: runs/main or runs/compare (or "
+                        "main / compare); a plain recording has none")
     x.set_defaults(fn=cmd_export)
     return ap
 

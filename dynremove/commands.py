@@ -559,7 +559,8 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
     return args.viewer("sink").RerunSink(None if rec is not None else args.record,
                      record_every_rows=getattr(args, "record_every_rows", None),
                      detail=getattr(args, "record_detail", "default"),
-                     gt_mask=gt, gt_background=gt_background, rec=rec, root=root)
+                     gt_mask=gt, gt_background=gt_background, rec=rec, root=root,
+                     photo_size=None if iset is None else tuple(iset.original_size))
 
 
 def stage_labels(params: Params) -> dict[str, str]:

@@ -28,6 +28,7 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
                   root: str = "") -> list[np.ndarray]:
     """Montage frames (BGR uint8), one per recorded snapshot step."""
     store = vi.load_store(path_rrd)
+    root = vi.resolve_root(path_rrd, root)  # a --compare recording: which of its runs
     p = P.Paths(root)
     snaps = vi.read_snapshots(path_rrd, root=root)
     info = vi.read_run_info(path_rrd, root=root)

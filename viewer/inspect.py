@@ -57,10 +57,9 @@ def read_rrd_tolerant(path: str):
         print(f"dynremove: note: {path}: {msg}", file=sys.stderr)
 
     def has_scan(store) -> None:
-        ep = store.schema().entity_paths()
-        if not any(e.endswith(P.REFERENCE_IMAGE) for e in ep):
-            raise InputError(f"{path}: recording cut before the first snapshot of a scan: "
-                             "nothing to inspect")
+        if not any(scans_recorded(store, r) for r in runs_in(store) or [""]):
+            raise InputError(f"{path}: recording cut before the first scan recorded "
+                             "anything: nothing to inspect")
 
     with open(path, "rb") as f:
         data = f.read()
@@ -70,6 +69,9 @@ def read_rrd_tolerant(path: str):
         warnings.simplefilter("always")
         try:
             store = RrdReader(path).stream().collect()
+        except Exception:  # noqa: BLE001 - damaged: read the complete messages below
+            store = None
+        if store is not None:  # (the checks below raise InputError: not "damaged")
             footer = any("footer" in str(w.message) for w in caught)
             if _interrupted_note(store, path, note):
                 return store
@@ -78,8 +80,6 @@ def read_rrd_tolerant(path: str):
                 note("no footer (the run was interrupted or the file cut): read what "
                      "was recorded")
             return store
-        except Exception:  # noqa: BLE001 - damaged: read the complete messages below
-            pass
         pos = n = 0
         pos = 12  # FourCC, version, options; then (kind u64, length u64, payload)*
         while pos + 16 <= len(data):
@@ -107,28 +107,109 @@ def read_rrd_tolerant(path: str):
     return store
 
 
-def interruption(store) -> str | None:
-    """"interrupted at scan S, step N" (or "... before the scans began") when the
-    recording is of an interrupted run (``RerunSink.interrupted``), else None."""
+def runs_in(store) -> list[str]:
+    """The roots of the runs a recording holds: ``[""]`` for a plain run,
+    ``["runs/main", "runs/compare"]`` for ``run --compare`` (each run logs
+    ``<root>/run/info``, or at least ``<root>/run/interrupted``); a root named
+    ``main`` first, the others sorted."""
+    roots = set()
     for ent in store.schema().entity_paths():
         ent = "/" + str(ent).strip("/")
-        if ent.endswith("/" + P.RUN_INTERRUPTED):
-            msg = _static_values(store, ent).get("message")
-            if msg:
-                return str(msg[0])
+        for leaf in (P.RUN_INFO, P.RUN_INTERRUPTED):
+            if ent.endswith("/" + leaf):
+                roots.add(ent[:-len(leaf) - 1].strip("/"))
+    return sorted(roots, key=lambda r: (r.rsplit("/", 1)[-1] != "main", r))
+
+
+# Entities only a scan writes: its chunks (the scan line), its events, its maps.
+_SCAN_ENTITIES = (P.REFERENCE_SCANLINE, P.EVENTS_DECISIONS, P.EVENTS_REPLACEMENTS,
+                  P.EVENTS_UPDATES, P.scan_map("M"))
+
+
+def scans_recorded(store, root: str = "") -> bool:
+    """Whether the run under ``root`` recorded anything of a scan (a chunk of one:
+    the scan line, events, or a scan's maps). The snapshot that ``start`` logs at
+    step 0, before the scans, does not count: a run interrupted between ``start``
+    and the first scan has nothing to inspect, however it was stopped."""
+    p = P.Paths(root)
+    want = {p(e) for e in _SCAN_ENTITIES}
+    return any("/" + str(e).strip("/") in want for e in store.schema().entity_paths())
+
+
+def _interruption_values(store, root: str = "") -> dict[str, Any]:
+    vals = _static_values(store, P.Paths(root)(P.RUN_INTERRUPTED))
+    return {k: v[0] for k, v in vals.items() if v}
+
+
+def interruption(store, root: str | None = None) -> str | None:
+    """"interrupted at scan S, step N" (or "... before the scans began") when the
+    recording is of an interrupted run (``RerunSink.interrupted``), else None.
+    ``root`` None: the first interrupted run of the recording, whatever its root."""
+    for r in runs_in(store) if root is None else [root.strip("/")]:
+        msg = _interruption_values(store, r).get("message")
+        if msg:
+            return str(msg)
     return None
 
 
 def _interrupted_note(store, path: str, note) -> bool:
-    """One note saying where an interrupted run ends; InputError when it ended before
-    anything inspectable was recorded. False: not an interrupted run."""
-    msg = interruption(store)
-    if msg is None:
+    """One note per interrupted run saying where it ends; InputError when nothing of
+    a scan was recorded (decided on what the recording holds, not on how it ended).
+    False: no interrupted run."""
+    roots = runs_in(store)
+    cut = [(r, m) for r in roots if (m := interruption(store, r))]
+    if not cut:
         return False
-    if not any(str(e).endswith(P.REFERENCE_IMAGE) for e in store.schema().entity_paths()):
-        raise InputError(f"{path}: the run was {msg}: nothing to inspect")
-    note(f"the run was {msg}: read what was recorded")
+    if not any(scans_recorded(store, r) for r in roots):
+        raise InputError(f"{path}: the run was {cut[0][1]}: nothing to inspect")
+    for r, msg in cut:
+        run = f"the run under {r}" if r else "the run"
+        note(f"{run} was {msg}: " + ("read what was recorded" if scans_recorded(store, r)
+                                     else "nothing to inspect there"))
     return True
+
+
+def _some_runs(roots: list[str]) -> str:
+    names = [r or "the top level (no --root)" for r in roots]
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def resolve_root(path: str | Path, root: str = "") -> str:
+    """The root of the run to read, checked against the runs the recording holds.
+
+    ``root`` as given (``runs/main``, ``/runs/main/``), or its last part when that
+    names one run (``main``); empty: the recording's only run. A ``--compare``
+    recording holds two runs (``runs/main``, ``runs/compare``): without ``root``
+    it raises InputError naming them, as it does for a root it does not hold.
+    """
+    roots = runs_in(load_store(path))
+    want = root.strip("/")
+    if not roots or want in roots:
+        return want
+    if not want:
+        if len(roots) == 1:
+            return roots[0]
+        n = {2: "two", 3: "three"}.get(len(roots), str(len(roots)))
+        raise InputError(f"{path} holds {n} runs, {_some_runs(roots)}: pass "
+                         + " or ".join(f"--root {r}" for r in roots))
+    tail = [r for r in roots if r.rsplit("/", 1)[-1] == want]
+    if len(tail) == 1:
+        return tail[0]
+    raise InputError(f"no run under --root {root}; {path} holds: " + ", ".join(
+        r or "one run at the top level (no --root)" for r in roots)
+        + (f" (pass --root {roots[0]})" if len(roots) == 1 and roots[0] else ""))
+
+
+def check_scans(path: str | Path, root: str = "") -> None:
+    """InputError "nothing to inspect" when the run under ``root`` recorded no scan."""
+    store = load_store(path)
+    if scans_recorded(store, root):
+        return
+    msg = interruption(store, root)
+    run = f"the run under {root}" if root else "the run"
+    raise InputError(f"{path}: {run} was {msg}: nothing to inspect" if msg else
+                     f"{path}: {run} recorded no scan (cut before the first one): "
+                     "nothing to inspect")
 
 
 def load_store(path: str | Path):
@@ -468,11 +549,12 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     ``n_candidates`` |P|, ``n_clusters`` k, ``win_size`` |A_m|, ``win_sources``
     (source names) and ``b_m`` (None in recordings made before these maps).
     """
+    root = resolve_root(path, root)
     info = read_run_info(path, root=root)
     H, W = int(info.get("height", 0) or 0), int(info.get("width", 0) or 0)
     if H and W and not (0 <= x < W and 0 <= y < H):
-        raise InputError(f"pixel ({x}, {y}) is outside the {W}x{H} image "
-                         f"(x in 0..{W - 1}, y in 0..{H - 1})")
+        raise InputError(outside_message(info, x, y))
+    check_scans(path, root)
     names = info.get("source_names", [])
     params = info.get("params", {})
     t_r = float(params.get("t_r", np.nan))
@@ -486,7 +568,10 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     cover = (np.abs(rep["x"] - x) <= h) & (np.abs(rep["y"] - y) <= h) & ~here
     L = read_final_dynamic(path, root=root)
     gt = read_gt_mask(path, root=root)
-    inside = L is not None and 0 <= y < L.shape[0] and 0 <= x < L.shape[1]
+    if not (H and W) and L is not None:
+        H, W = L.shape
+    # the per-scan maps and the selection are read for an interrupted run too
+    inside = 0 <= y < H and 0 <= x < W
     stages = {k: bool(v[y, x]) for k, v in read_stages(path, root=root).items()} \
         if inside else {}
 
@@ -503,8 +588,7 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             return None if a is None else a[y, x]
         v = at_(m["verdict"])
         scans.append(dict(
-            scan=m["scan"], step=visit_step(m["scan"], x, y, L.shape[0], L.shape[1],
-                                            direction=m["direction"]),
+            scan=m["scan"], step=visit_step(m["scan"], x, y, H, W, direction=m["direction"]),
             direction=m["direction"], M=float(m["M"][y, x]),
             verdict={0: "not visited", 1: "static", 2: "dynamic",
                      3: "undecided"}.get(int(v), "?") if v is not None else "?",
@@ -530,10 +614,67 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
         updates=[dict(scan=int(u["scan"]), step=int(u["step"]), src=int(u["src"]),
                       case=int(u["case"]), new_x=int(u["new_x"]), new_y=int(u["new_y"]),
                       new_C=float(u["new_C"])) for u in upd[(upd["x"] == x) & (upd["y"] == y)]],
-        final_dynamic=bool(L[y, x]) if inside else None,
+        final_dynamic=bool(L[y, x]) if L is not None and inside else None,
         stages=stages,
         gt=bool(gt[y, x]) if gt is not None and inside else None,
+        interrupted=_where_cut(load_store(path), root, x, y, H, W),
+        photo=photo_size(info),
     )
+
+
+def _where_cut(store, root: str, x: int, y: int, H: int, W: int) -> dict[str, Any] | None:
+    """Where an interrupted run ended, and whether its last scan had reached the pixel:
+    ``message``, ``scan``, ``step``, ``scans_began``, ``visit_step`` (when the last
+    scan would have visited the pixel) and ``reached``; None for a finished run."""
+    v = _interruption_values(store, root)
+    if not v.get("message"):
+        return None
+    out = dict(message=str(v["message"]), scan=int(v.get("scan", 0)),
+               step=int(v.get("step", 0)), scans_began=bool(v.get("scans_began", False)))
+    if out["scans_began"] and H and W:
+        out["visit_step"] = visit_step(out["scan"], x, y, H, W)
+        out["reached"] = out["visit_step"] <= out["step"]
+    return out
+
+
+def photo_size(info: dict[str, Any]) -> tuple[int, int] | None:
+    """(W, H) of the photos as read, when the run recorded them and analysed the
+    photos at another size (``--max-side``); else None."""
+    W0, H0 = int(info.get("photo_width", 0) or 0), int(info.get("photo_height", 0) or 0)
+    W, H = int(info.get("width", 0) or 0), int(info.get("height", 0) or 0)
+    return (W0, H0) if W0 and H0 and W and H and (W0, H0) != (W, H) else None
+
+
+def photo_to_analysis(info: dict[str, Any], x: int, y: int) -> tuple[int, int] | None:
+    """The analysis-image pixel of photo pixel (x, y) (as ``run --probe`` scales it),
+    or None."""
+    ph = photo_size(info)
+    if ph is None:
+        return None
+    W0, H0 = ph
+    W, H = int(info["width"]), int(info["height"])
+    return (min(W - 1, max(0, int(round((x + 0.5) * W / W0 - 0.5)))),
+            min(H - 1, max(0, int(round((y + 0.5) * H / H0 - 0.5)))))
+
+
+def outside_message(info: dict[str, Any], x: int, y: int) -> str:
+    """Why ``--pixel x,y`` is refused: outside the image the run analysed. When the
+    photos were larger and (x, y) lies inside them, the pixel it most likely means."""
+    W, H = int(info["width"]), int(info["height"])
+    msg = (f"pixel ({x}, {y}) is outside the {W}x{H} image (x in 0..{W - 1}, "
+           f"y in 0..{H - 1})")
+    ph = photo_size(info)
+    if ph is None:
+        return msg
+    W0, H0 = ph
+    msg = (f"pixel ({x}, {y}) is outside the {W}x{H} analysis image (x in 0..{W - 1}, "
+           f"y in 0..{H - 1}): --pixel counts in the image the run analysed, as the "
+           f"viewer and --failures do; the photos are {W0}x{H0} (analysed at "
+           f"×{W / W0:.3g})")
+    if 0 <= x < W0 and 0 <= y < H0:
+        qx, qy = photo_to_analysis(info, x, y)
+        msg += f": photo pixel ({x}, {y}) is --pixel {qx},{qy}"
+    return msg
 
 
 def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[str, Any]]:
@@ -546,13 +687,19 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     (the recorded decision inside whose M was most confidently wrong, or None).
     Needs ``gt_mask`` given to the sink and a finished run.
     """
+    root = resolve_root(path, root)
     L = read_final_dynamic(path, root=root)
     gt = read_gt_mask(path, root=root)
+    fix = ("record one with `dynremove run IMAGES --gt MASK --record FILE.rrd` (MASK: the "
+           "reference's ground-truth mask, white = moving)")
     if L is None:
-        raise InputError(f"{path}: the run did not finish (no final mask); --failures "
-                         "needs a finished run recorded with a ground-truth mask")
+        cut = interruption(load_store(path), root)
+        raise InputError(f"{path}: the run did not finish (" + (cut or "no final mask")
+                         + "); --failures needs a finished run recorded with a "
+                         "ground-truth mask: " + fix)
     if gt is None:
-        raise InputError(f"{path}: needs a finished run recorded with a ground-truth mask")
+        raise InputError(f"{path}: --failures compares the final mask with a ground-truth "
+                         "mask, and this run was recorded without one (no --gt): " + fix)
     dec = read_events(path, "decisions", root=root)
     H, W = L.shape
     scan_dirs = [(m["scan"], m["direction"]) for m in read_scan_maps(path, root=root)] or \

@@ -131,6 +131,11 @@ class RerunSink(StepColumns):
         decision, replacement and update is in ``events/*`` and on its chunk's
         ``reference/decisions/...`` entity, and every pixel's decision in
         ``scan_maps/*``: ``inspect`` answers the same.
+    photo_size : (W, H), optional
+        Size of the photos as read, when they were analysed downscaled
+        (``--max-side``): logged in ``run/info`` as ``photo_width`` and
+        ``photo_height``, so that ``inspect --pixel`` can turn a photo pixel it is
+        given by mistake into the analysis pixel it means.
     """
 
     enabled = True
@@ -144,12 +149,15 @@ class RerunSink(StepColumns):
                  gt_mask: np.ndarray | None = None,
                  gt_background: np.ndarray | None = None, root: str = "",
                  rec: rr.RecordingStream | None = None, jpeg_quality: int = 90,
-                 skip_unchanged_images: bool = True, detail: str = "default") -> None:
+                 skip_unchanged_images: bool = True, detail: str = "default",
+                 photo_size: tuple[int, int] | None = None) -> None:
         if rec is None and path is None:
             raise ValueError("path is required unless rec is given")
         if detail not in DETAIL_LEVELS:
             raise ValueError(f"detail must be one of {DETAIL_LEVELS}, got {detail!r}")
         self.detail = detail
+        self.photo = ({} if photo_size is None else
+                      {"photo_width": int(photo_size[0]), "photo_height": int(photo_size[1])})
         self.step_grid = STEP_GRID if detail == "default" else 1
         if record_every_rows is not None and record_every_rows < 1:
             raise ValueError(f"record_every_rows must be >= 1, got {record_every_rows}")
@@ -189,7 +197,7 @@ class RerunSink(StepColumns):
         if self.rec is None:
             return
         p = self.p
-        extra = {} if ref is None else {"ref_index": int(ref)}
+        extra = dict(self.photo, **({} if ref is None else {"ref_index": int(ref)}))
         self.rec.log(p(P.RUN_INFO), rr.AnyValues(height=H, width=W, names=list(names), **extra),
                      static=True)
         if images is not None and ref is not None:
@@ -509,7 +517,8 @@ class RerunSink(StepColumns):
                              step_grid=self.step_grid,
                              versions=json.dumps(info.versions),
                              params=json.dumps(params, default=str),
-                             probes=json.dumps([list(map(int, q)) for q in info.probes])),
+                             probes=json.dumps([list(map(int, q)) for q in info.probes]),
+                             **self.photo),
                 static=True)
         rec.log(p(P.RUN_PARAMS), rr.AnyValues(**{
             k: (v if isinstance(v, (bool, int, float, str)) else str(v))

@@ -52,6 +52,23 @@ def cluster_words(sc: dict[str, Any] | None, d: dict[str, Any] | None,
             f"b_m = Σ B_l = {b_m:.2f}; k = {k} cluster{'s' if k != 1 else ''}")
 
 
+def _not_reached(h: dict[str, Any]) -> str:
+    """The first line for a pixel no recorded scan says anything about."""
+    cut = h.get("interrupted")
+    if cut and cut.get("scans_began") and "visit_step" in cut:
+        where = f"the run was {cut['message']}"
+        if not cut["reached"]:
+            return (f"not reached: {where}, before scan {cut['scan']} came to this pixel "
+                    f"(its step would have been {cut['visit_step']})")
+        return (f"visited by scan {cut['scan']} at step {cut['visit_step']}, but {where} "
+                "before the scan's maps were recorded (at its end); of an unfinished scan "
+                "only the dynamic, probed and sampled decisions are kept, and this pixel "
+                "was none of them")
+    if cut:
+        return f"no scan reached it: the run was {cut['message']}"
+    return "no scan of this recording reached it"
+
+
 _STAGE_WORDS = {"clean": "the L clean-up", "votes": "the border votes",
                 "snap": "GrabCut (snap to edges)", "select": "the fill by selection"}
 
@@ -76,7 +93,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     dyn = [sc for sc in scans if sc["verdict"] == "dynamic"]
     key = dyn[0] if dyn else (scans[0] if scans else None)
     if key is None:
-        lines.append(f"pixel ({x}, {y}): no scan of this recording reached it")
+        lines.append(_not_reached(h))
     else:
         M = key["M"]
         if M != M:
@@ -165,7 +182,6 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     """
     lines = [f"pixel ({h['x']}, {h['y']}): " + verdict_lines(h)[0]]
     lines += ["  " + v for v in verdict_lines(h)[1:]]
-    lines.append("history (jump to a step on the `step` timeline):")
     ev: list[tuple[int, str]] = []
     dec_scans = {d["scan"] for d in h["decisions"]}
     for sc in h.get("scans", []):
@@ -225,12 +241,26 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         first_stage = n_scans * H * W if H and W else last + 1
         ev.append((first_stage, "  L after each step: " + " → ".join(
             f"{k} {_label(v)} (step {first_stage + i})" for i, (k, v) in enumerate(st.items()))))
-    lines += _fold(ev, max_lines - len(lines) - 1)
-    fin = f"final L = {_label(h['final_dynamic'])}"
-    if h.get("gt") is not None:
-        fin += f", ground truth = {_label(h['gt'])}"
-    lines.append("  " + fin)
-    return "\n".join(lines)
+    tail = []
+    cut = h.get("interrupted")
+    if h.get("final_dynamic") is not None:
+        fin = f"final L = {_label(h['final_dynamic'])}"
+        if h.get("gt") is not None:
+            fin += f", ground truth = {_label(h['gt'])}"
+        tail.append("  " + fin)
+    elif ev:  # (without a history, the first line has said where the run ends)
+        tail.append(f"  no final L: the run was {cut['message']}" if cut else
+                    "  no final L: the recording ends before the run finished")
+    photo = h.get("photo")
+    if photo:
+        H, W = h["size"]
+        tail.append(f"  (pixels of the {W}x{H} analysis image; the photos are "
+                    f"{photo[0]}x{photo[1]}, analysed at ×{W / photo[0]:.3g})")
+    if not ev:  # nothing changed it: no empty history
+        return "\n".join(lines + tail)
+    lines.append("history (jump to a step on the `step` timeline):")
+    lines += _fold(ev, max_lines - len(lines) - len(tail))
+    return "\n".join(lines + tail)
 
 
 # -- failures ----------------------------------------------------------------------

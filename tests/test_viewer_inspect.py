@@ -1,0 +1,271 @@
+"""`dynremove inspect` on the recordings a new user made (trial report, items 1, 2, 4, 5).
+
+* a ``--compare`` recording holds two runs: without ``--root`` (or with a root it
+  does not hold) inspect names them and exits 2, instead of explaining nothing;
+* an interrupted run is judged on what its recording holds (did a scan record
+  anything?), not on how it ended: Ctrl-C and SIGTERM between the sink's
+  ``start`` and the first scan both give exit 2 "nothing to inspect";
+* ``--pixel`` counts in the analysis image; a photo pixel given by mistake is
+  refused with the analysis pixel it means, when the recording knows the photos'
+  size;
+* ``--failures`` without ground truth names the command that records it.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+rr = pytest.importorskip("rerun")
+
+from test_viewer_fixtures import fabricate_run, make_info  # noqa: E402
+
+from dynremove import commands  # noqa: E402
+from dynremove.cli import main  # noqa: E402
+from dynremove.evaluation import synth  # noqa: E402
+from viewer import RerunSink, make_compare_blueprint  # noqa: E402
+from viewer import inspect as vi  # noqa: E402
+from viewer import verdict as vd  # noqa: E402
+from viewer._images import visit_step  # noqa: E402
+
+H, W, S = 48, 64, 3
+
+
+def _inspect(capsys, path, *args: str) -> tuple[int, str, list[str]]:
+    rc = main(["inspect", str(path), *args])
+    out, err = capsys.readouterr()
+    return rc, out, err.strip().splitlines()
+
+
+# -- 1. --compare recordings and --root ---------------------------------------------------
+@pytest.fixture(scope="module")
+def compare_rrd(tmp_path_factory):
+    """Two fabricated runs in one recording under the roots `run --compare` uses."""
+    path = tmp_path_factory.mktemp("cmp") / "cmp.rrd"
+    names = [f"src {s:02d}.jpg" for s in range(S)]
+    roots = ["runs/main", "runs/compare"]
+    rec = rr.RecordingStream("dynremove", recording_id="compare")
+    rec.save(path, default_blueprint=make_compare_blueprint(names, roots))
+    a = RerunSink(None, rec=rec, root=roots[0], record_every_rows=8)
+    b = RerunSink(None, rec=rec, root=roots[1], record_every_rows=8)
+    fabricate_run([a], H=H, W=W, S=S, n_scans=2)
+    fabricate_run([b], H=H, W=W, S=S, n_scans=1, seed=3)
+    rec.disconnect()
+    return path
+
+
+def test_compare_recording_without_root_names_both_runs(compare_rrd, capsys):
+    assert vi.runs_in(vi.load_store(compare_rrd)) == ["runs/main", "runs/compare"]
+    for args in (["--pixel", "5,5"], ["--failures"]):
+        rc, out, err = _inspect(capsys, compare_rrd, *args)
+        assert rc == 2 and out == "", out
+        assert err == [f"dynremove: error: {compare_rrd} holds two runs, runs/main and "
+                       "runs/compare: pass --root runs/main or --root runs/compare"], err
+
+
+@pytest.mark.parametrize("root", ["bogus", "runs/other", "runs"])
+def test_compare_recording_with_an_unknown_root(compare_rrd, capsys, root):
+    rc, out, err = _inspect(capsys, compare_rrd, "--pixel", "5,5", "--root", root)
+    assert rc == 2 and out == ""
+    assert err == [f"dynremove: error: no run under --root {root}; {compare_rrd} holds: "
+                   "runs/main, runs/compare"], err
+
+
+@pytest.mark.parametrize("root, want", [("runs/main", "runs/main"), ("/runs/compare/",
+                                                                       "runs/compare"),
+                                        ("compare", "runs/compare"), ("main", "runs/main")])
+def test_compare_recording_with_its_roots(compare_rrd, capsys, root, want):
+    assert vi.resolve_root(compare_rrd, root) == want
+    rc, out, err = _inspect(capsys, compare_rrd, "--pixel", "5,5", "--root", root)
+    assert rc == 0 and err == [], err
+    first = out.splitlines()[0]
+    assert first.startswith("pixel (5, 5): static in ") and first.count("pixel (") == 1, out
+    n_scans = 2 if want == "runs/main" else 1
+    assert f"scan {n_scans - 1} step" in out  # the run of that root, not the other
+
+
+def test_a_plain_recording_ignores_no_root_and_refuses_another(tmp_path, capsys):
+    path = tmp_path / "run.rrd"
+    fabricate_run([RerunSink(path, record_every_rows=8)], H=H, W=W, S=S, n_scans=1)
+    assert vi.resolve_root(path, "") == ""
+    rc, _, err = _inspect(capsys, path, "--pixel", "5,5", "--root", "runs/main")
+    assert rc == 2 and err == [f"dynremove: error: no run under --root runs/main; {path} "
+                               "holds: one run at the top level (no --root)"], err
+
+
+def test_no_doubled_pixel_prefix():
+    h = dict(x=3, y=4, t_r=0.3, decisions=[], scans=[], replacements=[], covered_by=[],
+             updates=[], source_names=[], final_dynamic=None, gt=None, stages={},
+             size=(H, W))
+    text = vd.format_pixel_history(h)
+    assert text == "pixel (3, 4): no scan of this recording reached it", text
+
+
+# -- 2. interrupted recordings: decided on what they hold ---------------------------------
+@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (commands.Terminated, 143)])
+def test_cut_between_start_and_the_first_scan_is_nothing_to_inspect(
+        tmp_path, capsys, monkeypatch, sig, code):
+    """Ctrl-C and SIGTERM after the sink's start (its step-0 snapshot is logged) but
+    before the first scan: the same recording, the same exit 2 "nothing to inspect".
+    (The trial saw exit 0 and "no scan ... final L = ?" when Ctrl-C landed there.)"""
+    import cv2
+
+    from dynremove import pipeline
+
+    scene = synth.make_scene(seed=0, n_views=4, size=(48, 64))
+    folder = tmp_path / "set"
+    folder.mkdir()
+    for name, im in zip(scene.names, scene.images):
+        cv2.imwrite(str(folder / name), im)
+
+    def cut(*a, **k):
+        raise sig()
+
+    monkeypatch.setattr(pipeline, "run_scans", cut)
+    rrd = tmp_path / "run.rrd"
+    rc = main(["run", str(folder), "--out", str(tmp_path / "out"), "--record", str(rrd),
+               "--quiet"])
+    capsys.readouterr()
+    assert rc == code
+    msg = "interrupted before the scans began (after correspondence)"
+    for args in (["--pixel", "5,5"], ["--failures"]):
+        rc, out, err = _inspect(capsys, rrd, *args)
+        assert (rc, out) == (2, ""), out
+        assert err == [f"dynremove: error: {rrd}: the run was {msg}: nothing to inspect"], err
+
+
+def _cut_sink(path, *, scan: int, after_chunks: int) -> RerunSink:
+    """A RerunSink whose run is interrupted (as the CLI does: ``interrupted()``) after
+    ``after_chunks`` chunks of scan ``scan``."""
+
+    class Cut(Exception):
+        pass
+
+    class CutSink(RerunSink):
+        n = 0
+
+        def chunk(self, events, state):
+            super().chunk(events, state)
+            if events.scan == scan:
+                self.n += 1
+                if self.n == after_chunks:
+                    raise Cut()
+
+    sink = CutSink(path, record_every_rows=4)
+    with pytest.raises(Cut):
+        fabricate_run([sink], H=H, W=W, S=S, n_scans=3, rows_per_chunk=4)
+    sink.interrupted()
+    return sink
+
+
+def test_sink_start_then_interrupted_is_nothing_to_inspect(tmp_path, capsys):
+    rrd = tmp_path / "run.rrd"
+    sink = RerunSink(rrd)
+    info, _, _ = make_info(H, W, S)
+    sink.start(info)  # logs the step-0 snapshot of the reference
+    sink.interrupted("after correspondence")
+    rc, out, err = _inspect(capsys, rrd, "--pixel", "5,5")
+    assert (rc, out) == (2, "")
+    assert err == [f"dynremove: error: {rrd}: the run was interrupted before the scans "
+                   "began (after correspondence): nothing to inspect"], err
+
+
+def test_cut_mid_scan_says_whether_the_scan_had_reached_the_pixel(tmp_path, capsys):
+    rrd = tmp_path / "mid.rrd"
+    _cut_sink(rrd, scan=0, after_chunks=3)  # rows 0..11 of scan 0 visited
+    msg = vi.interruption(vi.load_store(rrd))
+    step = int(msg.rsplit(" ", 1)[1])
+    assert msg.startswith("interrupted at scan 0, step ") and step == 12 * W - 1
+    note = f"dynremove: note: {rrd.resolve()}: the run was {msg}: read what was recorded"
+
+    rc, out, err = _inspect(capsys, rrd, "--pixel", "5,40")  # row 40: not reached
+    assert rc == 0 and err == [note], err
+    assert out.strip() == (f"pixel (5, 40): not reached: the run was {msg}, before scan 0 "
+                           f"came to this pixel (its step would have been "
+                           f"{visit_step(0, 5, 40, H, W)})")
+    rc, out, err = _inspect(capsys, rrd, "--pixel", "1,1")  # visited, nothing recorded
+    assert rc == 0 and out.startswith(f"pixel (1, 1): visited by scan 0 at step {W + 1}, "
+                                      f"but the run was {msg}"), out
+    assert "final L = ?" not in out and "history" not in out and len(out.splitlines()) == 1
+
+
+def test_cut_in_the_second_scan_answers_from_the_first(tmp_path, capsys):
+    """The per-scan maps of the finished scans are read although there is no final L."""
+    rrd = tmp_path / "second.rrd"
+    _cut_sink(rrd, scan=1, after_chunks=2)
+    rc, out, err = _inspect(capsys, rrd, "--pixel", "1,1")
+    assert rc == 0, err
+    lines = out.splitlines()
+    assert lines[0].startswith("pixel (1, 1): static in scan 0 (step "), out
+    assert lines[-1].startswith("  no final L: the run was interrupted at scan 1, step "), out
+    assert "final L = ?" not in out
+
+
+# -- 4. photo pixels vs analysis pixels ---------------------------------------------------
+@pytest.fixture(scope="module")
+def downscaled(tmp_path_factory):
+    """A run whose 256x192 photos were analysed at 64x48 (the sink knows both)."""
+    path = tmp_path_factory.mktemp("photo") / "run.rrd"
+    fabricate_run([RerunSink(path, record_every_rows=8, photo_size=(4 * W, 4 * H))],
+                  H=H, W=W, S=S, n_scans=1)
+    return path
+
+
+def test_run_info_records_the_photo_size(downscaled, tmp_path):
+    info = vi.read_run_info(downscaled)
+    assert (info["photo_width"], info["photo_height"]) == (4 * W, 4 * H)
+    assert (info["width"], info["height"]) == (W, H)
+    early = tmp_path / "early.rrd"  # begin() only (interrupted during the features)
+    sink = RerunSink(early, photo_size=(4 * W, 4 * H))
+    sink.begin(["a.png", "b.png", "c.png"], (H, W), ref=1)
+    sink.interrupted("during features")
+    info = vi._static_values(vi.RrdReader(str(early)).stream().collect(), "/run/info")
+    assert info["photo_width"] == [4 * W] and info["photo_height"] == [4 * H]
+
+
+def test_a_photo_pixel_is_refused_with_the_analysis_pixel_it_means(downscaled, capsys):
+    rc, out, err = _inspect(capsys, downscaled, "--pixel", "200,150")
+    assert (rc, out) == (2, "")
+    # as `run --probe 200,150` scales it: round((200.5)·64/256 − 0.5), round(150.5·48/192 − 0.5)
+    assert err == ["dynremove: error: pixel (200, 150) is outside the 64x48 analysis image "
+                   "(x in 0..63, y in 0..47): --pixel counts in the image the run analysed, "
+                   "as the viewer and --failures do; the photos are 256x192 (analysed at "
+                   "×0.25): photo pixel (200, 150) is --pixel 50,37"], err
+    rc, _, err = _inspect(capsys, downscaled, "--pixel", "300,150")  # outside the photo too
+    assert rc == 2 and err[0].endswith("the photos are 256x192 (analysed at ×0.25)"), err
+    rc, out, _ = _inspect(capsys, downscaled, "--pixel", "50,37")
+    assert rc == 0 and out.splitlines()[-1] == (
+        "  (pixels of the 64x48 analysis image; the photos are 256x192, analysed at ×0.25)")
+
+
+def test_without_a_photo_size_the_message_is_unchanged(tmp_path, capsys):
+    path = tmp_path / "run.rrd"
+    fabricate_run([RerunSink(path, record_every_rows=8)], H=H, W=W, S=S, n_scans=1)
+    rc, out, err = _inspect(capsys, path, "--pixel", "200,150")
+    assert rc == 2 and err == ["dynremove: error: pixel (200, 150) is outside the 64x48 "
+                               "image (x in 0..63, y in 0..47)"], err
+    rc, out, _ = _inspect(capsys, path, "--pixel", "5,5")
+    assert rc == 0 and "analysis image" not in out
+
+
+# -- 5. --failures without ground truth ---------------------------------------------------
+def test_failures_without_ground_truth_names_the_fix(downscaled, capsys):
+    rc, out, err = _inspect(capsys, downscaled, "--failures")
+    assert (rc, out) == (2, "") and len(err) == 1, err
+    assert "recorded without one (no --gt)" in err[0]
+    assert "`dynremove run IMAGES --gt MASK --record FILE.rrd`" in err[0], err
+
+
+def test_failures_of_an_interrupted_run_say_where_it_ended(tmp_path, capsys):
+    rrd = tmp_path / "mid.rrd"
+    _cut_sink(rrd, scan=1, after_chunks=2)
+    rc, _, err = _inspect(capsys, rrd, "--failures")
+    assert rc == 2 and "did not finish (interrupted at scan 1, step " in err[-1], err
+    assert "--gt MASK --record" in err[-1]
+
+
+def test_not_reached_and_photo_helpers():
+    info = dict(width=W, height=H, photo_width=4 * W, photo_height=4 * H)
+    assert vi.photo_size(info) == (4 * W, 4 * H)
+    assert vi.photo_size(dict(width=W, height=H, photo_width=W, photo_height=H)) is None
+    assert vi.photo_to_analysis(info, 4 * W - 1, 4 * H - 1) == (W - 1, H - 1)
+    assert vi.photo_to_analysis(info, 0, 0) == (0, 0)
