@@ -138,11 +138,18 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.flush()
             rec.disconnect()
     res.timings["load"] = t_load
-    res = at_output_size(res, iset, args.output_size)
+    bar = _bar(args, params)  # the steps after the pipeline's, on the same bar
+    if args.output_size == "full" and iset.scale < 1.0 and not iset.video:
+        bar("full-size output", 0.0)
+        res = at_output_size(res, iset, args.output_size)
+        bar("full-size output", 1.0)
     if gt_full is not None:
         gt = _resized_mask(gt_full, res.dynamic.shape)  # the output's size
+    bar("writing", 0.0)
     report = write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
                            record=args.record, reference=ref_info)
+    bar("writing", 1.0)
+    bar.close()
     if not res.dynamic.any():
         _note(args, "nothing was found moving in the reference: clean.png is the "
               "reference unchanged")
@@ -151,7 +158,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
          + (f" and {args.record}" if args.record else "")
          + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, {score}"
-         f"{res.timings['total'] + t_load:.1f} s)")
+         f"{time.perf_counter() - t0:.1f} s from reading to writing)")
     return EXIT_OK
 
 
@@ -587,7 +594,15 @@ def _note(args: argparse.Namespace, msg: str) -> None:
 
 
 def kernels_cached() -> bool:
-    """Whether numba's on-disk cache of the scan kernels is newer than their source."""
+    """Whether numba's on-disk cache holds the scan kernel for this source.
+
+    Asks numba's own index (its source stamp is a hash of the file's content, so a
+    checkout that only touches the file's time keeps the cache); on a numba whose
+    internals differ, falls back to comparing the cache's and the source's times."""
+    try:
+        return bool(_kernels._scan_rows._cache._cache_file._load_index())
+    except Exception:  # noqa: BLE001 - numba internals: the fallback below
+        pass
     src = Path(_kernels.__file__)
     cache = list((src.parent / "__pycache__").glob(src.stem + ".*.nbi"))
     return bool(cache) and max(c.stat().st_mtime for c in cache) >= src.stat().st_mtime

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io as _pyio
 import json
+import os
 from pathlib import Path
 
 import cv2
@@ -239,3 +240,29 @@ def test_a_closed_pipe_is_not_an_error(tmp_path):
     p.stdout.close()
     err = p.stderr.read().decode()
     assert p.wait() == 141 and err == "", err
+
+
+def test_the_compile_note_follows_numbas_own_cache(tmp_path):
+    """kernels_cached asks numba's index (a hash of the source's content): a copy of
+    the package with its cache is cached; an edited kernel file, or no cache, is not."""
+    import shutil
+    import subprocess
+    import sys
+
+    import dynremove
+
+    pkg = Path(dynremove.__file__).parent
+    if not list((pkg / "method" / "scan" / "__pycache__").glob("_kernels._scan_rows-*.nbi")):
+        pytest.skip("the scan kernels have not been compiled in this tree yet")
+    shutil.copytree(pkg, tmp_path / "dynremove")
+    probe = [sys.executable, "-c", "from dynremove.commands import kernels_cached as k; "
+             "print(k())"]
+
+    def cached() -> str:
+        return subprocess.run(probe, cwd=tmp_path, capture_output=True, text=True,
+                              env={**os.environ, "PYTHONPATH": str(tmp_path)}).stdout.strip()
+
+    assert cached() == "True"
+    with open(tmp_path / "dynremove" / "method" / "scan" / "_kernels.py", "a") as f:
+        f.write("\n# edited\n")
+    assert cached() == "False"
