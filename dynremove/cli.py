@@ -82,6 +82,15 @@ def parse_max_side(s: str) -> int | None:
     return v
 
 
+def parse_ref(s: str) -> str:
+    """``--ref``: kept as given (resolved once the images are known); empty is an error,
+    not the default."""
+    if not s.strip():
+        raise argparse.ArgumentTypeError("--ref '': give an index, a file name or 'auto' "
+                                         "(leave --ref out for the middle image)")
+    return s
+
+
 def parse_jobs(s: str) -> int:
     try:
         v = int(s)
@@ -145,7 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("images", nargs="+",
                    help="a folder of images (in name order, numbers by value: f8 before "
                         "f10), image files, or one video")
-    r.add_argument("--ref", default=None,
+    r.add_argument("--ref", default=None, type=parse_ref,
                    help="reference: index (0-based, in input order; negative counts from "
                         "the end, -1 = the last), file name or 'auto' (the sharpest frame with "
                         "the most keypoint matches); default: the middle image. The run "
@@ -199,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sets in parallel (joblib; -1 = all cores; default 1)")
     bt.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                     help="run the sets on this Dask cluster (extra dynremove[dask])")
-    bt.add_argument("--ref", default=None,
+    bt.add_argument("--ref", default=None, type=parse_ref,
                     help="reference of every set: index (0-based; negative counts from the "
                          "end), file name or 'auto' (default: middle)")
     bt.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
@@ -268,7 +277,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
                    help="downscale to at most PX (0 or 'none' = full size; default: only "
                         "above 1280 px)")
-    e.add_argument("--ref", default=None,
+    e.add_argument("--ref", default=None, type=parse_ref,
                    help="reference of every set: index (0-based; negative counts from the "
                         "end), file name or 'auto' (as run --ref auto; its mask must exist "
                         "in masks/) (default: the middle frame)")

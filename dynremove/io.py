@@ -163,6 +163,10 @@ def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str
                                  "(pass image files, or one folder of images)")
             paths.extend(imgs)
         elif p.exists():
+            if (len(args) > 1 and p.is_file() and p.suffix.lower() not in IMAGE_EXTS
+                    and is_video_file(p)):
+                raise InputError(f"{p}: is a video; give one video alone (its frames are "
+                                 "taken from it), or images")
             paths.append(p)
         else:
             raise InputError(f"{p}: no such file or folder")

@@ -16,6 +16,7 @@ import pytest
 
 from dynremove import commands, io
 from dynremove.cli import main
+from dynremove.errors import InputError
 from dynremove.commands import stage_labels
 from dynremove.evaluation import synth
 from dynremove.params import Params
@@ -266,3 +267,25 @@ def test_the_compile_note_follows_numbas_own_cache(tmp_path):
     with open(tmp_path / "dynremove" / "method" / "scan" / "_kernels.py", "a") as f:
         f.write("\n# edited\n")
     assert cached() == "False"
+
+
+def test_an_empty_ref_is_an_error_not_the_default(capsys, folder):
+    with pytest.raises(SystemExit) as e:
+        main(["run", str(folder), "--ref", ""])
+    assert e.value.code == 2 and "--ref '': give an index" in capsys.readouterr().err
+
+
+def test_two_videos_are_named_as_videos(tmp_path, folder):
+    """Frames come from one video given alone; two videos (or a video among images) get
+    a line that says so, not 'not a readable image'."""
+    vids = []
+    for name in ("a.mp4", "b.mp4"):
+        w = cv2.VideoWriter(str(tmp_path / name), cv2.VideoWriter_fourcc(*"mp4v"), 5, (64, 48))
+        if not w.isOpened():
+            pytest.skip("OpenCV cannot write MP4 here")
+        for _ in range(3):
+            w.write(np.zeros((48, 64, 3), np.uint8))
+        w.release()
+        vids.append(tmp_path / name)
+    with pytest.raises(InputError, match="a.mp4: is a video; give one video alone"):
+        io.list_inputs(vids)
