@@ -371,43 +371,9 @@ def _hog_bin(gray, x, y, nb):
     return -1, 0.0
 
 
-@numba.njit(cache=True, nogil=True)
-def _mark_changes(gray, src_gray, s, qx, qy, x, y, half, chg):
-    """Before ``_write_patch``: which reference pixels the write will change.
-
-    chg (2·half + 3)² uint8, the refresh box of ``_refresh_written`` (centre at
-    (x, y)): 1 where the window's gray value differs from the source's, else 0.
-    Same window and border rule as ``_write_patch``. Returns the bounding box of
-    the changes as window offsets (v0, v1, w0, w1); v0 > v1 when none.
-    """
-    H, W = gray.shape
-    o = half + 1
-    for i in range(2 * o + 1):
-        for j in range(2 * o + 1):
-            chg[i, j] = 0
-    v0, v1, w0, w1 = o, -o, o, -o
-    for v in range(-half, half + 1):
-        ry = y + v
-        sy = qy + v
-        if ry < 0 or ry >= H or sy < 0 or sy >= H:
-            continue
-        for w_ in range(-half, half + 1):
-            rx = x + w_
-            sx = qx + w_
-            if rx < 0 or rx >= W or sx < 0 or sx >= W:
-                continue
-            if gray[ry, rx] != src_gray[s, sy, sx]:
-                chg[v + o, w_ + o] = 1
-                v0 = min(v0, v)
-                v1 = max(v1, v)
-                w0 = min(w0, w_)
-                w1 = max(w1, w_)
-    return v0, v1, w0, w1
-
-
 @numba.njit(cache=True, nogil=True, inline="always")
 def _changed(chg, x, y, o, px, py):
-    """Whether ``_mark_changes`` marked (px, py); outside its box nothing changed."""
+    """Whether ``_write_patch`` marked (px, py) changed; outside its box nothing changed."""
     i = py - y + o
     j = px - x + o
     return 0 <= i <= 2 * o and 0 <= j <= 2 * o and chg[i, j] != 0
@@ -420,12 +386,12 @@ def _refresh_written(gray, nb, hb, hm, hb_s, hm_s, s, qx, qy, x, y, half, chg, b
     computing few of them.
 
     A pixel's bin reads only its four (clamped) neighbours' gray values, so it is
-    kept where none of them changed (chg of ``_mark_changes``); where all four
+    kept where none of them changed (chg of ``_write_patch``); where all four
     are copies of the source's, unclamped on both sides (the window's interior,
     away from both images' borders), it is the source's bin at the copied pixel
     (hb_s, hm_s of source s, the same function of the same four values);
     elsewhere it is recomputed. box: the changes' bounding box from
-    ``_mark_changes``; only pixels within one of it can need anything.
+    ``_write_patch``; only pixels within one of it can need anything.
     """
     H, W = gray.shape
     o = half + 1
@@ -821,13 +787,21 @@ def _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf,
 
 
 @numba.njit(cache=True, nogil=True)
-def _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y, half):
+def _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y, half, chg):
     """Copy the (2·half+1)² window of source s at (qx, qy) onto the reference at (x, y).
 
     Mirrors ``reference.write_patch``; half = p // 2 (patch write) or 0 (pixel).
-    Pixels outside either image are skipped.
+    Pixels outside either image are skipped. For ``_refresh_written``, in the
+    same pass: chg (2·half + 3)² uint8, the refresh box centred at (x, y), gets 1
+    where the gray value changes, else 0. Returns the bounding box of the changes
+    as window offsets (v0, v1, w0, w1); v0 > v1 when none.
     """
     H, W = gray.shape
+    o = half + 1
+    for i in range(2 * o + 1):
+        for j in range(2 * o + 1):
+            chg[i, j] = 0
+    v0, v1, w0, w1 = o, -o, o, -o
     for v in range(-half, half + 1):
         ry = y + v
         sy = qy + v
@@ -838,10 +812,17 @@ def _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y, ha
             sx = qx + w_
             if rx < 0 or rx >= W or sx < 0 or sx >= W:
                 continue
+            if gray[ry, rx] != src_gray[s, sy, sx]:
+                chg[v + o, w_ + o] = 1
+                v0 = min(v0, v)
+                v1 = max(v1, v)
+                w0 = min(w0, w_)
+                w1 = max(w1, w_)
             for c in range(3):
                 img[ry, rx, c] = src_img[s, sy, sx, c]
                 lab[ry, rx, c] = src_lab[s, sy, sx, c]
             gray[ry, rx] = src_gray[s, sy, sx]
+    return v0, v1, w0, w1
 
 
 # --- Sec. 3.2.3: update of N and C ----------------------------------------------------
@@ -1114,9 +1095,8 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                 s = cs[ib]
                 qx = cx[ib]
                 qy = cy[ib]
-                box = _mark_changes(gray, src_gray, s, qx, qy, x, y, half, chg)
-                _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x, y,
-                             half)
+                box = _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x,
+                                   y, half, chg)
                 _refresh_written(gray, nb, hb_r, hm_r, hb_s, hm_s, s, qx, qy, x, y, half, chg,
                                  box)
                 for c in range(3):
