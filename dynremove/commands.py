@@ -181,8 +181,7 @@ def _probes_at_analysis_size(args: argparse.Namespace, iset: io.ImageSet
             out.append((x, y))
             continue
         H, W = iset.images[0].shape[:2]
-        xa = min(W - 1, max(0, int(round((x + 0.5) * W / W0 - 0.5))))
-        ya = min(H - 1, max(0, int(round((y + 0.5) * H / H0 - 0.5))))
+        xa, ya = io.photo_to_analysis(x, y, (W0, H0), (W, H))
         _note(args, f"--probe {x},{y}: pixel ({xa}, {ya}) of the {W}x{H} analysis image "
               "(the recording's and `inspect --pixel`'s coordinates)")
         out.append((xa, ya))

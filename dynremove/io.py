@@ -430,6 +430,15 @@ def prepare_out_dir(out: str | os.PathLike) -> Path:
     return p
 
 
+def photo_to_analysis(x: int, y: int, photo: tuple[int, int],
+                      analysis: tuple[int, int]) -> tuple[int, int]:
+    """The pixel of the analysis image (size (W, H)) that photo pixel (x, y) falls in,
+    for a photo of size ``photo`` (W0, H0): pixel centres scaled, rounded, clamped."""
+    (W0, H0), (W, H) = photo, analysis
+    return (min(W - 1, max(0, int(round((x + 0.5) * W / W0 - 0.5)))),
+            min(H - 1, max(0, int(round((y + 0.5) * H / H0 - 0.5)))))
+
+
 def check_out_file(path: str | os.PathLike, flag: str) -> Path:
     """Check that a file can be written at ``path`` (its folder is created); InputError
     if it is a folder, or its folder cannot be created or written."""

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 from rerun.chunk import RrdReader
 
+from dynremove import io
 from dynremove.errors import InputError
 from dynremove.events import (CORRESPONDENCE_UPDATE_DTYPE, REPLACEMENT_DTYPE,
                               WHY_DYNAMIC, WHY_PROBE, WHY_SAMPLE, decision_dtype)
@@ -651,10 +652,7 @@ def photo_to_analysis(info: dict[str, Any], x: int, y: int) -> tuple[int, int] |
     ph = photo_size(info)
     if ph is None:
         return None
-    W0, H0 = ph
-    W, H = int(info["width"]), int(info["height"])
-    return (min(W - 1, max(0, int(round((x + 0.5) * W / W0 - 0.5)))),
-            min(H - 1, max(0, int(round((y + 0.5) * H / H0 - 0.5)))))
+    return io.photo_to_analysis(x, y, ph, (int(info["width"]), int(info["height"])))
 
 
 def outside_message(info: dict[str, Any], x: int, y: int) -> str:
