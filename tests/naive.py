@@ -13,6 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import blurred_lab
+from dynremove.refine.montage import DECAY_PX, PLATEAU_PX
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.upsample import grow_replaced
 
@@ -97,6 +98,14 @@ def member_median(values, member):
     return np.clip(np.nanmedian(vals, axis=0) + 0.5, 0, 255).astype(np.uint8)
 
 
+def _distance(known):
+    """Euclidean distance (px) from every pixel to the nearest True of ``known``, by brute force."""
+    ky, kx = np.nonzero(known)
+    gy, gx = np.mgrid[0:known.shape[0], 0:known.shape[1]]
+    d2 = (gy[..., None] - ky) ** 2 + (gx[..., None] - kx) ** 2
+    return np.sqrt(d2.min(-1))
+
+
 def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
                  ring_px=3, max_de=15.0):
     """``montage.offset_blend`` on whole images."""
@@ -117,7 +126,11 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
             if good.any():
                 off[:] = np.median(d[good], axis=0)
         else:
-            off = harmonic_fill(np.where(good[..., None], d, 0).astype(np.float32), ~good)
+            m = np.median(d[good], axis=0)
+            dep = harmonic_fill(np.where(good[..., None], d - m, 0).astype(np.float32), ~good)
+            dist = _distance(good).astype(np.float32)
+            fade = np.exp(-np.maximum(dist - PLATEAU_PX, 0.0) / DECAY_PX).astype(np.float32)
+            off = m + dep * fade[..., None]
         out[sel] = src[sel] + off[sel]
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 

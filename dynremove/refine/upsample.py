@@ -34,7 +34,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import mask_boxes, remap_points
-from dynremove.refine.montage import add_offset, ring_agrees, ring_offset
+from dynremove.refine.montage import DECAY_PX, PLATEAU_PX, add_offset, ring_agrees, ring_offset
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.select import Selection, member_median
 
@@ -157,7 +157,8 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     for lbl in np.unique(chosen):
         good = ring_agrees(diff[lbl], usable[lbl, ring_i], _MAX_DE)
         mine = chosen == lbl
-        off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), rep & (lab == lbl))
+        off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), rep & (lab == lbl),
+                          plateau_px=PLATEAU_PX * blur, decay_px=DECAY_PX * blur)
         out[mine] = add_offset(cand[lbl, rep_i[mine]], off)
     no_src = _resize_nearest(selection.no_source.view(np.uint8), size)[y0:y1, x0:x1] > 0
     no_src &= rep
