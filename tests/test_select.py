@@ -8,7 +8,7 @@ import pytest
 
 from dynremove import preset, remove_dynamic
 from dynremove.evaluation import synth
-from dynremove.refine.montage import expansion_labels, offset_blend, ring_agrees
+from dynremove.refine.montage import expansion_labels, offset_blend, ring_agrees, ring_offset
 from dynremove.refine.morphology import dilate_disc
 
 
@@ -82,6 +82,33 @@ def test_offset_blend_matches_a_darker_reference(brighter):
     raw[rep] = src[rep]
     assert np.linalg.norm(_lab(raw)[inner].mean(0) - _lab(raw)[outer].mean(0)) > 5.0
     assert np.array_equal(out[~rep], ref[~rep])
+
+
+def test_offset_blend_keeps_ring_content_near_the_ring_only():
+    """A source 20 levels darker, a few levels darker still along one side of the
+    ring (a misaligned edge, within ring_agrees' tolerance): the middle of the fill
+    takes the common offset, not the edge's; next to that side the edge's offset is
+    kept, so the seam stays hidden. The full membrane (fade off) tints the middle."""
+    ref = np.full((90, 90, 3), 120, np.uint8)
+    src = np.full_like(ref, 100)
+    src[:, :18] = 88  # along the left side of the ring only
+    rep = np.zeros(ref.shape[:2], bool)
+    rep[15:75, 18:78] = True
+    cand = np.stack([ref, src])
+    usable = np.ones((2,) + rep.shape, bool)
+    labs = np.stack([_lab(ref), _lab(src)])
+    out = offset_blend(ref, cand, rep.astype(np.intp), rep, usable, labs)
+    assert np.abs(out[45, 48].astype(int) - 120).max() <= 1  # the middle: 100 + 20
+    assert out[45, 18].astype(int).min() >= 129  # next to the left side: 100 + ~32
+    # planted: no fade, the membrane carries the edge's offset into the middle
+    ring = dilate_disc(rep, 3) & ~rep
+    ry, rx = np.nonzero(ring)
+    good = ring_agrees(labs[0, ry, rx] - labs[1, ry, rx], usable[1, ry, rx])
+    assert good.all()  # the edge passes as agreeing: only the fade keeps it out
+    full = ring_offset(ref[ry, rx], src[ry, rx], good, (ry, rx), rep, decay_px=1e9)
+    at = np.ravel_multi_index((45, 48), rep.shape)
+    k = int(np.searchsorted(np.flatnonzero(rep.ravel()), at))
+    assert full[k].min() >= 22  # 20 + the left edge's share
 
 
 def test_ring_agrees_keeps_the_common_offset_and_drops_content():
