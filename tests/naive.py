@@ -107,7 +107,7 @@ def _distance(known):
 
 
 def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
-                 ring_px=3, max_de=15.0):
+                 ring_px=3, max_de=15.0, plateau_px=PLATEAU_PX, decay_px=DECAY_PX):
     """``montage.offset_blend`` on whole images."""
     out = reference.astype(np.float32)
     ring = dilate_disc(replaced, ring_px) & ~replaced
@@ -129,7 +129,7 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
             m = np.median(d[good], axis=0)
             dep = harmonic_fill(np.where(good[..., None], d - m, 0).astype(np.float32), ~good)
             dist = _distance(good).astype(np.float32)
-            fade = np.exp(-np.maximum(dist - PLATEAU_PX, 0.0) / DECAY_PX).astype(np.float32)
+            fade = np.exp(-np.maximum(dist - plateau_px, 0.0) / decay_px).astype(np.float32)
             off = m + dep * fade[..., None]
         out[sel] = src[sel] + off[sel]
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
@@ -188,7 +188,9 @@ def full_resolution(reference, sources, clean_working, dynamic, selection):
     member[chosen - 1, np.arange(len(py))] = True
     cand[chosen, py, px] = member_median(cand[1:, py, px], member)
     labs = np.stack([blurred_lab(c, max(sx, sy)) for c in cand])
-    out = offset_blend(reference[roi], cand, lab, rep_roi, usable, labs, ring_px=ring_px)
+    scale = max(sx, sy)  # the fade's distances are full-size pixels
+    out = offset_blend(reference[roi], cand, lab, rep_roi, usable, labs, ring_px=ring_px,
+                       plateau_px=PLATEAU_PX * scale, decay_px=DECAY_PX * scale)
     no_src = cv2.resize(selection.no_source.astype(np.uint8), size,
                         interpolation=cv2.INTER_NEAREST)[roi] > 0
     if no_src.any():
