@@ -5,12 +5,16 @@ A *set* below ROOT is a folder holding images directly, a folder with a
 present, gives the Jaccard of the result), or a video file. ROOT itself may be a
 set. Each set's outputs are those of ``dynremove run`` (:func:`write_outputs`)
 in ``DIR/<set>/``; ``DIR/summary.json`` and ``DIR/summary.csv`` list every set
-with its status (``ok``, ``skipped``, ``error``), figures and error message.
+with its status (``ok``, ``error``), whether it was skipped (not re-run), figures,
+seconds, notes (those of its ``report.json``: unaligned sources, a blurry
+reference, ...) and error message.
 
 Resume: a set whose ``report.json`` carries the same *batch key* (a hash of the
 parameters, the options and the bytes of every input file) and whose images
-exist is skipped. A failing set does not stop the others; the command exits 1
-at the end.
+exist is skipped: its row keeps the outcome, figures, seconds and notes of the
+run that made the outputs (from the previous ``summary.json``, else from
+``report.json``), with ``skipped`` true. A failing set does not stop the others;
+the command exits 1 at the end.
 
 Sets run in parallel with joblib (``--jobs``; each worker runs OpenCV
 single-threaded), or on a Dask cluster (``--scheduler tcp://host:port``, extra
@@ -45,8 +49,9 @@ from dynremove.pipeline import full_resolution_output, remove_dynamic
 from dynremove.video import auto_reference, blurry_reference_note
 
 OUTPUT_FILES = ("clean.png", "dynamic_mask.png", "coverage.png", "report.json")
-SUMMARY_FIELDS = ("set", "status", "n_images", "reference", "dynamic_fraction",
-                  "jaccard_vs_gt", "seconds", "error", "inputs", "out")
+SUMMARY_FIELDS = ("set", "status", "skipped", "n_images", "reference", "dynamic_fraction",
+                  "jaccard_vs_gt", "seconds", "notes", "error", "inputs", "out")
+NOTES_SEP = " | "  # between the notes of a set in summary.csv (a list in summary.json)
 SKIP_DIRS = {"masks", "gt", "groundtruth", "ground_truth"}  # beside frames/: not sets
 DASK_CONNECT_TIMEOUT_S = 30
 
@@ -245,13 +250,15 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
     t0 = time.perf_counter()
     out = out_root / bs.name
     row: dict[str, Any] = dict.fromkeys(SUMMARY_FIELDS)
-    row.update({"set": bs.name, "inputs": len(bs.inputs), "out": str(out)})
+    row.update({"set": bs.name, "skipped": False, "notes": [], "inputs": len(bs.inputs),
+                "out": str(out)})
     try:
         key = batch_key(bs, options)
+        row["batch_key"] = key
         done = _is_done(out, key)
-        if done is not None:
-            row.update(_row_from_report(done), status="skipped",
-                       seconds=round(time.perf_counter() - t0, 3))
+        if done is not None:  # the outcome of the run that wrote the outputs
+            row.update(_row_from_report(done), status="ok", skipped=True,
+                       seconds=_earlier_seconds(done))
             return row
         params = Params(**options["params"])
         iset = io.load_image_set(list(bs.inputs), max_side=options.get("max_side"),
@@ -271,8 +278,9 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
                                  preset_name=options["preset"], valid_masks=iset.valid_masks)
             res = at_output_size(res, iset, options.get("output_size", "full"))
         out.mkdir(parents=True, exist_ok=True)
+        extra = {"batch_key": key, "batch_seconds": round(time.perf_counter() - t0, 3)}
         report = write_outputs(out, res, iset=iset, ref=ref, preset_name=options["preset"],
-                               gt=gt, reference=ref_info, extra={"batch_key": key})
+                               gt=gt, reference=ref_info, extra=extra)
         row.update(_row_from_report(report), status="ok")
     except Exception as e:  # noqa: BLE001 - recorded in the summary, the batch goes on
         msg = " ".join(str(e).split()) or type(e).__name__
@@ -287,7 +295,38 @@ def _row_from_report(report: dict) -> dict:
             "reference": report.get("reference", {}).get("name"),
             "dynamic_fraction": round(float(report.get("dynamic_fraction", 0.0)), 5),
             "jaccard_vs_gt": (round(report["jaccard_vs_gt"], 4)
-                              if report.get("jaccard_vs_gt") is not None else None)}
+                              if report.get("jaccard_vs_gt") is not None else None),
+            "notes": [str(n) for n in report.get("notes") or []]}
+
+
+def _earlier_seconds(report: dict) -> float | None:
+    """Seconds of the run that wrote ``report`` (:func:`run_batch` prefers the
+    previous summary's figure, which includes writing the outputs)."""
+    if report.get("batch_seconds") is not None:
+        return float(report["batch_seconds"])
+    secs = report.get("seconds") or {}  # written before batch_seconds existed
+    if secs.get("total") is None:
+        return None
+    return round(float(secs["total"]) + float(secs.get("full_resolution", 0.0)), 3)
+
+
+def _previous_rows(out: Path) -> dict[str, dict]:
+    """The rows of ``out/summary.json`` by set name ({} when missing or unreadable)."""
+    try:
+        prev = json.loads((out / "summary.json").read_text())
+        return {r["set"]: r for r in prev.get("sets", []) if isinstance(r, dict) and "set" in r}
+    except (OSError, ValueError, TypeError, KeyError, AttributeError):
+        return {}
+
+
+def _keep_earlier(row: dict, prev: dict[str, dict]) -> dict:
+    """A skipped row with the seconds of the previous summary's row of the same set,
+    when that row is the run that made the outputs (same batch key, ``ok``)."""
+    p = prev.get(row["set"])
+    if (row.get("skipped") and p and p.get("batch_key") == row.get("batch_key")
+            and p.get("status") == "ok" and p.get("seconds") is not None):
+        row["seconds"] = p["seconds"]
+    return row
 
 
 # --- the batch --------------------------------------------------------------------------
@@ -302,6 +341,7 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     "wall_s", "jobs", "scheduler"}``; rows in set-name order (see SUMMARY_FIELDS).
     """
     out = io.prepare_out_dir(out)
+    prev = _previous_rows(out)
     sets = find_sets(root, exclude=[out])
     if not sets:
         raise InputError(f"{root}: no sets found (a set is a folder of at least 2 images, "
@@ -310,10 +350,10 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
                "ref": ref, "frames": frames, "span": span, "pick": pick}
     t0 = time.perf_counter()
     rows, workers = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler,
-                             on_done=on_done)
+                             on_done=on_done, prev=prev)
     summary = {"root": str(root), "out": str(out), "sets": rows,
-               "n_ok": sum(r["status"] == "ok" for r in rows),
-               "n_skipped": sum(r["status"] == "skipped" for r in rows),
+               "n_ok": sum(r["status"] == "ok" and not r.get("skipped") for r in rows),
+               "n_skipped": sum(bool(r.get("skipped")) for r in rows),
                "n_failed": sum(r["status"] == "error" for r in rows),
                "wall_s": round(time.perf_counter() - t0, 3),
                "jobs": None if scheduler else jobs, "scheduler": scheduler,
@@ -323,19 +363,22 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     w = csv.DictWriter(buf, fieldnames=SUMMARY_FIELDS, lineterminator="\n")
     w.writeheader()
     for r in rows:
-        w.writerow({k: r.get(k) for k in SUMMARY_FIELDS})
+        w.writerow({k: NOTES_SEP.join(r.get(k) or []) if k == "notes" else r.get(k)
+                    for k in SUMMARY_FIELDS})
     io._atomic_write_bytes(out / "summary.csv", buf.getvalue().encode())
     return summary
 
 
 def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
-             scheduler: str | None, on_done: Callable[[int, int, dict], None] | None
-             ) -> tuple[list[dict], int]:
+             scheduler: str | None, on_done: Callable[[int, int, dict], None] | None,
+             prev: dict[str, dict] | None = None) -> tuple[list[dict], int]:
     """The rows in set order, and the number of workers (joblib's, or the Dask
-    cluster's when ``scheduler``)."""
+    cluster's when ``scheduler``). ``prev``: the previous summary's rows by set
+    (:func:`_keep_earlier`)."""
     from joblib import Parallel, delayed, effective_n_jobs, parallel_config
 
     results: dict[str, dict] = {}
+    on_done = _with_earlier(on_done, prev or {})
     if not scheduler:
         if jobs == 1:
             _collect((run_set(bs, out, options) for bs in sets), sets, on_done, results)
@@ -372,6 +415,16 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
     return [results[bs.name] for bs in sets], workers
 
 
+def _with_earlier(on_done: Callable[[int, int, dict], None] | None, prev: dict[str, dict]
+                  ) -> Callable[[int, int, dict], None]:
+    """``on_done`` applied after :func:`_keep_earlier` (in the main process)."""
+    def cb(k: int, n: int, row: dict) -> None:
+        _keep_earlier(row, prev)
+        if on_done:
+            on_done(k, n, row)
+    return cb
+
+
 def _collect(gen: Iterable[dict], sets: Sequence[BatchSet],
              on_done: Callable[[int, int, dict], None] | None, results: dict) -> list[dict]:
     for k, row in enumerate(gen, 1):
@@ -381,12 +434,49 @@ def _collect(gen: Iterable[dict], sets: Sequence[BatchSet],
     return list(results.values())
 
 
+def _is_photo_note(note: str) -> bool:
+    """True for a note about one photo (``"name.jpg: ..."``), not the whole set."""
+    head, sep, _ = note.partition(": ")
+    return bool(sep) and " " not in head and "." in head
+
+
+def _shorten(note: str, limit: int = 90) -> str:
+    """The note's first clause (before `` (`` or ``. ``), at most ``limit`` characters
+    cut at a word; ``…`` when something was left out."""
+    text = " ".join(note.split())
+    short = text
+    for stop in (" (", ". ", "; "):
+        i = short.find(stop)
+        if i >= 20:
+            short = short[:i]
+    if len(short) > limit:
+        short = short[:limit].rsplit(" ", 1)[0].rstrip(",;:")
+    return short if short == text else short.rstrip(".") + "…"
+
+
+def notes_phrase(notes: Sequence[str]) -> str:
+    """``"1 note: <note>"`` or ``"5 notes: <note>…; 4 more in report.json"``, shortened;
+    ``""`` without notes. The note shown: the first saying the result is unreliable,
+    else the first about the whole set (not one photo), else the first."""
+    if not notes:
+        return ""
+    main = min(notes, key=lambda m: ("unreliable" not in m.lower(), _is_photo_note(m)))
+    n = len(notes)
+    more = f"; {n - 1} more in report.json" if n > 1 else ""
+    return f"{n} note{'' if n == 1 else 's'}: {_shorten(main)}{more}"
+
+
 def stderr_progress(k: int, n: int, row: dict) -> None:
-    """One line per finished set on stderr."""
-    what = {"ok": f"ok, {100 * (row['dynamic_fraction'] or 0):.1f} % dynamic"
-                  + (f", J {row['jaccard_vs_gt']:.3f}" if row.get("jaccard_vs_gt")
-                     is not None else ""),
-            "skipped": "skipped (outputs exist, same parameters and inputs)",
-            "error": f"error: {row.get('error')}"}[row["status"]]
-    print(f"[{k}/{n}] {row['set']}: {what} ({row['seconds']:.1f} s)", file=sys.stderr,
-          flush=True)
+    """One line per finished set on stderr (with its notes, shortened)."""
+    secs = "" if row.get("seconds") is None else f" ({row['seconds']:.1f} s)"
+    if row["status"] == "error":
+        what = f"error: {row.get('error')}{secs}"
+    else:
+        what = (f"{row['status']}, {100 * (row['dynamic_fraction'] or 0):.1f} % dynamic"
+                + (f", J {row['jaccard_vs_gt']:.3f}" if row.get("jaccard_vs_gt")
+                   is not None else "") + secs)
+        if row.get("skipped"):
+            what = f"skipped (done before, same parameters and inputs): {what}"
+        phrase = notes_phrase(row.get("notes") or [])
+        what += f", {phrase}" if phrase else ""
+    print(f"[{k}/{n}] {row['set']}: {what}", file=sys.stderr, flush=True)

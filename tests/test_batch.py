@@ -80,8 +80,13 @@ def test_batch_runs_resumes_and_reports_failures(tmp_path, root, capsys):
     capsys.readouterr()
     rows = summary_rows(out)
     assert rc == 1
-    assert rows["a"]["status"] == rows["davis/b"]["status"] == "skipped"
+    # not re-run, but the earlier outcome is kept
+    assert rows["a"]["status"] == rows["davis/b"]["status"] == "ok"
+    assert rows["a"]["skipped"] == rows["davis/b"]["skipped"] == "True"
+    assert rows["bad"]["status"] == "error" and rows["bad"]["skipped"] == "False"
     assert rows["a"]["dynamic_fraction"] not in ("", None)
+    js = json.loads((out / "summary.json").read_text())
+    assert (js["n_ok"], js["n_failed"], js["n_skipped"]) == (0, 1, 2)
     assert (out / "a" / "dynamic_mask.png").read_bytes() == mask_a
 
     # other parameters: run again
@@ -89,6 +94,85 @@ def test_batch_runs_resumes_and_reports_failures(tmp_path, root, capsys):
                "--quiet"])
     capsys.readouterr()
     assert summary_rows(out)["a"]["status"] == "ok"
+    assert summary_rows(out)["a"]["skipped"] == "False"
+
+
+UNALIGNED = "sources could not be aligned to the reference: the result is unreliable…"
+
+
+@pytest.fixture
+def blurry_root(tmp_path, root):
+    """x/: the set a/ with its middle view (the default reference) blurred: notes on the
+    blurry reference, each source's few matches and the unreliable alignment."""
+    r = tmp_path / "r"
+    imgs = [cv2.imread(str(p)) for p in sorted((root / "a").iterdir())]
+    imgs[len(imgs) // 2] = cv2.GaussianBlur(imgs[len(imgs) // 2], (0, 0), 3)
+    write_set(r / "x", imgs)
+    return r
+
+
+def test_notes_are_in_the_progress_line_and_the_summaries(tmp_path, blurry_root, capsys):
+    out = tmp_path / "out"
+    assert main(["batch", str(blurry_root), "--out", str(out), "--max-scans", "1"]) == 0
+    err = capsys.readouterr().err
+    notes = json.loads((out / "x" / "report.json").read_text())["notes"]
+    n = len(notes)
+    assert n >= 2 and any("much blurrier" in m for m in notes)
+    line = next(ln for ln in err.splitlines() if ln.startswith("[1/1] x: ok"))
+    assert f" s), {n} notes: " in line and UNALIGNED in line  # the one that matters
+    assert line.endswith(f"; {n - 1} more in report.json")
+    assert "misaligned fill" not in line  # shortened to its first clause
+    assert summary_rows(out)["x"]["notes"] == " | ".join(notes)
+    js = json.loads((out / "summary.json").read_text())
+    assert js["sets"][0]["notes"] == notes
+
+
+def test_skipped_set_keeps_its_earlier_outcome_time_and_notes(tmp_path, blurry_root, capsys):
+    out = tmp_path / "out"
+    assert main(["batch", str(blurry_root), "--out", str(out), "--max-scans", "1"]) == 0
+    capsys.readouterr()
+    first = json.loads((out / "summary.json").read_text())["sets"][0]
+    assert first["status"] == "ok" and first["skipped"] is False and first["seconds"] > 0.02
+    assert first["notes"]
+
+    assert main(["batch", str(blurry_root), "--out", str(out), "--max-scans", "1"]) == 0
+    err = capsys.readouterr().err
+    again = json.loads((out / "summary.json").read_text())["sets"][0]
+    assert again["skipped"] is True
+    assert {k: again[k] for k in again if k != "skipped"} == {
+        k: first[k] for k in first if k != "skipped"}  # outcome, figures, seconds, notes
+    assert summary_rows(out)["x"]["seconds"] == str(first["seconds"])
+    line = next(ln for ln in err.splitlines() if ln.startswith("[1/1] x:"))
+    assert line.startswith("[1/1] x: skipped (done before, same parameters and inputs): ok, ")
+    assert f"({first['seconds']:.1f} s), {len(first['notes'])} notes: " in line
+    assert UNALIGNED in line
+
+    # batch interrupted before the summary was written: report.json has the figures
+    (out / "summary.json").unlink()
+    assert main(["batch", str(blurry_root), "--out", str(out), "--max-scans", "1",
+                 "--quiet"]) == 0
+    resumed = json.loads((out / "summary.json").read_text())["sets"][0]
+    assert resumed["status"] == "ok" and resumed["skipped"] is True
+    assert resumed["notes"] == first["notes"]
+    assert resumed["dynamic_fraction"] == first["dynamic_fraction"]
+    assert 0.02 < resumed["seconds"] <= first["seconds"]  # up to writing the outputs
+
+
+def test_notes_phrase_shortens_and_prefers_a_note_about_the_whole_set():
+    notes = ["s1.jpg: only 9 keypoint matches with the reference; no epipolar term",
+             "s2.jpg: only 6 keypoint matches with the reference; no epipolar term",
+             "2 of 3 sources could not be aligned to the reference: the result is unreliable "
+             "(misaligned fill, missed or false detections). Photos of more overlap give "
+             "more matches"]
+    assert batch.notes_phrase(notes) == (
+        "3 notes: 2 of 3 sources could not be aligned to the reference: the result is "
+        "unreliable…; 2 more in report.json")
+    assert batch.notes_phrase(notes[:1]) == ("1 note: s1.jpg: only 9 keypoint matches with "
+                                             "the reference…")
+    assert batch.notes_phrase(["short one"]) == "1 note: short one"
+    assert batch.notes_phrase([]) == ""
+    long = batch.notes_phrase(["word " * 60])
+    assert long.endswith("…") and len(long) < 110
 
 
 def test_changed_input_is_run_again(tmp_path, root, capsys):

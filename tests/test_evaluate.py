@@ -58,8 +58,64 @@ def test_eval_cli_writes_json(data, tmp_path, capsys):
     assert code == 0
     rep = json.loads(out.read_text())
     assert {r["method"] for r in rep["sets"]} == {"median", "telea"}
-    assert "median" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "median" in text
+    assert "mean J (1 set) " in text and "mean PSNR dB (1 set) " in text  # not "1 sets"
     assert main(["eval", str(tmp_path / "nowhere")]) == 2
+
+
+def _whole_report(n_sets: int) -> dict:
+    """A report of ``n_sets`` sets with a background and free.png, two methods."""
+    from dynremove.evaluation.evaluate import SCORE_KEYS
+
+    rows, info = [], []
+    for k in range(n_sets):
+        s = f"s{k}"
+        info.append({"set": s, "has_background": True, "has_free": True})
+        for m, left in (("dynremove", 20.0 + k), ("median", 40.0 + k)):
+            r = dict.fromkeys(SCORE_KEYS)
+            r.update(set=s, method=m, jaccard=0.5, psnr=20.0, ssim=0.5, psnr_whole=30.0,
+                     ssim_whole=0.9, damage=1.0, leftover=left, unrecoverable=12.5 + k,
+                     seconds=1.0)
+            rows.append(r)
+    return {"methods": ["dynremove", "median"], "sets": rows, "set_info": info}
+
+
+def test_whole_photo_table_labels_the_mean_unrecoverable_and_counts_sets():
+    from dynremove.evaluation.evaluate import format_table
+
+    text = format_table(_whole_report(1))
+    lines = text.splitlines()
+    head = next(ln for ln in lines if ln.startswith("set") and "unrec%" in ln)
+    col_end = head.index("unrec%") + len("unrec%")  # the column is right-aligned
+
+    def row(label: str) -> str:
+        return next(ln for ln in lines if ln.startswith(label))
+
+    left = row("mean leftover %")
+    assert "12.5" not in left and left[:col_end].strip() == "mean leftover %"
+    assert left.split()[-2:] == ["20.0", "40.0"]  # the methods' mean leftover
+    unrec = row("mean unrec %")
+    assert unrec[:col_end].endswith("12.5") and unrec == unrec[:col_end]  # nothing else
+    assert "mean J (1 set) " in text and "mean PSNR dB (1 set) " in text
+    assert "sets)" not in text
+
+    text = format_table(_whole_report(2))
+    assert "mean J (2 sets)" in text and "mean PSNR dB (2 sets)" in text
+    unrec = next(ln for ln in text.splitlines() if ln.startswith("mean unrec %"))
+    assert unrec.split()[-1] == "13.0"  # mean of 12.5 and 13.5
+
+
+def test_progress_line_counts_failed_methods_in_words(capsys):
+    from dynremove.evaluation.evaluate import _stderr_progress
+
+    rows = [{"method": "median", "jaccard": None, "error": "ValueError: x"},
+            {"method": "telea", "jaccard": None}]
+    _stderr_progress(1, 2, {"set": "s", "seconds": 1.0, "rows": rows})
+    rows[1]["error"] = "ValueError: y"
+    _stderr_progress(2, 2, {"set": "s", "seconds": 1.0, "rows": rows})
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].endswith("  1 method failed") and err[1].endswith("  2 methods failed")
 
 
 def _static_set(folder, n=5):

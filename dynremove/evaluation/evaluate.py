@@ -380,7 +380,8 @@ def _stderr_progress(k: int, n: int, res: dict) -> None:
     err = sum(1 for r in res["rows"] if "error" in r)
     print(f"[{k}/{n}] {res['set']}: {res['seconds']:.1f} s"
           + (f"  (J {', '.join(js)})" if js else "")
-          + (f"  {err} method(s) failed" if err else ""), file=sys.stderr, flush=True)
+          + (f"  {_count(err, 'method')} failed" if err else ""), file=sys.stderr,
+          flush=True)
 
 
 def _mean(vals: Iterable[float | None]) -> float | None:
@@ -500,6 +501,11 @@ def run_ablation(data_dir: str | Path, *, base: Any, names: Sequence[str] | None
 
 
 # --------------------------------------------------------------------------- tables
+def _count(n: int, word: str) -> str:
+    """``"1 set"``, ``"2 sets"``."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 def _fmt(x: float | None, spec: str) -> str:
     return "-" if x is None else format(x, spec)
 
@@ -512,7 +518,7 @@ def _render(table: list[list[str]], n_body: int, n_left: int = 1) -> list[str]:
         if k == 1 or k == n_body + 1:
             lines.append("  ".join("-" * w for w in widths))
         lines.append("  ".join(c.ljust(w) if i < n_left else c.rjust(w)
-                               for i, (c, w) in enumerate(zip(r, widths))))
+                               for i, (c, w) in enumerate(zip(r, widths))).rstrip())
     return lines
 
 
@@ -521,7 +527,7 @@ def format_table(report: dict) -> str:
     where a background exists), then the means per method. Sets with a background
     get a second table, "whole photo": per method ``PSNR SSIM dmg% left%`` over the
     whole image, the set's ``unrec%`` (true-mask pixels no other view saw free), and
-    the means."""
+    the means (``mean unrec %`` on a row of its own)."""
     methods = report["methods"]
     rows = report["sets"]
     info = {i["set"]: i for i in report.get("set_info", [])}
@@ -545,7 +551,7 @@ def format_table(report: dict) -> str:
         table.append([s] + [cell(by.get((s, m)), bg) for m in methods])
     summ = report.get("summary") or summarize(rows, methods)
     n_sets = len(set_names)
-    table.append([f"mean J ({n_sets} sets)"]
+    table.append([f"mean J ({_count(n_sets, 'set')})"]
                  + [_fmt(summ[m]["jaccard"], ".3f") for m in methods])
     if any_bg:
         table.append(["mean PSNR dB (in mask)"] + [_fmt(summ[m]["psnr"], ".2f") for m in methods])
@@ -583,12 +589,13 @@ def _format_whole(report: dict, methods: Sequence[str], by: dict, info: dict,
     summ = summarize(bg_rows, methods)
     mean_unrec = _mean(unrec(s) for s in bg_sets)
     n = len(bg_sets)
-    table.append([f"mean PSNR dB ({n} sets)", ""]
+    table.append([f"mean PSNR dB ({_count(n, 'set')})", ""]
                  + [_fmt(summ[m]["psnr_whole"], ".2f") for m in methods])
     table.append(["mean SSIM", ""] + [_fmt(summ[m]["ssim_whole"], ".3f") for m in methods])
     table.append(["mean damage %", ""] + [_fmt(summ[m]["damage"], ".2f") for m in methods])
-    table.append(["mean leftover %", _fmt(mean_unrec, ".1f")]
-                 + [_fmt(summ[m]["leftover"], ".1f") for m in methods])
+    table.append(["mean leftover %", ""] + [_fmt(summ[m]["leftover"], ".1f") for m in methods])
+    # the only figure of the unrec% column: a row of its own, the methods' cells blank
+    table.append(["mean unrec %", _fmt(mean_unrec, ".1f")] + [""] * len(methods))
     head = ["whole photo, cells: PSNR(dB) SSIM damage% leftover%",
             "  damage%: of all pixels, outside the true mask + 5 px: right in the input, "
             "wrong in the output (CIE76 dE > 10, 1 px blur)",
