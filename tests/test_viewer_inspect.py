@@ -126,7 +126,8 @@ def test_cut_between_start_and_the_first_scan_is_nothing_to_inspect(
                "--quiet"])
     capsys.readouterr()
     assert rc == code
-    msg = "interrupted before the scans began (after correspondence)"
+    msg = vi.interruption(vi.RrdReader(str(rrd)).stream().collect())  # as the CLI said
+    assert msg.startswith("interrupted before the scans began (") and "during scan" not in msg
     for args in (["--pixel", "5,5"], ["--failures"]):
         rc, out, err = _inspect(capsys, rrd, *args)
         assert (rc, out) == (2, ""), out
@@ -269,3 +270,187 @@ def test_not_reached_and_photo_helpers():
     assert vi.photo_size(dict(width=W, height=H, photo_width=W, photo_height=H)) is None
     assert vi.photo_to_analysis(info, 4 * W - 1, 4 * H - 1) == (W - 1, H - 1)
     assert vi.photo_to_analysis(info, 0, 0) == (0, 0)
+
+
+# -- trial 18, item 1: candidates, clusters and DBSCAN noise told consistently ------------
+def _cand(src, name, cluster, B=0.5):
+    return dict(slot=src, src=src, src_name=name, x=10 + src, y=20, B=B, cluster=cluster)
+
+
+def _camel_decision():
+    """The decision camel.rrd recorded at (300, 187): 6 candidates, DBSCAN found one
+    cluster (label 0, two members) and called the other four noise (label −1)."""
+    names = ["00014", "00024", "00034", "00054", "00064", "00074"]
+    cands = [_cand(s, n, -1) for s, n in enumerate(names[:4])]
+    cands += [_cand(4, names[4], 0, 0.87), _cand(5, names[5], 0, 0.99)]
+    return names, dict(scan=0, step=119980, M=0.11, t_r=0.3, dynamic=True, why=["dynamic"],
+                       n_cand=6, n_clusters=1, win_cluster=0, win_weight=1.86,
+                       consensus_dist=0.26, chosen_src=5, candidates=cands)
+
+
+def test_noise_candidates_are_not_counted_in_the_cluster():
+    names, d = _camel_decision()
+    assert vd.candidate_counts(d) == (
+        "6 candidates: 2 in the winner cluster 0 (b_m 1.86: 00064 (14,20) B_l 0.87, "
+        "00074 (15,20) B_l 0.99), 4 noise")
+    assert vd.cluster_words(None, d, 6) == (
+        "winning cluster A_m (cluster 0): 2 of 6 candidates from 2 of 6 sources (00064, "
+        "00074); the other 4 DBSCAN noise; b_m = Σ B_l = 1.86; k = 1 cluster")
+    # the per-scan maps (any pixel) say |P| 6, k 1, |A_m| 2: the other 4 are noise
+    sc = dict(n_candidates=6, n_clusters=1, win_size=2, win_sources=names[4:], b_m=1.86)
+    assert "the other 4 DBSCAN noise" in vd.cluster_words(sc, d, 6)
+    assert "2 of 6 candidates from 2 of 6 sources, the other 4 DBSCAN noise, b_m 1.86, k 1" \
+        in vd.cluster_words(sc, None, 6, short=True)
+    # k = 2 without the decision's labels: the split is not known, and not invented
+    sc2 = dict(sc, n_clusters=2)
+    assert "the other 4 in the 1 other cluster or DBSCAN noise" in vd.cluster_words(sc2, None, 6)
+    h = dict(x=300, y=187, t_r=0.3, decisions=[d], scans=[], replacements=[], covered_by=[],
+             updates=[], source_names=names, final_dynamic=True, gt=None, stages={},
+             size=(360, 640))
+    text = vd.format_pixel_history(h)
+    assert "6 candidates in 1 cluster" not in text
+    assert "step 119980: M 0.11 ≤ t_r 0.30 → DYNAMIC [dynamic]; 6 candidates: 2 in the " \
+           "winner cluster 0" in text, text
+    all_noise = dict(d, n_clusters=0, win_cluster=-1,
+                     candidates=[dict(c, cluster=-1) for c in d["candidates"]])
+    assert vd.candidate_counts(all_noise) == "6 candidates: all noise"
+
+
+def test_history_of_a_recorded_decision_counts_each_dbscan_label(tmp_path, capsys):
+    """The fabricated decisions label their candidates 0, 1, 2, 0, … (at odd steps
+    the last one −1, noise), the winner cluster 1: every count said matches."""
+    path = tmp_path / "run.rrd"
+    fabricate_run([RerunSink(path, record_every_rows=8)], H=H, W=W, S=S, n_scans=1)
+    h = vi.pixel_history(path, 23, 0)  # step 23: a sampled decision, recorded
+    d = h["decisions"][0]
+    labels = [c["cluster"] for c in d["candidates"]]
+    assert d["win_cluster"] == 1 and labels.count(-1) == 1, labels
+    n, win, noise = len(labels), labels.count(1), labels.count(-1)
+    rc, out, _ = _inspect(capsys, path, "--pixel", "23,0")
+    assert rc == 0
+    others = ", ".join(f"{labels.count(c)} in cluster {c}" for c in (0, 2) if c in labels)
+    line = next(ln for ln in out.splitlines() if "step " in ln and "candidates:" in ln)
+    assert f"{n} candidates: {win} in the winner cluster 1 (b_m " in line, line
+    assert line.split("), ", 1)[1].startswith(f"{others}, {noise} noise"), line
+    assert (f"{win} of {n} candidates from {win} of {S} sources" in out
+            and f"the other {n - win}: {n - win - noise} in 2 other clusters, {noise} "
+                "DBSCAN noise" in out), out
+
+
+# -- trial 18, item 2: --failures says its pixels are the analysis image's ----------------
+def test_failures_of_a_downscaled_run_name_the_analysis_image_and_the_photo_pixel(
+        tmp_path, capsys):
+    from test_viewer_fixtures import gt_for
+
+    gt, _ = gt_for(H, W, S)
+    path = tmp_path / "run.rrd"
+    fabricate_run([RerunSink(path, record_every_rows=8, gt_mask=gt,
+                             photo_size=(4 * W, 4 * H))], H=H, W=W, S=S, n_scans=1)
+    rc, out, err = _inspect(capsys, path, "--failures", "--top", "3")
+    assert rc == 0 and err == [], err
+    items = vi.failures(path, top=3)
+    lines = out.splitlines()
+    assert len(items) >= 2 and len(lines) == len(items) + 3, out
+    info = vi.read_run_info(path)
+    for e, line in zip(items, lines[1:]):
+        (qx, qy), (px, py) = e["pixel"], e["photo_pixel"]
+        assert f"pixel {qx},{qy} (photo {px},{py})  steps " in line, line
+        assert (0 <= px < 4 * W and 0 <= py < 4 * H
+                and vi.photo_to_analysis(info, px, py) == (qx, qy))  # the same pixel
+    assert lines[-2] == ("(pixels of the 64x48 analysis image; the photos are 256x192, "
+                         "analysed at ×0.25: --pixel takes these; \"photo X,Y\" is the same "
+                         "pixel in the photo)")
+    # as --pixel says it
+    rc, out, _ = _inspect(capsys, path, "--pixel", "{},{}".format(*items[0]["pixel"]))
+    assert out.splitlines()[-1].startswith(
+        "  (pixels of the 64x48 analysis image; the photos are 256x192, analysed at ×0.25")
+
+
+def test_failures_at_the_photos_size_add_no_note(tmp_path, capsys):
+    from test_viewer_fixtures import gt_for
+
+    gt, _ = gt_for(H, W, S)
+    path = tmp_path / "run.rrd"
+    fabricate_run([RerunSink(path, record_every_rows=8, gt_mask=gt)], H=H, W=W, S=S,
+                  n_scans=1)
+    rc, out, _ = _inspect(capsys, path, "--failures")
+    assert rc == 0 and "photo" not in out and "analysis image" not in out, out
+    assert all(e["photo_pixel"] is None for e in vi.failures(path))
+
+
+# -- trial 18, item 3: interrupted after the scans is not "at scan S, step N" -------------
+@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (commands.Terminated, 143)])
+def test_cut_during_the_refinement_is_after_the_scans(tmp_path, capsys, monkeypatch, sig,
+                                                      code):
+    """A real run (one scan) interrupted in the refinement, after the scan's summary
+    was recorded: the trial saw "interrupted at scan 0, step 691199" there."""
+    import cv2
+
+    from dynremove import pipeline
+
+    scene = synth.make_scene(seed=0, n_views=4, size=(48, 64))
+    folder = tmp_path / "set"
+    folder.mkdir()
+    for name, im in zip(scene.names, scene.images):
+        cv2.imwrite(str(folder / name), im)
+
+    def cut(*a, **k):
+        raise sig()
+
+    monkeypatch.setattr(pipeline, "refine_mask", cut)
+    rrd = tmp_path / "run.rrd"
+    rc = main(["run", str(folder), "--out", str(tmp_path / "out"), "--record", str(rrd),
+               "--quiet"])
+    capsys.readouterr()
+    assert rc == code
+    msg = "interrupted after the scans (during the refinement)"
+    store = vi.load_store(rrd)
+    assert vi.interruption(store) == msg and vi._scan_summary(store, "", 0) is not None
+    rc, out, err = _inspect(capsys, rrd, "--pixel", "5,5")
+    assert rc == 0 and err == [f"dynremove: note: {rrd.resolve()}: the run was {msg}: "
+                               "read what was recorded"], err
+    assert out.splitlines()[0].startswith("pixel (5, 5): ") and "step 3071" not in out
+    assert out.splitlines()[-1] == f"  no final L: the run was {msg}", out
+    rc, _, err = _inspect(capsys, rrd, "--failures")
+    assert rc == 2 and f"did not finish ({msg})" in err[-1], err
+
+
+def test_before_the_scans_a_starting_scan_is_not_said_to_run():
+    assert vd.before_scans_message("during scan 0") == \
+        "interrupted before the scans began (as scan 0 was starting)"
+    assert vd.before_scans_message("after correspondence") == \
+        "interrupted before the scans began (after correspondence)"
+    assert vd.before_scans_message() == "interrupted before the scans began"
+
+
+def test_cut_between_two_scans_and_after_the_last(tmp_path):
+    """The sink: a run stopped after scan 0 finished, with more scans to come (the
+    fabricated run allows 3 and finds dynamic pixels), then after all three."""
+    between = tmp_path / "between.rrd"
+    sink = RerunSink(between, record_every_rows=8)
+    fabricate_run([sink], H=H, W=W, S=S, n_scans=3, stop_after_scans=1)
+    sink.interrupted("after scan 0")
+    assert vi.interruption(vi.load_store(between)) == \
+        "interrupted after scan 0, before scan 1 began"
+    after = tmp_path / "after.rrd"
+    sink = RerunSink(after, record_every_rows=8)
+    fabricate_run([sink], H=H, W=W, S=S, n_scans=3, stop_after_scans=3)
+    sink.interrupted("during fill by selection")
+    assert vi.interruption(vi.load_store(after)) == \
+        "interrupted after the scans (during the fill by selection)"
+
+
+def test_recording_of_an_older_sink_cut_after_the_scans(tmp_path):
+    """Recordings made before the fix say "interrupted at scan 2, step N" after the
+    last scan finished; its summary is recorded, so the reader tells it right."""
+    path = tmp_path / "old.rrd"
+    sink = RerunSink(path, record_every_rows=8)
+    fabricate_run([sink], H=H, W=W, S=S, n_scans=3, stop_after_scans=3)
+    step = 3 * H * W - 1
+    sink.rec.log(sink.p(vi.P.RUN_INTERRUPTED), rr.AnyValues(
+        message=f"interrupted at scan 2, step {step}", scan=2, step=step, scans_began=True),
+        static=True)
+    sink.close()
+    store = vi.load_store(path)
+    assert vi.interruption(store) == "interrupted after the scans"
+    assert vi._where_cut(store, "", 1, 1, H, W)["message"] == "interrupted after the scans"

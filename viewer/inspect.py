@@ -27,6 +27,7 @@ from dynremove.events import (CORRESPONDENCE_UPDATE_DTYPE, REPLACEMENT_DTYPE,
 from dynremove.refine.select import REASONS
 from viewer import paths as P
 from viewer._images import mask_sources, visit_step
+from viewer.verdict import after_scan_message, more_scans
 
 _KINDS = {"decisions": P.EVENTS_DECISIONS, "replacements": P.EVENTS_REPLACEMENTS,
           "updates": P.EVENTS_UPDATES}
@@ -138,13 +139,39 @@ def scans_recorded(store, root: str = "") -> bool:
 
 
 def _interruption_values(store, root: str = "") -> dict[str, Any]:
-    vals = _static_values(store, P.Paths(root)(P.RUN_INTERRUPTED))
-    return {k: v[0] for k, v in vals.items() if v}
+    """The ``run/interrupted`` values (message, scan, step, scans_began). A run that
+    older sinks said was "interrupted at scan S, step N" although scan S had
+    finished (its summary, ``stats/n_dynamic``, is recorded: the refinement or the
+    fill was running) gets the message today's sink logs for it."""
+    p = P.Paths(root)
+    vals = {k: v[0] for k, v in _static_values(store, p(P.RUN_INTERRUPTED)).items() if v}
+    msg = str(vals.get("message") or "")
+    if vals.get("scans_began") and msg.startswith("interrupted at scan "):
+        scan = int(vals.get("scan", 0))
+        n_dyn = _scan_summary(store, root, scan)
+        if n_dyn is not None:
+            params = _static_values(store, p(P.RUN_INFO)).get("params")
+            params = json.loads(params[0]) if params else {}
+            vals["message"] = after_scan_message(scan, more_scans(scan, n_dyn, params))
+    return vals
+
+
+def _scan_summary(store, root: str, scan: int) -> float | None:
+    """n_dynamic of scan ``scan``'s summary (logged when the scan finished), or None."""
+    entity = P.Paths(root)(P.stat("n_dynamic"))
+    t = _arrow(store, entity, index="scan")
+    col = None if t is None else _column(t, f"{entity}:Scalars:scalars")
+    if col is None:
+        return None
+    for s, v in zip(t.column("scan").to_pylist(), col.to_pylist()):
+        if s == scan and v:
+            return float(v[0])
+    return None
 
 
 def interruption(store, root: str | None = None) -> str | None:
-    """"interrupted at scan S, step N" (or "... before the scans began") when the
-    recording is of an interrupted run (``RerunSink.interrupted``), else None.
+    """"interrupted at scan S, step N" (or "... before the scans began", "... after
+    the scans") when the recording is of an interrupted run (``RerunSink.interrupted``), else None.
     ``root`` None: the first interrupted run of the recording, whatever its root."""
     for r in runs_in(store) if root is None else [root.strip("/")]:
         msg = _interruption_values(store, r).get("message")
@@ -655,6 +682,18 @@ def photo_to_analysis(info: dict[str, Any], x: int, y: int) -> tuple[int, int] |
     return io.photo_to_analysis(x, y, ph, (int(info["width"]), int(info["height"])))
 
 
+def analysis_to_photo(info: dict[str, Any], x: int, y: int) -> tuple[int, int] | None:
+    """The photo pixel whose centre analysis pixel (x, y)'s centre falls on (the
+    inverse of :func:`photo_to_analysis`), or None when the run analysed the photos
+    at their own size."""
+    ph = photo_size(info)
+    if ph is None:
+        return None
+    (W0, H0), W, H = ph, int(info["width"]), int(info["height"])
+    return (min(W0 - 1, max(0, int(round((x + 0.5) * W0 / W - 0.5)))),
+            min(H0 - 1, max(0, int(round((y + 0.5) * H0 / H - 0.5)))))
+
+
 def outside_message(info: dict[str, Any], x: int, y: int) -> str:
     """Why ``--pixel x,y`` is refused: outside the image the run analysed. When the
     photos were larger and (x, y) lies inside them, the pixel it most likely means."""
@@ -682,10 +721,14 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     pixels, largest first. Each entry: ``kind`` ("FP"/"FN"), ``area``, ``bbox``
     (x, y, w, h), ``centroid``, ``pixel`` (the most interior pixel, a good
     ``--probe``), ``n_decisions`` (recorded decisions inside) and ``worst``
-    (the recorded decision inside whose M was most confidently wrong, or None).
+    (the recorded decision inside whose M was most confidently wrong, or None);
+    all in pixels of the analysis image, of size ``size`` (H, W); when the photos
+    were analysed at another size, ``photo`` (W, H) and ``photo_pixel`` (``pixel``
+    in the photo), else None.
     Needs ``gt_mask`` given to the sink and a finished run.
     """
     root = resolve_root(path, root)
+    info = read_run_info(path, root=root)
     L = read_final_dynamic(path, root=root)
     gt = read_gt_mask(path, root=root)
     fix = ("record one with `dynremove run IMAGES --gt MASK --record FILE.rrd` (MASK: the "
@@ -725,6 +768,8 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
             out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh),
                             centroid=(float(cents[i][0]), float(cents[i][1])),
                             pixel=(qx, qy), n_decisions=len(d_in), worst=worst,
+                            size=(H, W), photo=photo_size(info),
+                            photo_pixel=analysis_to_photo(info, qx, qy),
                             steps=[visit_step(sc, qx, qy, H, W, direction=dr)
                                    for sc, dr in scan_dirs]))
     out.sort(key=lambda e: -e["area"])

@@ -50,6 +50,7 @@ from viewer._images import (CLASS_COLORS, REASON_NAMES, VERDICT_COLORS, VERDICT_
                             source_set_classes, visited_mask)
 from viewer.blueprint import make_blueprint, make_compare_blueprint
 from viewer.sink_columns import StepColumns
+from viewer.verdict import after_scan_message, before_scans_message, more_scans
 
 _REASON_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 120),
                    3: (230, 40, 40, 160), 4: (120, 120, 120, 120), 5: (240, 150, 30, 140),
@@ -176,6 +177,8 @@ class RerunSink(StepColumns):
         self._opened = False  # the file is open (begin() or start())
         self._scans_began = False
         self._seen = (0, 0)  # (scan, step) last seen, for interrupted()
+        self._finished: tuple[int, float] | None = None  # (scan, n_dynamic) of the last
+        # scan, when it has finished and no other has started
         self._pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._pending_n = 0
         self.timing: dict[str, list[float]] = {}  # method: [calls, seconds]
@@ -216,7 +219,9 @@ class RerunSink(StepColumns):
         Called by the CLI on Ctrl-C / SIGTERM. The recording keeps everything
         logged so far and gets its footer, so it reads back like a finished one.
         ``stage``: where the run was, said when the scans had not begun
-        ("interrupted before the scans began (during features)").
+        ("interrupted before the scans began (during features)") or had all
+        finished ("interrupted after the scans (during the refinement)"); between
+        two scans: "interrupted after scan 0, before scan 1 began".
         """
         if self._closed:
             return
@@ -229,8 +234,14 @@ class RerunSink(StepColumns):
         except Exception:  # noqa: BLE001 - the interruption may have cut a chunk short
             self._pending, self._pending_n = [], 0
         scan, step = self._seen
-        msg = (f"interrupted at scan {scan}, step {step}" if self._scans_began
-               else "interrupted before the scans began" + (f" ({stage})" if stage else ""))
+        if not self._scans_began:
+            msg = before_scans_message(stage)
+        elif self._finished is not None:
+            done, n_dyn = self._finished
+            params = getattr(getattr(self, "info", None), "params", None) or {}
+            msg = after_scan_message(done, more_scans(done, n_dyn, params), stage)
+        else:
+            msg = f"interrupted at scan {scan}, step {step}"
         self._set_time(scan, step)
         self.rec.log(self.p(P.LOG), rr.TextLog(msg, level=rr.TextLogLevel.WARN))
         self.rec.log(self.p(P.RUN_INTERRUPTED), rr.AnyValues(
@@ -297,6 +308,7 @@ class RerunSink(StepColumns):
         t0 = time.perf_counter()
         self._scan = int(scan)
         self._scans_began = True
+        self._finished = None
         self._seen = (self._scan, self._scan * self.H * self.W)
         self._direction = 1 if int(direction) >= 0 else -1
         self._rows_done = 0
@@ -378,6 +390,7 @@ class RerunSink(StepColumns):
             f"replaced, {int(s['n_undecided'])} undecided, {float(s['seconds']):.2f} s",
             level=rr.TextLogLevel.INFO))
         self.rec.flush()
+        self._finished = (scan, float(s["n_dynamic"]))
         self._tick("scan_finished", t0)
 
     def finish(self, result: Any) -> None:

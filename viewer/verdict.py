@@ -44,12 +44,64 @@ def cluster_words(sc: dict[str, Any] | None, d: dict[str, Any] | None,
     if not k or not size:
         return (f"no cluster: {n} candidate{'s' if n != 1 else ''}, all DBSCAN noise"
                 if n else "no candidate (all outside the sources)")
+    rest = _the_others(n, k, size, d)
     if short:
-        return (f"A_m {size} of {n} candidates from {len(srcs)} of {n_sources} sources, "
-                f"b_m {b_m:.2f}, k {k}")
+        return (f"A_m {size} of {n} candidates from {len(srcs)} of {n_sources} sources"
+                f"{', ' + rest if rest else ''}, b_m {b_m:.2f}, k {k}")
     return (f"winning cluster A_m{'' if cid is None else f' (cluster {cid})'}: {size} of "
-            f"{n} candidates from {len(srcs)} of {n_sources} sources ({', '.join(srcs)}); "
-            f"b_m = Σ B_l = {b_m:.2f}; k = {k} cluster{'s' if k != 1 else ''}")
+            f"{n} candidates from {len(srcs)} of {n_sources} sources ({', '.join(srcs)})"
+            f"{'; ' + rest if rest else ''}; b_m = Σ B_l = {b_m:.2f}; "
+            f"k = {k} cluster{'s' if k != 1 else ''}")
+
+
+def _the_others(n: int, k: int, size: int, d: dict[str, Any] | None) -> str:
+    """Where the candidates outside A_m went: other clusters or DBSCAN noise (label −1).
+    Counted from the decision's labels when it is recorded and matches; else from
+    k alone (k = 1: all the others are noise); "" when A_m holds them all."""
+    others = n - size
+    if others <= 0:
+        return ""
+    labels = [c["cluster"] for c in d["candidates"]] if d is not None else None
+    if labels is not None and len(labels) == n:
+        noise = sum(1 for c in labels if c < 0)
+    elif k == 1:
+        noise = others
+    else:
+        return (f"the other {others} in the {k - 1} other cluster{'s' if k > 2 else ''} "
+                "or DBSCAN noise")
+    if noise == others:
+        return f"the other {others} DBSCAN noise"
+    if noise == 0:
+        return f"the other {others} in {k - 1} other cluster{'s' if k > 2 else ''}"
+    return (f"the other {others}: {others - noise} in {k - 1} other "
+            f"cluster{'s' if k > 2 else ''}, {noise} DBSCAN noise")
+
+
+def candidate_counts(d: dict[str, Any]) -> str:
+    """A recorded decision's candidates by DBSCAN label, the winner first: "6
+    candidates: 2 in the winner cluster 0 (b_m 1.87: its members), 4 noise" (noise:
+    label −1)."""
+    cands = d["candidates"]
+    n = len(cands)
+    head = f"{n} candidate{'s' if n != 1 else ''}"
+    if not n:
+        return head
+    by: dict[int, int] = {}
+    for c in cands:
+        by[c["cluster"]] = by.get(c["cluster"], 0) + 1
+    win = d["win_cluster"]
+    parts = []
+    for c in sorted((c for c in by if c >= 0), key=lambda c: (c != win, c)):
+        if c == win:
+            members = ", ".join(f"{m['src_name']} ({m['x']},{m['y']}) B_l {m['B']:.2f}"
+                                for m in cands if m["cluster"] == c)
+            parts.append(f"{by[c]} in the winner cluster {c} (b_m {d['win_weight']:.2f}: "
+                         f"{members})")
+        else:
+            parts.append(f"{by[c]} in cluster {c}")
+    if by.get(-1):
+        parts.append(("all" if by[-1] == n else str(by[-1])) + " noise")
+    return head + ": " + ", ".join(parts)
 
 
 def _not_reached(h: dict[str, Any]) -> str:
@@ -67,6 +119,40 @@ def _not_reached(h: dict[str, Any]) -> str:
     if cut:
         return f"no scan reached it: the run was {cut['message']}"
     return "no scan of this recording reached it"
+
+
+_STEP_NAMES = {"refine": "the refinement", "fill by selection": "the fill by selection",
+               "fused fill": "the fused fill", "fusion": "the fill"}
+
+
+def after_scan_message(scan: int, more: bool, stage: str | None = None) -> str:
+    """Where a run interrupted after scan ``scan`` had finished (its summary recorded)
+    ends: "interrupted after the scans (during the refinement)", or "interrupted
+    after scan 0, before scan 1 began" when ``more`` scans were to come. ``stage``:
+    the CLI's "during refine", "after scan 0"... (a scan's end is said already)."""
+    if more:
+        return f"interrupted after scan {scan}, before scan {scan + 1} began"
+    when, _, name = (stage or "").partition(" ")
+    if when not in ("during", "after") or not name or name.startswith("scan"):
+        return "interrupted after the scans"
+    return f"interrupted after the scans ({when} {_STEP_NAMES.get(name, name)})"
+
+
+def before_scans_message(stage: str | None = None) -> str:
+    """Where a run interrupted before any scan started recording ends: "interrupted
+    before the scans began (after correspondence)". A scan's own stage ("during scan
+    0": the CLI's progress names the first scan as its set-up begins, before the
+    scan records anything) is said as "as scan 0 was starting"."""
+    when, _, name = (stage or "").partition(" ")
+    if when in ("during", "after") and name.startswith("scan "):
+        stage = f"as {name} was starting"
+    return "interrupted before the scans began" + (f" ({stage})" if stage else "")
+
+
+def more_scans(scan: int, n_dynamic: float, params: dict[str, Any]) -> bool:
+    """Whether the scans go on after ``scan`` (as the driver decides: up to
+    ``max_scans``, and only while a scan finds dynamic pixels)."""
+    return scan + 1 < int(params.get("max_scans", 1)) and n_dynamic > 0
 
 
 _STAGE_WORDS = {"clean": "the L clean-up", "votes": "the border votes",
@@ -200,13 +286,10 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
             op = "≤" if d["M"] <= d["t_r"] else ">"
             verdict = (f"M {d['M']:.2f} {op} t_r {d['t_r']:.2f} → "
                        f"{'DYNAMIC' if d['dynamic'] else 'static'}")
-        win, srcs = _winning(d)
+        cd = d["consensus_dist"]
         txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
-               f"{len(d['candidates'])} candidates in {d['n_clusters']} "
-               f"cluster{'s' if d['n_clusters'] != 1 else ''}; winner "
-               f"cluster {d['win_cluster']} b_m {d['win_weight']:.2f}: " + ", ".join(
-                   f"{c['src_name']} ({c['x']},{c['y']}) B_l {c['B']:.2f}" for c in win)
-               + f"; SIFT distance to the consensus {d['consensus_dist']:.3f}")
+               + candidate_counts(d)
+               + (f"; SIFT distance to the consensus {cd:.3f}" if cd == cd else ""))
         ev.append((d["step"], txt))
     for r in h["replacements"]:
         ev.append((r["step"], f"  scan {r['scan']} step {r['step']}: replaced by the patch "
@@ -253,14 +336,19 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
                     "  no final L: the recording ends before the run finished")
     photo = h.get("photo")
     if photo:
-        H, W = h["size"]
-        tail.append(f"  (pixels of the {W}x{H} analysis image; the photos are "
-                    f"{photo[0]}x{photo[1]}, analysed at ×{W / photo[0]:.3g})")
+        tail.append(f"  ({_analysis_note(h['size'], photo)})")
     if not ev:  # nothing changed it: no empty history
         return "\n".join(lines + tail)
     lines.append("history (jump to a step on the `step` timeline):")
     lines += _fold(ev, max_lines - len(lines) - len(tail))
     return "\n".join(lines + tail)
+
+
+def _analysis_note(size: tuple[int, int], photo: tuple[int, int]) -> str:
+    """"pixels of the WxH analysis image; the photos are W0xH0, analysed at ×s"."""
+    H, W = size
+    return (f"pixels of the {W}x{H} analysis image; the photos are {photo[0]}x{photo[1]}, "
+            f"analysed at ×{W / photo[0]:.3g}")
 
 
 # -- failures ----------------------------------------------------------------------
@@ -273,13 +361,18 @@ def format_failures(items: list[dict[str, Any]]) -> str:
     for e in items:
         x0, y0, w, h = e["bbox"]
         steps = ", ".join(str(s) for s in e.get("steps", []))
+        ph = e.get("photo_pixel")
         s = (f"{e['kind']} {e['area']:6d} px  ({x0},{y0}) {w}x{h}  pixel "
-             f"{e['pixel'][0]},{e['pixel'][1]}  steps {steps}; {e['n_decisions']} recorded "
-             f"decisions")
+             f"{e['pixel'][0]},{e['pixel'][1]}"
+             + (f" (photo {ph[0]},{ph[1]})" if ph else "")
+             + f"  steps {steps}; {e['n_decisions']} recorded decisions")
         if e["worst"]:
             s += (f"; worst M {e['worst']['M']:.2f} at ({e['worst']['x']},{e['worst']['y']})"
                   f" step {e['worst']['step']}")
         lines.append(s)
+    if items and items[0].get("photo"):
+        lines.append(f"({_analysis_note(items[0]['size'], items[0]['photo'])}: --pixel "
+                     "takes these; \"photo X,Y\" is the same pixel in the photo)")
     if items:
         lines.append("explain one: dynremove inspect REC --pixel X,Y; in the viewer, type "
                      "the step into the time panel's `step` field")
