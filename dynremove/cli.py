@@ -17,6 +17,7 @@ import dataclasses
 import os
 import signal
 import sys
+from pathlib import Path
 from typing import Any, Sequence
 
 import cv2
@@ -91,6 +92,19 @@ def parse_ref(s: str) -> str:
     return s
 
 
+def parse_set_ref(s: str) -> str:
+    """``batch`` / ``eval --ref``: the reference of every set, so an index, a bare file name
+    or 'auto'; a path names one file of one set."""
+    from dynremove.io import is_path_ref
+
+    s = parse_ref(s)
+    if is_path_ref(s):
+        raise argparse.ArgumentTypeError(
+            f"--ref {s}: the reference of every set is an index, a file name or 'auto', "
+            f"not a path (e.g. --ref {Path(s).name})")
+    return s
+
+
 def parse_jobs(s: str) -> int:
     try:
         v = int(s)
@@ -156,7 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "f10), image files, or one video")
     r.add_argument("--ref", default=None, type=parse_ref,
                    help="reference: index (0-based, in input order; negative counts from "
-                        "the end, -1 = the last), file name or 'auto' (the sharpest frame with "
+                        "the end, -1 = the last), file name (one that no other input has), "
+                        "path (exactly that input) or 'auto' (the sharpest frame with "
                         "the most keypoint matches); default: the middle image. The run "
                         "names the one it takes")
     r.add_argument("--out", default="out/run", help="output folder (default: out/run)")
@@ -208,7 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
                     help="sets in parallel (joblib; -1 = all cores; default 1)")
     bt.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                     help="run the sets on this Dask cluster (extra dynremove[dask])")
-    bt.add_argument("--ref", default=None, type=parse_ref,
+    bt.add_argument("--ref", default=None, type=parse_set_ref,
                     help="reference of every set: index (0-based; negative counts from the "
                          "end), file name or 'auto' (default: middle)")
     bt.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
@@ -277,7 +292,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
                    help="downscale to at most PX (0 or 'none' = full size; default: only "
                         "above 1280 px)")
-    e.add_argument("--ref", default=None, type=parse_ref,
+    e.add_argument("--ref", default=None, type=parse_set_ref,
                    help="reference of every set: index (0-based; negative counts from the "
                         "end), file name or 'auto' (as run --ref auto; its mask must exist "
                         "in masks/) (default: the middle frame)")
@@ -303,13 +318,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="folder of static images (with --n-sets: a folder of such folders)")
     c.add_argument("objects_dir", metavar="OBJECTS_DIR",
                    help="DAVIS-style sets with masks (e.g. shared/data/davis)")
-    c.add_argument("--out", required=True, metavar="DIR")
-    c.add_argument("--seed", type=int, default=0)
-    c.add_argument("--n-views", type=int, default=6, metavar="N")
-    c.add_argument("--objects", type=int, default=1, metavar="K", help="objects per set")
+    c.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (required; with --n-sets, one sub-folder per set)")
+    c.add_argument("--seed", type=int, default=0,
+                   help="seed of the random choices: the objects, their size and path (same "
+                        "seed, same sets; default 0)")
+    c.add_argument("--n-views", type=int, default=6, metavar="N",
+                   help="views per set, the middle N images of the static folder; the "
+                        "middle view is the reference (at least 2; default 6)")
+    c.add_argument("--objects", type=int, default=1, metavar="K",
+                   help="moving objects pasted into each set (default 1)")
     c.add_argument("--n-sets", type=int, default=0, metavar="N",
                    help="write N sets under DIR (one per static set x objects), "
-                        "STATIC_DIR being a folder of static sets")
+                        "STATIC_DIR being a folder of static sets (default 0: one set "
+                        "from STATIC_DIR itself)")
     c.set_defaults(fn=cmd_composite)
 
     v = sub.add_parser("view", help="open a recording in the Rerun viewer (with its layout)",

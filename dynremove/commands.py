@@ -8,11 +8,15 @@ never imported here: commands that need it call ``args.viewer(name)``, which
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import gc
+import re
 import signal
 import sys
 import os
 import time
+import traceback
 import warnings
 from pathlib import Path
 from typing import Any
@@ -47,7 +51,31 @@ def params_from_args(args: argparse.Namespace) -> Params:
     try:
         return dataclasses.replace(base, **changes) if changes else base
     except (TypeError, ValueError) as e:  # Params.__post_init__ validates the values
-        raise InputError(str(e)) from None
+        raise InputError(flag_message(str(e))) from None
+
+
+_PARAM_FIELDS = frozenset(f.name for f in dataclasses.fields(Params))
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def flag_message(msg: str) -> str:
+    """A ``Params`` validation message in terms of the flags the user typed:
+    ``t_r must be in [0, 1], got 5.0`` -> ``--t-r 5.0: must be in [0, 1]``; any other
+    field name in it (outside quotes) becomes its flag too."""
+    def flags(text: str) -> str:
+        return re.sub(r"(?<![\w'\"-])([a-z][a-z0-9]*(?:_[a-z0-9]+)*)(?![\w'\"])",
+                      lambda m: _flag(m[1]) if m[1] in _PARAM_FIELDS else m[1], text)
+
+    m = re.fullmatch(r"([a-z][a-z0-9_]*) (must .*), got (.*)", msg, flags=re.S)
+    if m and m[1] in _PARAM_FIELDS:
+        value = m[3].strip()
+        if len(value) >= 2 and value[0] == value[-1] and value[0] in "'\"":
+            value = value[1:-1]  # a string's repr: as typed
+        return f"{_flag(m[1])} {value}: {flags(m[2])}"
+    return flags(msg)
 
 
 # --- commands -----------------------------------------------------------------------------
@@ -76,16 +104,22 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     ref: int | None = None
     rec = sink = sink_b = None
     try:
+        where.bar("load", 0.0)
         iset = io.load_image_set(args.images, max_side=args.max_side,
                                  valid_mask=args.valid_mask, frames=args.frames,
                                  span=args.span, pick=args.pick)
         _check_memory(args, iset)
         where.stage = "while choosing the reference"
-        ref, ref_info, ref_notes = choose_reference(args.ref, iset)
+        ref_arg = args.ref
+        if ref_arg is not None and str(ref_arg).strip().lower() != "auto":
+            # by path (exactly that file) or by a name no other input has: the index
+            ref_arg = str(io.resolve_ref(ref_arg, iset.names, paths=iset.paths))
+        ref, ref_info, ref_notes = choose_reference(ref_arg, iset)
         t_load = time.perf_counter() - t0
+        where.bar("load", 1.0)
         for n in [*iset.notes, reference_note(args.ref, ref, ref_info, iset.names),
                   *ref_notes]:
-            _note(args, n)
+            _note(args, n, where.bar)
         iset.notes.extend(ref_notes)
         gt_full = gt = None
         if args.gt:
@@ -103,14 +137,17 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         if args.record:
             where.stage = "while opening the recording"
         if compare is not None:
-            rec = args.viewer("sink").open_compare_stream(
-                args.record, [n for i, n in enumerate(iset.names) if i != ref],
-                roots=["runs/main", "runs/compare"])
+            with record_errors(args.record):
+                rec = args.viewer("sink").open_compare_stream(
+                    args.record, [n for i, n in enumerate(iset.names) if i != ref],
+                    roots=["runs/main", "runs/compare"])
         sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
         _note_compile(args)
         where.stage = "during features"
-        with warnings.catch_warnings(record=True) as caught:
+        with warnings.catch_warnings():
             warnings.simplefilter("always")
+            # each note as soon as the pipeline knows it, between the stages' lines
+            warnings.showwarning = lambda message, *a, **k: _note(args, str(message), where.bar)
             res = remove_dynamic(iset.images, ref=ref, params=params, sink=sink,
                                  probes=probes, sample_static=args.sample_static,
                                  names=iset.names, preset_name=args.preset, progress=where,
@@ -125,8 +162,6 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                        valid_masks=iset.valid_masks)
                 _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic "
                      f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
-        for w in caught:
-            _note(args, str(w.message))
     except (KeyboardInterrupt, Terminated):
         _record_interruption(args, where.stage, iset, ref, rec, [sink, sink_b])
         raise
@@ -478,6 +513,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
 # --- commands that read recordings (``args.viewer``: see dynremove.cli) ------------------
 def _recording(path: str) -> Path:
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a recording")
     if not p.is_file():
         raise InputError(f"{p}: no such recording")
     return p
@@ -566,11 +603,65 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
     if not getattr(args, "record", None):
         return None
     Path(args.record).parent.mkdir(parents=True, exist_ok=True)
-    return args.viewer("sink").RerunSink(None if rec is not None else args.record,
+    sink = args.viewer("sink").RerunSink(None if rec is not None else args.record,
                      record_every_rows=getattr(args, "record_every_rows", None),
                      detail=getattr(args, "record_detail", "default"),
                      gt_mask=gt, gt_background=gt_background, rec=rec, root=root,
                      photo_size=None if iset is None else tuple(iset.original_size))
+    if rec is None:  # the sink creates the file when the run begins (inside the pipeline)
+        begin, path = sink.begin, args.record
+
+        def begin_or_input_error(*a: Any, **k: Any) -> None:
+            with record_errors(path, sink):
+                begin(*a, **k)
+
+        sink.begin = begin_or_input_error
+    return sink
+
+
+@contextlib.contextmanager
+def _native_stderr_silenced():
+    """File descriptor 2 to /dev/null: Rerun's Rust side logs there itself (a coloured
+    "WARN re_sdk::log_sink: Dropping data in MemorySink" when a stream that could not
+    open its file is dropped), past ``sys.stderr``."""
+    try:
+        sys.stderr.flush()
+        saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    except OSError:
+        yield
+        return
+    try:
+        os.dup2(devnull, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
+@contextlib.contextmanager
+def record_errors(path: str, sink: Any = None):
+    """Rerun failing to create the ``--record`` file (RuntimeError "Failed to create
+    file ...", e.g. a folder where no file can be created) is bad input: InputError
+    naming --record; the half-made stream is dropped without Rerun's log line."""
+    try:
+        yield
+    except RuntimeError as e:
+        if sink is not None and getattr(sink, "_opened", False):
+            raise  # the file was created: a failure while logging, not bad input
+        reason = re.sub(r"^Failed to create file:\s*|,\s*path: .*$", "",
+                        " ".join(str(e).split())) or type(e).__name__
+        with _native_stderr_silenced():
+            stream = getattr(sink, "rec", None)
+            if sink is not None:
+                sink.rec = None  # nothing to close: the file was never opened
+            if stream is not None:
+                with contextlib.suppress(Exception):
+                    stream.disconnect()
+            traceback.clear_frames(e.__traceback__)  # open_compare_stream's holds one
+            del stream, e
+            gc.collect()
+        raise InputError(f"--record {path}: cannot create the file ({reason})") from None
 
 
 def stage_labels(params: Params) -> dict[str, str]:
@@ -587,8 +678,14 @@ def _bar(args: argparse.Namespace, params: Params | None = None) -> ProgressBar:
                        labels=stage_labels(params) if params is not None else None)
 
 
-def _note(args: argparse.Namespace, msg: str) -> None:
-    if not getattr(args, "quiet", False):
+def _note(args: argparse.Namespace, msg: str, bar: ProgressBar | None = None) -> None:
+    """``dynremove: note: msg`` on stderr (not with --quiet); with ``bar``, on a line
+    of its own between the bar's stage lines."""
+    if getattr(args, "quiet", False):
+        return
+    if bar is not None and bar.enabled:
+        bar.note(f"dynremove: note: {msg}")
+    else:
         print(f"dynremove: note: {msg}", file=sys.stderr)
 
 

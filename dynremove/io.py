@@ -387,8 +387,19 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
                     notes=notes, valid=valids, video=video)
 
 
-def resolve_ref(ref: str | int | None, names: Sequence[str]) -> int:
-    """Reference by index (negative counts from the end) or by file name; default middle."""
+def is_path_ref(ref: object) -> bool:
+    """Whether a ``--ref`` value is a path (it contains a path separator), not a bare name."""
+    return isinstance(ref, str) and any(sep and sep in ref for sep in ("/", os.sep, os.altsep))
+
+
+def resolve_ref(ref: str | int | None, names: Sequence[str],
+                paths: Sequence[str | os.PathLike] | None = None) -> int:
+    """Reference by index (negative counts from the end), by file name or stem, or (with
+    ``paths``, the inputs' paths) by path; default: the middle image.
+
+    A path (see :func:`is_path_ref`) picks exactly that file (resolved paths compared);
+    a name or stem that more than one input has is an error listing them.
+    """
     if ref is None or ref == "":
         return len(names) // 2
     if isinstance(ref, int) or (isinstance(ref, str) and ref.lstrip("-").isdigit()):
@@ -397,11 +408,28 @@ def resolve_ref(ref: str | int | None, names: Sequence[str]) -> int:
             raise InputError(f"--ref {ref}: out of range, there are {len(names)} images "
                              f"(0..{len(names) - 1})")
         return i % len(names)
-    matches = [i for i, n in enumerate(names) if n == ref or Path(n).stem == ref
-               or Path(str(ref)).name == n]
+    ref = str(ref)
+    if is_path_ref(ref):
+        if paths is None:
+            raise InputError(f"--ref {ref}: a path cannot name the reference here; give a "
+                             "file name or an index")
+        target = Path(ref).expanduser().resolve()
+        matches = [i for i, q in enumerate(paths) if Path(q).resolve() == target]
+        if not matches:
+            why = "" if target.exists() else "; no such file"
+            raise InputError(f"--ref {ref}: is not one of the input images{why} (a bare "
+                             f"file name, e.g. {Path(ref).name}, matches the inputs by name)")
+        return matches[0]
+    matches = ([i for i, n in enumerate(names) if n == ref]
+               or [i for i, n in enumerate(names) if Path(n).stem == ref])
     if not matches:
         raise InputError(f"--ref {ref}: names no input image (have {', '.join(names[:8])}"
                          + (" …" if len(names) > 8 else "") + ")")
+    if len(matches) > 1:
+        which = ", ".join(f"{paths[i] if paths is not None else names[i]} (index {i})"
+                          for i in matches)
+        raise InputError(f"--ref {ref}: {len(matches)} input images have this name: {which}; "
+                         "give the path of one, or its index")
     return matches[0]
 
 
@@ -416,11 +444,23 @@ def read_mask(path: str | os.PathLike, size: tuple[int, int] | None = None) -> n
     return m > 127
 
 
+def _file_in_the_way(p: Path) -> Path | None:
+    """The nearest existing ancestor of ``p`` (``p`` itself included) when it is not a
+    folder: a folder cannot be created below it."""
+    for q in (p, *p.parents):
+        if q.exists():
+            return None if q.is_dir() else q
+    return None
+
+
 def prepare_out_dir(out: str | os.PathLike) -> Path:
     """Create the output folder; InputError if it is a file or not writable."""
     p = Path(out)
     if p.exists() and not p.is_dir():
         raise InputError(f"--out {p}: exists and is not a folder")
+    blocker = _file_in_the_way(p.parent)
+    if blocker is not None:
+        raise InputError(f"--out {p}: cannot create it: {blocker} is a file, not a folder")
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -441,15 +481,30 @@ def photo_to_analysis(x: int, y: int, photo: tuple[int, int],
 
 def check_out_file(path: str | os.PathLike, flag: str) -> Path:
     """Check that a file can be written at ``path`` (its folder is created); InputError
-    if it is a folder, or its folder cannot be created or written."""
+    if it is a folder, if its folder cannot be created, or if no file can be created in
+    that folder (tried: a temporary file is created and removed; ``os.access`` says yes
+    to root for read-only places such as /proc)."""
     p = Path(path)
     if p.is_dir():
         raise InputError(f"{flag} {p}: is a folder; give a file name (e.g. {p / 'run.rrd'})")
+    blocker = _file_in_the_way(p.parent)
+    if blocker is not None:
+        raise InputError(f"{flag} {p}: cannot create its folder: {blocker} is a file, "
+                         "not a folder")
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise InputError(f"{flag} {p}: cannot create its folder ({e.strerror or e})") from None
-    if not os.access(p.parent, os.W_OK) or (p.exists() and not os.access(p, os.W_OK)):
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".check", dir=p.parent)
+    except OSError as e:
+        raise InputError(f"{flag} {p}: cannot create the file ({e.strerror or e})") from None
+    os.close(fd)
+    try:
+        os.unlink(tmp)
+    except OSError:
+        pass
+    if p.exists() and not os.access(p, os.W_OK):
         raise InputError(f"{flag} {p}: not writable")
     return p
 

@@ -44,9 +44,12 @@ class Result:
     dynamic: npt.NDArray[np.bool_]  # (H, W) final dynamic map L (after clean-up, if on)
     dynamic_raw: npt.NDArray[np.bool_]  # (H, W) L as the scans left it
     M: list[np.ndarray]  # (H, W) float32 M map of every scan
-    coverage: npt.NDArray[np.uint8]  # (H, W) sources whose final match agrees with the output
+    # (H, W) sources that agree with the output: in ``dynamic`` with the fill by
+    # selection, those it combined there (0 where it inpainted: no source saw it free);
+    # elsewhere, those whose match agrees with the reference as the scans left it
+    coverage: npt.NDArray[np.uint8]
     scans: np.ndarray  # SCAN_SUMMARY_DTYPE records
-    timings: dict[str, float]  # seconds per stage
+    timings: dict[str, float]  # seconds per stage that ran (they add up to "total")
     N: np.ndarray  # (S, H, W, 2) int32 final correspondences
     C: np.ndarray  # (S, H, W) float32 final similarity
     ref_index: int
@@ -84,27 +87,77 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
             timings: dict[str, float] | None = None,
             progress: Progress | None = None) -> tuple[ScanInputs, list[geometry.TwoView]]:
     """Features, geometry, dense correspondences and similarity maps (Sec. 3.1)."""
-    timings = {} if timings is None else timings
+    clock = _Clock({} if timings is None else timings, progress)
+    out = _prepare(images, ref, params, clock)
+    clock.stop()
+    return out
+
+
+class _Clock:
+    """The stages' seconds and progress lines. A stage runs from its start to the
+    next one's (its seconds go to ``timings[name]``), so the stages add up to the
+    run; ``progress`` hears ``(name, 0.0)`` when it starts and ``(name, 1.0)`` when
+    it ends, its fractions in between stay below 1. A stage started with
+    ``show=False`` reports its own progress (the scans: one line per scan)."""
+
+    def __init__(self, timings: dict[str, float], progress: Progress | None) -> None:
+        self.timings, self.progress = timings, progress
+        self.name: str | None = None
+        self.show = False
+        self.t = 0.0
+
+    def start(self, name: str, *, show: bool = True) -> None:
+        self.stop()
+        self.name, self.show, self.t = name, show, time.perf_counter()
+        if show and self.progress:
+            self.progress(name, 0.0)
+
+    def tick(self, frac: float) -> None:
+        if self.show and self.progress and self.name is not None:
+            self.progress(self.name, min(frac, 0.999))
+
+    def stop(self) -> None:
+        if self.name is None:
+            return
+        self.timings[self.name] = time.perf_counter() - self.t
+        if self.show and self.progress:
+            self.progress(self.name, 1.0)
+        self.name = None
+
+
+def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clock,
+             on_geometry: Callable[[list[geometry.TwoView]], None] | None = None
+             ) -> tuple[ScanInputs, list[geometry.TwoView]]:
+    """``prepare`` on ``clock``, whose last stage ("similarity") is left running;
+    ``on_geometry(views)`` is called as soon as the geometry is known."""
     p = params.patch_size
     srcs = [i for i in range(len(images)) if i != ref]
-    t = time.perf_counter()
+    clock.start("features")
     grays = [features.to_gray(im) for im in images]
     labs = [features.to_lab(im) for im in images]
     fc = [features.patch_mean(lab, patch_size=p) for lab in labs]  # f_c from the Lab once computed
     fg = []
     for i, g in enumerate(grays):
         fg.append(features.dense_sift(g, patch_size=p))
-        if progress:
-            progress("features", (i + 1) / len(grays))
+        clock.tick((i + 1) / len(grays))
     unit = features.sift_unit(fg, sift_scale=params.sift_scale)
-    timings["features"] = time.perf_counter() - t
+    # the scan's inputs, stacked per source
+    packed = dict(
+        img=images[ref].copy(), lab=labs[ref].copy(), gray=grays[ref].copy(),
+        fc_r=fc[ref].copy(), fg_r=fg[ref].copy(),
+        src_img=np.ascontiguousarray(np.stack([images[s] for s in srcs])),
+        src_lab=np.ascontiguousarray(np.stack([labs[s] for s in srcs])),
+        src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
+        fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
+        fg_s=np.ascontiguousarray(np.stack([fg[s] for s in srcs])))
 
-    t = time.perf_counter()
+    clock.start("geometry")
     g8 = [np.clip(g + 0.5, 0, 255).astype(np.uint8) for g in grays]
     views = geometry.geometry_for_sources(g8[ref], [g8[s] for s in srcs], seed=params.seed)
-    timings["geometry"] = time.perf_counter() - t
+    if on_geometry is not None:
+        on_geometry(views)
 
-    t = time.perf_counter()
+    clock.start("correspondence")
     Ns = []
     # the ungated homography + flow matches, kept for the fill by selection
     flows = (np.empty((len(srcs),) + g8[ref].shape + (2,), np.float32)
@@ -116,11 +169,9 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
             gate_px=params.flow_gate * max(g8[ref].shape),
             F=views[k].F, epipolar_px=params.flow_gate_epipolar_px,
             flow_out=None if flows is None else flows[k]))
-        if progress:
-            progress("correspondence", (k + 1) / len(srcs))
+        clock.tick((k + 1) / len(srcs))
     Nf = np.ascontiguousarray(np.stack(Ns))
     N = correspondence.round_matches(Nf)
-    timings["correspondence"] = time.perf_counter() - t
 
     S = len(srcs)
     F = np.zeros((S, 3, 3), np.float64)
@@ -128,20 +179,11 @@ def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
     for k, v in enumerate(views):
         if v.F is not None:
             F[k], hasF[k] = v.F, True
-    st = ScanInputs(
-        img=images[ref].copy(), lab=labs[ref].copy(), gray=grays[ref].copy(),
-        fc_r=fc[ref].copy(), fg_r=fg[ref].copy(),
-        src_img=np.ascontiguousarray(np.stack([images[s] for s in srcs])),
-        src_lab=np.ascontiguousarray(np.stack([labs[s] for s in srcs])),
-        src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
-        fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
-        fg_s=np.ascontiguousarray(np.stack([fg[s] for s in srcs])),
-        N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF, sift_unit=unit, Nf=Nf,
-        Nf_flow=flows)
-    t = time.perf_counter()
+    clock.start("similarity")
+    st = ScanInputs(**packed, N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF,
+                    sift_unit=unit, Nf=Nf, Nf_flow=flows)
     pf, pi = pack_params(params, sift_unit=unit)
     st.C = kn._similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F, st.hasF, pf, pi)
-    timings["similarity"] = time.perf_counter() - t
     return st, views
 
 
@@ -190,43 +232,53 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
         sink.begin(names, (H, W), images=images, ref=ref)  # the recording before features
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
-    st, views = prepare(images, ref, params, timings=timings, progress=progress)
-    msgs = []
+    clock = _Clock(timings, progress)
+    msgs: list[str] = []
     srcs = [i for i in range(len(images)) if i != ref]
-    if params.near_copy_agree > 0 and len(srcs) > 1:
-        agree = agreement_with_reference(np.asarray(images[ref]), st.src_img,
-                                         [v.H for v in views])
-        copy = agree >= params.near_copy_agree
-        if copy.any() and not copy.all():
-            keep = np.flatnonzero(~copy)
-            msgs.append("near-copies of the reference, not used as evidence (they would "
-                        "out-vote the views that saw the background): " + ", ".join(
-                            f"{names[srcs[k]]} ({100 * agree[k]:.1f} % alike)"
-                            for k in np.flatnonzero(copy)))
-            st = _keep_sources(st, keep)
-            views = [views[k] for k in keep]
-            srcs = [srcs[k] for k in keep]
-    weak = [k for k, v in enumerate(views) if v.F is None]
-    for k in weak:
-        n = views[k].n_matches
-        msgs.append(f"{names[srcs[k]]}: only {n} keypoint match{'' if n == 1 else 'es'} with "
-                    "the reference; no epipolar term and no homography pre-warp for it")
-    if weak and 2 * len(weak) >= len(views):
-        msgs.append(f"{len(weak)} of {len(views)} sources could not be aligned to the "
-                    "reference: the result is unreliable (misaligned fill, missed or "
-                    "false detections). Photos of more overlap, or a larger --max-side "
-                    f"than the {W}x{H} analysed, give more matches")
-    if len(images) == 2:
-        msgs.append("only 2 photos: where they disagree, either may show the mover; the "
-                    "reference is kept there unless the colours of the detected region "
-                    "single it out (3 or more photos decide by consensus)")
-    if all(v.F is None for v in views) and params.use_epipolar:
-        msgs.append("no source has a fundamental matrix: the epipolar terms are off")
-    for m in msgs:
-        warnings.warn(m, stacklevel=2)
+    keep: list[np.ndarray] = []
+
+    def geometry_notes(views: list[geometry.TwoView]) -> None:
+        """The notes the geometry gives, warned as soon as it is known."""
+        nonlocal srcs
+        if params.near_copy_agree > 0 and len(srcs) > 1:
+            agree = agreement_with_reference(
+                np.asarray(images[ref]), np.stack([images[s] for s in srcs]),
+                [v.H for v in views])
+            copy = agree >= params.near_copy_agree
+            if copy.any() and not copy.all():
+                msgs.append("near-copies of the reference, not used as evidence (they would "
+                            "out-vote the views that saw the background): " + ", ".join(
+                                f"{names[srcs[k]]} ({100 * agree[k]:.1f} % alike)"
+                                for k in np.flatnonzero(copy)))
+                keep.append(np.flatnonzero(~copy))
+                views = [views[k] for k in keep[0]]
+                srcs = [srcs[k] for k in keep[0]]
+        weak = [k for k, v in enumerate(views) if v.F is None]
+        if weak:
+            msgs.append(_few_matches_note([(names[srcs[k]], views[k].n_matches)
+                                           for k in weak]))
+        if weak and 2 * len(weak) >= len(views):
+            msgs.append(f"{len(weak)} of {len(views)} sources could not be aligned to the "
+                        "reference: the result is unreliable (misaligned fill, missed or "
+                        "false detections). Photos of more overlap, or a larger --max-side "
+                        f"than the {W}x{H} analysed, give more matches")
+        if len(images) == 2:
+            msgs.append("only 2 photos: where they disagree, either may show the mover; the "
+                        "reference is kept there unless the colours of the detected region "
+                        "single it out (3 or more photos decide by consensus)")
+        if all(v.F is None for v in views) and params.use_epipolar:
+            msgs.append("no source has a fundamental matrix: the epipolar terms are off")
+        for m in msgs:
+            warnings.warn(m, stacklevel=4)
+
+    st, views = _prepare(images, ref, params, clock, on_geometry=geometry_notes)
+    if keep:  # near-copies dropped (the notes said so)
+        st = _keep_sources(st, keep[0])
+        views = [views[k] for k in keep[0]]
     probe = np.zeros((H, W), np.bool_)
     for (x, y) in probes:
         probe[y, x] = True
+    clock.start("scans", show=False)  # a line per scan
     if sink.enabled:
         cov0 = _coverage(st, params)
         sink.start(RunInfo(
@@ -234,7 +286,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
             params=params.to_dict(), preset=preset_name, versions=_versions(),
             size=(H, W), N0=st.N.copy(), C0=st.C.copy(), coverage=cov0,
             probes=[(int(x), int(y)) for x, y in probes]))
-    t = time.perf_counter()
+    if progress:  # (a ProgressBar times scan 0 from the end of the similarity)
+        progress("scan 0", 0.0)
 
     def scan_progress(scan: int, done: int, total: int) -> None:
         if progress:
@@ -243,58 +296,54 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     L, M_maps, summaries = run_scans(st, params, sink=sink, probe=probe,
                                      sample_static=sample_static, chunk_rows=chunk_rows,
                                      kernel=kernel, progress=scan_progress)
-    timings["scans"] = time.perf_counter() - t
-    t = time.perf_counter()
+    # a stage that does not run (the paper preset's refine and fill) has no line
+    # and no entry in ``timings``
+    clock.stop()
     stages = {"scan": L}  # the same array as Result.dynamic_raw
     dyn = L.copy()
-    if params.clean_mask:
-        dyn = stages["clean"] = clean_mask(L, params)
-    cov = _coverage(st, params)
     clean = st.img
     ref_img = np.asarray(images[ref])
-    if progress and (params.refine_tau > 0 or params.snap):
-        progress("refine", 0.0)
+    if params.clean_mask or params.refine_tau > 0 or params.snap:
+        clock.start("refine")
+    if params.clean_mask:
+        dyn = stages["clean"] = clean_mask(L, params)
     if params.refine_tau > 0:
         dyn = stages["votes"] = refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
-        if progress:
-            progress("refine", 0.5 if params.snap else 1.0)
+        clock.tick(0.5)
     if params.snap:
         dyn = stages["snap"] = snap_to_edges(ref_img, dyn, params)
-        if progress:
-            progress("refine", 1.0)
-    timings["refine"] = time.perf_counter() - t
-    t = time.perf_counter()
+    clock.stop()
     selection = None
+    if params.fuse:
+        clock.start("fusion")
     if params.fuse and params.fill == "select":
-        if progress:
-            progress("fusion", 0.0)
         selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=None if
                                 valid_masks is None else np.stack([valid_masks[s] for s in srcs]),
                                 flows=st.Nf_flow)
         clean = selection.clean
         dyn = stages["select"] = selection.replaced
-        n_ns = int(selection.no_source.sum())
-        if n_ns:
-            msgs.append(f"{n_ns} px ({100 * n_ns / max(1, dyn.sum()):.1f} % of the replaced "
-                        "region) were seen free by no source: inpainted (OpenCV Telea)")
-            warnings.warn(msgs[-1], stacklevel=2)
-        if progress:
-            progress("fusion", 1.0)
     elif params.fuse:
-        if progress:
-            progress("fusion", 0.0)
         clean, _ = fuse_background(
             ref_img, st.src_img, st.Nf, dyn, margin_px=params.fuse_margin_px,
             combine=params.fuse_combine,
             realign=params.fuse_realign, homographies=[v.H for v in views],
             flow_preset=params.flow_preset, realign_max_px=params.fuse_realign_max_px)
-        if progress:
-            progress("fusion", 1.0)
-    timings["fusion"] = time.perf_counter() - t
     if valid_masks is not None:  # no content in the reference: never flagged, kept as is
         valid_ref = np.asarray(valid_masks[ref], bool)
         dyn = stages["valid"] = dyn & valid_ref
         clean = np.where(valid_ref[..., None], clean, ref_img)
+    clock.start("coverage")
+    # sources whose match agrees with the reference as the scans left it (the
+    # refinement and the fills do not change ``st``) ...
+    cov = _coverage(st, params)
+    if selection is not None:  # ... and inside the fill by selection, what it used
+        cov = _selection_coverage(cov, dyn, selection)
+        n_ns = int((dyn & selection.no_source).sum())
+        if n_ns:
+            msgs.append(f"{n_ns} px ({100 * n_ns / max(1, dyn.sum()):.1f} % of the replaced "
+                        "region) were seen free by no source: inpainted (OpenCV Telea)")
+            warnings.warn(msgs[-1], stacklevel=2)
+    clock.stop()
     timings["total"] = time.perf_counter() - t_all
     result = Result(
         clean=clean, clean_scan=st.img, dynamic=dyn, dynamic_raw=L, M=M_maps, coverage=cov,
@@ -326,7 +375,8 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
 
 def _keep_sources(st: ScanInputs, keep: np.ndarray) -> ScanInputs:
     """``st`` restricted to the sources ``keep`` (indices along the S axis)."""
-    per_source = ("src_img", "src_lab", "src_gray", "fc_s", "fg_s", "N", "C", "F", "hasF", "Nf")
+    per_source = ("src_img", "src_lab", "src_gray", "fc_s", "fg_s", "N", "C", "F", "hasF", "Nf",
+                  "Nf_flow")
     return dataclasses.replace(st, **{
         k: np.ascontiguousarray(getattr(st, k)[keep]) for k in per_source
         if getattr(st, k) is not None})
@@ -336,6 +386,35 @@ def _coverage(st: ScanInputs, params: Params) -> np.ndarray:
     """Sources whose current match agrees with the reference's current features."""
     pf, _ = pack_params(params, sift_unit=st.sift_unit)
     return kn._appearance_support(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, pf)
+
+
+def _selection_coverage(cov: np.ndarray, dynamic: np.ndarray, selection: Selection
+                        ) -> np.ndarray:
+    """``cov`` with the fill by selection's pixels: inside ``dynamic`` (the replaced
+    pixels kept in the output), the number of sources the output was made from
+    (``Selection.members``: the chosen source and the free ones whose sample through
+    their field agrees with it; their median is the output), and 0 exactly where no
+    source showed the background free (``Selection.no_source``: inpainted)."""
+    if selection.members is None or not dynamic.any():
+        return cov
+    n = np.minimum(selection.members.sum(0), 255).astype(np.uint8)
+    return np.where(dynamic, np.where(selection.no_source, 0, n), cov).astype(cov.dtype)
+
+
+def _few_matches_note(weak: list[tuple[str, int]]) -> str:
+    """One note for every source with too few keypoint matches (``(name, matches)``),
+    in the form of ``io``'s per-file notes: "a.jpg, b.jpg: what"."""
+    names = [name for name, _ in weak]
+    lo, hi = min(n for _, n in weak), max(n for _, n in weak)
+    what = (f"only {lo}" if lo == hi else f"only {lo} to {hi}") + \
+        f" keypoint match{'' if hi == 1 else 'es'}"
+    if len(weak) == 1:
+        return (f"{names[0]}: {what} with the reference; no epipolar term and no "
+                "homography pre-warp for it")
+    who = (", ".join(names) if len(names) <= 4
+           else f"{len(names)} images ({names[0]}, ..., {names[-1]})")
+    return (f"{who}: {what} each with the reference; no epipolar term and no homography "
+            "pre-warp for them")
 
 
 def _dist_version(name: str) -> str:

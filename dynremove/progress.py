@@ -12,6 +12,13 @@ class ProgressBar:
 
     ``labels`` renames stages on screen (e.g. the pipeline's "fusion" as the fill
     that runs); other stages are shown by their own name.
+
+    A stage's clock starts at its first call, or, when the stage before it
+    reached 100 %, at that moment: consecutive stages (the scans, whose first
+    call comes after their first rows) then take the whole time between them,
+    and the lines add up. Call ``(stage, 0.0)`` when a stage starts for its
+    clock to start there. Not on a terminal, a stage gets one line, when it
+    first reaches 100 %.
     """
 
     def __init__(self, *, enabled: bool = True, stream: TextIO | None = None, width: int = 28,
@@ -22,7 +29,9 @@ class ProgressBar:
         self.labels = dict(labels or {})
         self.stage: str | None = None
         self.t_stage = time.perf_counter()
+        self.t_done: float | None = None  # when the current stage reached 100 %
         self.t_draw = 0.0
+        self.open = False  # a terminal line is drawn and not ended yet
         self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
 
     def label(self, stage: str) -> str:
@@ -34,9 +43,15 @@ class ProgressBar:
             return
         now = time.perf_counter()
         if stage != self.stage:
-            self.close()
-            self.stage, self.t_stage = stage, now
-        if frac < 1.0 and now - self.t_draw < 0.1:
+            # a stage following one that completed starts where that one ended
+            start = self.t_done if self.t_done is not None else now
+            self._end_line()
+            self.stage, self.t_stage, self.t_done, self.t_draw = stage, start, None, 0.0
+        if frac >= 1.0:
+            if self.t_done is not None and not self.tty:
+                return  # its line is written
+            self.t_done = now
+        elif now - self.t_draw < 0.1:
             return
         self.t_draw = now
         if not self.tty and frac < 1.0:
@@ -46,9 +61,23 @@ class ProgressBar:
         line = f"{self.label(stage):<17} [{bar}] {100 * frac:5.1f} %  {now - self.t_stage:6.1f} s"
         self.stream.write(("\r" if self.tty else "") + line + ("" if self.tty else "\n"))
         self.stream.flush()
+        self.open = self.tty
 
-    def close(self) -> None:
-        if self.enabled and self.stage is not None and self.tty:
+    def note(self, text: str) -> None:
+        """Write ``text`` as a line of its own now, between the stages' lines (a
+        note as soon as it is known): on a terminal, the bar being drawn is ended
+        first and goes on below."""
+        self._end_line()
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def _end_line(self) -> None:
+        if self.open:
             self.stream.write("\n")
             self.stream.flush()
-        self.stage = None
+            self.open = False
+
+    def close(self) -> None:
+        if self.enabled:
+            self._end_line()
+        self.stage, self.t_done = None, None

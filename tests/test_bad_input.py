@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import struct
 import subprocess
 import sys
@@ -61,7 +62,8 @@ def assert_input_error(rc: int, err: str, *words: str, out: Path | None = None) 
     """Exit 2, one error line (after any notes) containing every word, no traceback."""
     assert rc == 2, err
     assert "Traceback" not in err
-    lines = [ln for ln in err.splitlines() if ln.strip()]
+    lines = [ln for ln in err.splitlines() if ln.strip()
+             and not re.match(r"^\S.* \[[#-]+\] +[\d.]+ % +[\d.]+ s$", ln)]  # progress
     errors = [ln for ln in lines if ln.startswith("dynremove: error: ")]
     assert len(errors) == 1, err
     assert lines[-1] == errors[0], err
@@ -333,6 +335,58 @@ def test_record_path_that_is_a_folder_is_bad_input(tmp_path, capsys, scene):
     assert "is a folder" in err
 
 
+def test_record_below_a_file_names_the_file(tmp_path, capsys, scene):
+    """Before: "cannot create its folder (File exists)"."""
+    write_set(tmp_path / "s", scene.images[:3])
+    afile = tmp_path / "afile"
+    afile.write_text("keep me")
+    out = tmp_path / "out"
+    for rec in (afile / "x.rrd", afile / "deeper" / "x.rrd"):
+        rc, _, err = run_cli(capsys, tmp_path / "s", "--record", rec, "--out", out)
+        line = assert_input_error(rc, err, out=out)
+        assert line == (f"dynremove: error: --record {rec}: cannot create its folder: "
+                        f"{afile} is a file, not a folder"), line
+    assert afile.read_text() == "keep me"
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+def test_record_where_no_file_can_be_created(tmp_path, capsys, scene):
+    """/proc: os.access says writable to root, but no file can be created there. Refused
+    before any work (no output folder, no reading), one line, exit 2."""
+    write_set(tmp_path / "s", scene.images[:3])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--record", "/proc/x.rrd", "--out", out)
+    line = assert_input_error(rc, err, out=out)
+    assert line.startswith("dynremove: error: --record /proc/x.rrd: cannot create the file ("
+                           ), line
+    assert not out.exists() and notes_of(err) == []  # before the images were read
+    with pytest.raises(InputError, match="cannot create the file"):
+        io.check_out_file("/proc/x.rrd", "--record")
+    io.check_out_file(tmp_path / "ok" / "x.rrd", "--record")  # a writable place passes
+    assert list((tmp_path / "ok").iterdir()) == []  # and the trial file is gone
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc")
+def test_subprocess_rerun_failing_to_create_the_recording(tmp_path, scene):
+    """Should the check pass and Rerun still fail to create the file (RuntimeError): one
+    line naming --record, exit 2, and no Rerun log line ("WARN re_sdk::log_sink: Dropping
+    data in MemorySink", in colour) on the terminal; the same with --compare."""
+    pytest.importorskip("rerun")
+    write_set(tmp_path / "s", scene.images[:3])
+    for extra in ([], ["--compare", "paper"]):
+        argv = ["run", str(tmp_path / "s"), "--record", "/proc/x.rrd", "--out",
+                str(tmp_path / "out"), "--max-scans", "1", "--quiet", *extra]
+        code = ("import sys\nfrom dynremove import cli, io\n"
+                "io.check_out_file = lambda p, flag: p  # as if the check had passed\n"
+                f"sys.exit(cli.main({argv!r}))\n")
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           timeout=300, env={**os.environ, "DYNREMOVE_DEBUG": ""})
+        assert r.returncode == 2, r.stderr
+        assert r.stderr == ("dynremove: error: --record /proc/x.rrd: cannot create the file "
+                            "(No such file or directory (os error 2))\n"), r.stderr
+        assert files_under(tmp_path / "out") == []
+
+
 # --- the true mask (--gt) ---------------------------------------------------------------
 def write_mask(path: Path, mask: np.ndarray) -> Path:
     assert cv2.imwrite(str(path), mask.astype(np.uint8) * 255)
@@ -545,7 +599,8 @@ def test_out_is_a_file(tmp_path, capsys, scene):
     assert_input_error(rc, err, str(f), "not a folder")
     assert f.read_text() == "keep me"
     rc, _, err = run_cli(capsys, tmp_path / "s", "--out", f / "sub")
-    assert_input_error(rc, err, str(f / "sub"), "cannot create")
+    assert_input_error(rc, err, str(f / "sub"), "cannot create",
+                       f"{f} is a file, not a folder")
     assert f.read_text() == "keep me"
 
 
@@ -566,10 +621,10 @@ def test_out_not_writable(tmp_path, capsys, scene):
 
 
 @pytest.mark.parametrize("flag, value, words", [
-    ("--patch-size", "4", ["patch_size", "odd", "4"]),
-    ("--dbscan-eps", "-1", ["dbscan_eps", "> 0"]),
-    ("--t-r", "1.5", ["t_r"]),
-    ("--correspondence", "magic", ["correspondence", "magic"]),
+    ("--patch-size", "4", ["--patch-size 4: must be odd"]),
+    ("--dbscan-eps", "-1", ["--dbscan-eps -1.0: must be > 0"]),
+    ("--t-r", "1.5", ["--t-r 1.5: must be in [0, 1]"]),
+    ("--correspondence", "magic", ["--correspondence magic: must be one of"]),
 ])
 def test_bad_parameters(tmp_path, capsys, scene, flag, value, words):
     write_set(tmp_path / "s", scene.images[:3])

@@ -5,6 +5,7 @@ progress stages named by what runs, and the help of ``--ref`` / ``--gt``.
 
 from __future__ import annotations
 
+import dataclasses
 import io as _pyio
 import json
 import os
@@ -289,3 +290,123 @@ def test_two_videos_are_named_as_videos(tmp_path, folder):
         vids.append(tmp_path / name)
     with pytest.raises(InputError, match="a.mp4: is a video; give one video alone"):
         io.list_inputs(vids)
+
+
+# --- a fresh user's second round ---------------------------------------------------------
+def two_folders_with_the_same_name(tmp_path, scene) -> list[Path]:
+    """a/x.png, b/x.png and c/other.png: two inputs named x.png."""
+    paths = []
+    for sub, name, im in zip("abc", ["x.png", "x.png", "other.png"], scene.images):
+        (tmp_path / sub).mkdir()
+        assert cv2.imwrite(str(tmp_path / sub / name), im)
+        paths.append(tmp_path / sub / name)
+    return paths
+
+
+def test_ref_as_a_path_picks_exactly_that_file(tmp_path, capsys, scene, monkeypatch):
+    paths = two_folders_with_the_same_name(tmp_path, scene)
+    monkeypatch.chdir(tmp_path)
+    for ref, index in [(paths[1], 1), (paths[0], 0), ("b/x.png", 1), ("./a/x.png", 0)]:
+        out = tmp_path / f"out{index}"
+        rc, _, err = run_cli(capsys, *paths, "--ref", ref, "--out", out, *FAST)
+        assert rc == 0, err
+        rep = json.loads((out / "report.json").read_text())["reference"]
+        assert rep["index"] == index and rep["chosen_by"] == "given", (ref, rep)
+        assert f"(index {index} of 0..2, given by --ref {ref})" in err
+
+
+@pytest.mark.parametrize("how", ["missing", "another-folder"])
+def test_ref_path_that_is_not_an_input_is_an_error(tmp_path, capsys, folder, how):
+    """Before: matched by its file name (FOLDER/view1.png taken, exit 0)."""
+    other = tmp_path / "elsewhere"
+    if how == "another-folder":
+        other.mkdir()
+        (other / "view1.png").write_bytes((folder / "view1.png").read_bytes())
+    ref = other / "view1.png"
+    out = tmp_path / "out"
+    rc, stdout, err = run_cli(capsys, folder, "--ref", ref, "--out", out, *FAST)
+    assert rc == 2 and stdout == "", err
+    lines = err.strip().splitlines()
+    assert lines[-1].startswith(f"dynremove: error: --ref {ref}: is not one of the input "
+                                "images"), err
+    assert ("no such file" in lines[-1]) == (how == "missing")
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_ref_name_that_several_inputs_have_is_an_error(tmp_path, capsys, scene):
+    paths = two_folders_with_the_same_name(tmp_path, scene)
+    for ref in ("x.png", "x"):
+        rc, _, err = run_cli(capsys, *paths, "--ref", ref, "--out", tmp_path / "out", *FAST)
+        assert rc == 2, err
+        line = err.strip().splitlines()[-1]
+        assert line.startswith(f"dynremove: error: --ref {ref}: 2 input images have this "
+                               "name"), err
+        assert f"{paths[0]} (index 0), {paths[1]} (index 1)" in line, line
+    # a name only one input has still works
+    rc, _, err = run_cli(capsys, *paths, "--ref", "other", "--out", tmp_path / "out", *FAST)
+    assert rc == 0 and "reference: other.png (index 2 of 0..2, given by --ref other)" in err
+
+
+@pytest.mark.parametrize("cmd", ["batch", "eval"])
+def test_ref_of_every_set_refuses_a_path(tmp_path, capsys, folder, cmd):
+    argv = [cmd, str(folder), "--ref", str(folder / "view1.png")]
+    with pytest.raises(SystemExit) as e:
+        main(argv + (["--out", str(tmp_path / "o")] if cmd == "batch" else []))
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.count("\n") == 1, err
+    assert "not a path (e.g. --ref view1.png)" in err
+
+
+@pytest.mark.parametrize("flag, value, line", [
+    ("--t-r", "5", "dynremove: error: --t-r 5.0: must be in [0, 1]"),
+    ("--select-tau", "-1", "dynremove: error: --select-tau -1.0: must be > 0"),
+    ("--patch-size", "4", "dynremove: error: --patch-size 4: must be odd and >= 3"),
+    ("--dbscan-min-pts", "0", "dynremove: error: --dbscan-min-pts 0: must be >= 1"),
+    ("--correspondence", "magic", "dynremove: error: --correspondence magic: must be one of"),
+    ("--refine-tau", "-1", "dynremove: error: --refine-tau must be >= 0 and "
+                           "--refine-shrink-frac in (0, 1]"),
+])
+def test_parameter_errors_name_the_flag(tmp_path, capsys, folder, flag, value, line):
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, folder, flag, value, "--out", out)
+    assert rc == 2 and err.startswith(line) and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_parameter_error_messages_use_flags_for_every_field():
+    from dynremove.commands import flag_message
+
+    assert flag_message("t_r must be in [0, 1], got 5.0") == "--t-r 5.0: must be in [0, 1]"
+    assert (flag_message("fill must be one of ('select', 'median'), got 'x'")
+            == "--fill x: must be one of ('select', 'median')")
+    for f in dataclasses.fields(Params):
+        msg = flag_message(f"{f.name} must be > 0, got -1")
+        assert msg == f"--{f.name.replace('_', '-')} -1: must be > 0", msg
+
+
+def test_composite_help_gives_every_option_a_help_and_its_default(capsys):
+    text = help_of(capsys, "composite")
+    opts = text[text.index("options:"):]
+    helps = {}
+    for flag, nxt in [("--out DIR", "--seed"), ("--seed SEED", "--n-views"),
+                      ("--n-views N", "--objects"), ("--objects K", "--n-sets"),
+                      ("--n-sets N", None)]:
+        start = opts.index(flag) + len(flag)
+        helps[flag] = opts[start:opts.index(nxt, start) if nxt else None].strip()
+        assert len(helps[flag]) > 10, (flag, helps[flag])
+    assert "required" in helps["--out DIR"]
+    for flag, default in [("--seed SEED", "default 0"), ("--n-views N", "default 6"),
+                          ("--objects K", "default 1"), ("--n-sets N", "default 0")]:
+        assert default in helps[flag], (flag, helps[flag])
+
+
+def test_inspect_a_folder_says_it_is_a_folder(tmp_path, capsys):
+    d = tmp_path / "run.rrd"
+    d.mkdir()
+    for cmd in (["inspect", str(d), "--pixel", "1,1"],
+                ["export", str(d), "--out", str(tmp_path / "x.gif")]):
+        assert main(cmd) == 2
+        err = capsys.readouterr().err
+        assert err == f"dynremove: error: {d}: is a folder, not a recording\n", err
+    assert main(["inspect", str(tmp_path / "none.rrd"), "--pixel", "1,1"]) == 2
+    assert "none.rrd: no such recording" in capsys.readouterr().err

@@ -292,6 +292,35 @@ def test_blurry_middle_reference_note_and_ref_auto(tmp_path, capsys, scene):
     assert rc == 0 and "blurrier" not in err
 
 
+
+def test_resolve_ref_by_path_name_stem_and_index(tmp_path, monkeypatch):
+    """A path picks exactly that input (resolved paths compared); a name or stem that
+    several inputs have is an error naming them; indices and unique names as before."""
+    monkeypatch.chdir(tmp_path)
+    paths = [tmp_path / "a" / "x.jpg", tmp_path / "b" / "x.jpg", Path("c/other.jpg")]
+    names = [p.name for p in paths]
+    assert io.resolve_ref(str(paths[1]), names, paths=paths) == 1
+    assert io.resolve_ref("a/../b/x.jpg", names, paths=paths) == 1
+    assert io.resolve_ref(str(tmp_path / "c" / "other.jpg"), names, paths=paths) == 2
+    assert io.resolve_ref("./c/other.jpg", names, paths=paths) == 2
+    with pytest.raises(InputError, match=r"--ref /nowhere/x.jpg: is not one of the input "
+                                         r"images; no such file"):
+        io.resolve_ref("/nowhere/x.jpg", names, paths=paths)
+    for ref in ("x.jpg", "x"):
+        with pytest.raises(InputError) as e:
+            io.resolve_ref(ref, names, paths=paths)
+        assert str(e.value) == (f"--ref {ref}: 2 input images have this name: {paths[0]} "
+                                f"(index 0), {paths[1]} (index 1); give the path of one, "
+                                "or its index")
+    with pytest.raises(InputError, match=r"x.jpg \(index 0\), x.jpg \(index 1\)"):
+        io.resolve_ref("x.jpg", names)  # without the paths: the names and indices
+    with pytest.raises(InputError, match="a path cannot name the reference here"):
+        io.resolve_ref(str(paths[0]), names)
+    assert io.resolve_ref("other", names) == io.resolve_ref("other.jpg", names) == 2
+    assert io.resolve_ref("-3", names) == 0 and io.resolve_ref(None, names) == 1
+    # an exact name wins over another input's stem
+    assert io.resolve_ref("v.png", ["v.png", "v.png.jpg"]) == 0
+
 # --- recordings --------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):

@@ -10,6 +10,7 @@ traceback or "internal error".
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -75,7 +76,8 @@ def _inspect(rrd: Path, *args: str) -> subprocess.CompletedProcess:
 
 def _clean_lines(stderr: str) -> list[str]:
     assert "Traceback" not in stderr and "internal error" not in stderr, stderr
-    lines = [ln for ln in stderr.splitlines() if ln.strip()]
+    lines = [ln for ln in stderr.splitlines() if ln.strip()
+             and not re.match(r"^\S.* \[[#-]+\] +[\d.]+ % +[\d.]+ s$", ln)]  # progress
     assert all(ln.startswith("dynremove: ") for ln in lines), stderr
     return lines
 
@@ -111,7 +113,7 @@ def test_ctrl_c_during_the_scan_says_where_it_ends(tmp_path):
         rrd = tmp_path / f"run_{delay}.rrd"
         p = _start(images, tmp_path, rrd, "--record-every-rows", "1")
         for line in p.stderr:  # non-tty progress: one line when a stage completes
-            if line.startswith("correspondence"):
+            if line.startswith("similarity"):  # the last stage before the scans
                 break
         time.sleep(delay)
         rc, err = _interrupt(p)
@@ -231,7 +233,8 @@ def test_ctrl_c_at_a_mid_point_says_which_stage(tmp_path):
     rc, err = _interrupt(p)
     msg = _readable_or_none(rrd, err, rc)
     assert msg is not None  # the sink opened the file before the features
-    stages = ("(after features)", "(during correspondence)", "(after correspondence)")
+    stages = tuple(f"({w} {s})" for s in ("features", "geometry", "correspondence",
+                                           "similarity") for w in ("during", "after"))
     assert msg.startswith("interrupted at scan") or msg.endswith(stages), msg
 
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import io as _pyio
 import json
+import re
 
 import cv2
 import numpy as np
@@ -12,6 +14,7 @@ from dynremove import MemorySink, NullSink, preset, remove_dynamic
 from dynremove.evaluation import synth
 from dynremove.cli import main
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
+from dynremove.progress import ProgressBar
 
 
 @pytest.fixture(scope="module")
@@ -102,3 +105,166 @@ def test_default_on_other_synthetic_scenes():
         ps.append(psnr_in_mask(r.clean, sc.background, gt))
     assert min(js) >= 0.8 and np.mean(js) >= 0.88
     assert min(ps) >= 25.0 and np.mean(ps) >= 28.5
+
+
+# --- what the run reports: coverage, notes, stage times -----------------------------------
+def test_coverage_png_and_report_say_what_was_inpainted(tmp_path):
+    """coverage.png is 0 inside the mask exactly where the fill inpainted (no source
+    showed the background free), and report.json's ``uncovered_dynamic_px`` is the
+    count the note gives (seed 3: 3 px; it said 518 when the coverage was the
+    scans' agreement with the reference, and coverage.png was black on all 518)."""
+    sc = synth.make_scene(seed=3, n_views=6, size=(360, 640))
+    synth.write_scene(sc, tmp_path / "set")
+    out = tmp_path / "out"
+    assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(out), "--quiet"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    mask = cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_UNCHANGED) > 0
+    cov = cv2.imread(str(out / "coverage.png"), cv2.IMREAD_UNCHANGED)
+    notes = [n for n in rep["notes"] if "seen free by no source: inpainted" in n]
+    assert len(notes) == 1, rep["notes"]
+    n = int(re.match(r"(\d+) px ", notes[0]).group(1))
+    assert n > 0 and rep["uncovered_dynamic_px"] == n == int((mask & (cov == 0)).sum())
+    with pytest.warns(UserWarning, match=f"{n} px .* seen free by no source"):
+        r = remove_dynamic(sc.images, ref=sc.ref_index)  # the same run: where it inpainted
+    np.testing.assert_array_equal(mask & (cov == 0), r.selection.no_source & r.dynamic)
+
+
+def test_coverage_in_the_mask_counts_the_sources_the_output_was_made_from(scene, result):
+    """Inside the replaced region: the sources the fill combined (the chosen one and the
+    free ones agreeing with it), at least 1 where nothing was inpainted; outside, the
+    count the scans left (sources agreeing with the reference)."""
+    sel, dyn, cov = result.selection, result.dynamic, result.coverage
+    assert dyn.any() and not (sel.no_source & dyn).any()
+    assert not any("inpainted" in w for w in result.warnings)
+    np.testing.assert_array_equal(cov[dyn], sel.members.sum(0)[dyn])
+    assert cov[dyn].min() >= 1  # nothing inpainted: no black inside the mask
+    assert int(cov.max()) <= len(scene.images) - 1
+    paper = remove_dynamic(scene.images, ref=scene.ref_index, params=preset("paper"))
+    assert paper.selection is None and paper.coverage.shape == dyn.shape
+
+
+def test_few_matches_are_one_note_given_with_the_geometry():
+    """Sources with too few keypoint matches: one note naming them all (as io's per-file
+    notes), warned when the geometry is known, before the correspondences."""
+    rng = np.random.default_rng(5)
+    ims = [cv2.GaussianBlur(rng.integers(0, 256, (48, 64, 3), dtype=np.uint8), (0, 0), 3)
+           for _ in range(4)]
+    events = []
+    with pytest.warns(UserWarning) as caught:
+        def progress(stage, frac):
+            events.append((stage, frac, [str(w.message) for w in caught]))
+
+        remove_dynamic(ims, ref=1, names=["a.png", "b.png", "c.png", "d.png"],
+                       progress=progress)
+    few = [str(w.message) for w in caught if "keypoint match" in str(w.message)]
+    assert len(few) == 1, few
+    assert few[0].startswith("a.png, c.png, d.png: only ") and "each with the reference" in few[0]
+    first_corr = next(seen for stage, _, seen in events if stage == "correspondence")
+    assert few[0] in first_corr
+    assert any("3 of 3 sources could not be aligned" in m for m in first_corr)
+
+
+def test_few_matches_note_forms():
+    from dynremove.pipeline import _few_matches_note
+
+    assert _few_matches_note([("a.jpg", 1)]) == (
+        "a.jpg: only 1 keypoint match with the reference; no epipolar term and no "
+        "homography pre-warp for it")
+    assert _few_matches_note([(f"s{i}.jpg", 9 + i) for i in range(5)]).startswith(
+        "5 images (s0.jpg, ..., s4.jpg): only 9 to 13 keypoint matches each")
+
+
+def test_progress_lines_are_the_report_stages(scene):
+    """A line for every stage of ``timings`` (the scans: one per scan), each as long as
+    the stage, and together the run's total."""
+    stream = _pyio.StringIO()  # not a terminal: one line per finished stage
+    bar = ProgressBar(stream=stream)
+    r = remove_dynamic(scene.images, ref=scene.ref_index, params=preset("default"),
+                       progress=bar)
+    bar.close()
+    shown: dict[str, float] = {}
+    for ln in stream.getvalue().splitlines():
+        m = re.match(r"(.+?)\s+\[[#-]+\]\s+100\.0 %\s+([\d.]+) s$", ln)
+        assert m, ln
+        key = "scans" if m.group(1).startswith("scan ") else m.group(1)
+        shown[key] = shown.get(key, 0.0) + float(m.group(2))
+    stages = {k: v for k, v in r.timings.items() if k != "total"}
+    assert set(shown) == set(stages) >= {"features", "geometry", "correspondence",
+                                         "similarity", "scans", "refine", "fusion"}
+    for k, v in stages.items():
+        assert abs(shown[k] - v) <= 0.08 * (len(r.scans) if k == "scans" else 1), (k, shown, v)
+    assert abs(sum(stages.values()) - r.timings["total"]) <= 0.05
+    assert abs(sum(shown.values()) - r.timings["total"]) <= 0.06 * len(shown)
+
+
+class _Clock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_progress_clock_starts_with_the_stage(monkeypatch):
+    """A stage is timed from its (stage, 0.0) call, or from the end of the stage before
+    it when its first call comes later (a scan's first rows); one line per stage."""
+    from dynremove import progress
+
+    clock = _Clock()
+    monkeypatch.setattr(progress.time, "perf_counter", clock)
+    stream = _pyio.StringIO()
+    bar = ProgressBar(stream=stream)
+    for t, stage, frac in [(0, "a", 0.0), (1, "a", 0.5), (2, "a", 1.0), (2.5, "a", 1.0),
+                           (5, "b", 0.3), (6, "b", 1.0)]:
+        clock.t = t
+        bar(stage, frac)
+    bar.close()
+    clock.t = 10
+    bar("c", 0.2)
+    clock.t = 11
+    bar("c", 1.0)
+    secs = [(ln.split("[")[0].strip(), float(ln.split()[-2]))
+            for ln in stream.getvalue().splitlines()]
+    assert secs == [("a", 2.0), ("b", 4.0), ("c", 1.0)]
+
+
+def test_progress_note_ends_the_bar_line():
+    class Tty(_pyio.StringIO):
+        def isatty(self):
+            return True
+
+    stream = Tty()
+    bar = ProgressBar(stream=stream)
+    bar("features", 0.5)
+    bar.note("dynremove: note: something")
+    bar("features", 1.0)
+    bar.close()
+    lines = stream.getvalue().split("\n")
+    assert lines[1] == "dynremove: note: something"
+    assert lines[0].startswith("\rfeatures") and lines[2].startswith("\rfeatures")
+    assert lines[3] == ""
+
+
+def test_dropping_sources_drops_every_per_source_array():
+    """A near-copy dropped from the sources takes all its per-source arrays with it,
+    the fill's flow matches included (they were left whole, so the fill sampled
+    each remaining source through another source's flow)."""
+    import dataclasses
+
+    from dynremove.method.scan.driver import ScanInputs
+    from dynremove.pipeline import _keep_sources
+
+    S, H, W = 4, 3, 5
+    per = lambda *shape: np.arange(S * int(np.prod(shape)), dtype=np.float32).reshape(S, *shape)  # noqa: E731
+    st = ScanInputs(img=np.zeros((H, W, 3), np.uint8), lab=np.zeros((H, W, 3), np.float32),
+                    gray=np.zeros((H, W), np.float32), fc_r=np.zeros((H, W, 3), np.float32),
+                    fg_r=np.zeros((H, W, 128), np.uint8), src_img=per(H, W, 3),
+                    src_lab=per(H, W, 3), src_gray=per(H, W), fc_s=per(H, W, 3),
+                    fg_s=per(H, W, 128), N=per(H, W, 2), C=per(H, W), F=per(3, 3),
+                    hasF=np.ones(S, bool), sift_unit=1.0, Nf=per(H, W, 2), Nf_flow=per(H, W, 2))
+    keep = np.array([0, 2, 3])
+    out = _keep_sources(st, keep)
+    for f in dataclasses.fields(ScanInputs):
+        a, b = getattr(st, f.name), getattr(out, f.name)
+        if isinstance(a, np.ndarray) and a.shape[:1] == (S,) and a.ndim > 1 or f.name == "hasF":
+            np.testing.assert_array_equal(b, a[keep], err_msg=f.name)
