@@ -468,7 +468,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
                           max_side=args.max_side, ref=args.ref, progress=progress)
         print(format_table(report))
     n_sets = len({r["set"] for r in report["sets"]})
-    print(f"{n_sets} sets, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
+    print(f"{n_sets} set{'' if n_sets == 1 else 's'}, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
           + (f" -> {args.json}" if args.json else ""))
     if args.json:
         io.write_json(args.json, report)
