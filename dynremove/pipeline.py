@@ -136,20 +136,25 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
     grays = [features.to_gray(im) for im in images]
     labs = [features.to_lab(im) for im in images]
     fc = [features.patch_mean(lab, patch_size=p) for lab in labs]  # f_c from the Lab once computed
-    fg = []
+    # f_g written straight into the scan's arrays (the reference's, and the sources'
+    # stacked): a stack of the per-photo arrays cost 0.9 s of copying at 7 × 854×480
+    H, W = grays[ref].shape
+    fg_r = np.empty((H, W, 128), np.uint8)
+    fg_s = np.empty((len(srcs), H, W, 128), np.uint8)
+    fg = [fg_r if i == ref else fg_s[srcs.index(i)] for i in range(len(images))]
     for i, g in enumerate(grays):
-        fg.append(features.dense_sift(g, patch_size=p))
+        features.dense_sift(g, patch_size=p, out=fg[i])
         clock.tick((i + 1) / len(grays))
     unit = features.sift_unit(fg, sift_scale=params.sift_scale)
     # the scan's inputs, stacked per source
     packed = dict(
         img=images[ref].copy(), lab=labs[ref].copy(), gray=grays[ref].copy(),
-        fc_r=fc[ref].copy(), fg_r=fg[ref].copy(),
+        fc_r=fc[ref].copy(), fg_r=fg_r,
         src_img=np.ascontiguousarray(np.stack([images[s] for s in srcs])),
         src_lab=np.ascontiguousarray(np.stack([labs[s] for s in srcs])),
         src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
         fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
-        fg_s=np.ascontiguousarray(np.stack([fg[s] for s in srcs])))
+        fg_s=fg_s)
 
     clock.start("geometry")
     g8 = [np.clip(g + 0.5, 0, 255).astype(np.uint8) for g in grays]

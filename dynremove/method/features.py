@@ -64,7 +64,8 @@ def sift_bin_px(patch_size: int) -> int:
     return max(1, int(round(patch_size / 4.0)))
 
 
-def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int) -> npt.NDArray[np.uint8]:
+def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int,
+               out: npt.NDArray[np.uint8] | None = None) -> npt.NDArray[np.uint8]:
     """128-d SIFT descriptor of the p×p patch at every pixel, f_g (Sec. 3.1).
 
     Parameters
@@ -73,6 +74,9 @@ def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int) -> npt.NDArray
         Gray image, [0, 255].
     patch_size : int
         p: the 4×4 cells are ``round(p/4)`` px wide.
+    out : (H, W, 128) uint8 C-contiguous ndarray, optional
+        Written in place and returned (e.g. one view of the stacked sources'
+        array: no second copy of ~50 MB per photo at 854×480).
 
     Returns
     -------
@@ -102,12 +106,19 @@ def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int) -> npt.NDArray
     offs = np.array([int(math.floor((i - 1.5) * b + 0.5)) for i in range(4)], np.int64)
     sigma = 2.0 * b  # Gaussian over cells: half the descriptor width, as in SIFT
     cw = np.exp(-((offs[:, None] ** 2 + offs[None, :] ** 2) / (2.0 * sigma * sigma)))
-    return _assemble_sift(pooled, offs, cw.astype(np.float32))
+    if out is None:
+        out = np.empty(gray.shape + (128,), np.uint8)
+    elif out.shape != gray.shape + (128,) or out.dtype != np.uint8 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous uint8 array of shape "
+                         f"{gray.shape + (128,)}, got {out.dtype} {out.shape}")
+    _assemble_sift(pooled, offs, cw.astype(np.float32), out)
+    return out
 
 
 @numba.njit(cache=True, parallel=True, nogil=True, error_model="numpy")
-def _assemble_sift(pooled, offs, cw):
-    """pooled (8, H, W) float32, offs (4,) int64 ascending, cw (4, 4) float32 → (H, W, 128) uint8.
+def _assemble_sift(pooled, offs, cw, out):
+    """pooled (8, H, W) float32, offs (4,) int64 ascending, cw (4, 4) float32 → out (H, W,
+    128) uint8 (written).
 
     Per pixel: d = the 16 cells' 8 pooled values × the cell weight (float32),
     n = √Σ d² + 1e-12, d ← min(d / n, 0.2) (stored float32; Σ over the float64
@@ -119,7 +130,6 @@ def _assemble_sift(pooled, offs, cw):
     check that stops vectorisation (the divisors are ≥ 1e-12).
     """
     _, H, W = pooled.shape
-    out = np.empty((H, W, 128), np.uint8)
     B = 32
     for y in numba.prange(H):
         d = np.empty((128, B), np.float32)
