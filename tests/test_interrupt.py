@@ -51,11 +51,19 @@ def _log_texts(path: Path) -> list[str]:
     return [x for v in t.column("/log:TextLog:text").to_pylist() if v for x in v]
 
 
+def _sigint_default() -> None:
+    """In the child before exec: SIGINT as a terminal gives it. A test run started in
+    the background of a non-interactive shell inherits SIGINT ignored, and the run
+    would then (rightly) not stop."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _start(images: Path, tmp: Path, rrd: Path, *extra: str) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "dynremove.cli", "run", str(images), "--out", str(tmp / "out"),
          "--record", str(rrd), *extra],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO, env=ENV)
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO, env=ENV,
+        preexec_fn=_sigint_default)
 
 
 def _interrupt(p: subprocess.Popen) -> tuple[int, str]:
@@ -258,6 +266,7 @@ def test_interrupted_before_the_sink_exists(tmp_path, monkeypatch, capsys, where
 
     monkeypatch.setattr(target, where, cut)
     rrd = tmp_path / "run.rrd"
+    before = signal.getsignal(signal.SIGINT)
     rc = main(["run", str(images), "--out", str(tmp_path / "out"), "--record", str(rrd),
                "--quiet"])
     err = capsys.readouterr().err
@@ -275,4 +284,4 @@ def test_interrupted_before_the_sink_exists(tmp_path, monkeypatch, capsys, where
         assert not info
     with pytest.raises(vi.InputError, match=r"before the scans began \(" + stage):
         vi.load_store(rrd)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    assert signal.getsignal(signal.SIGINT) is before  # restored
