@@ -148,15 +148,15 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
 def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dict, list[str]]:
     """The reference index, how it was chosen (for the report) and notes.
 
-    ``ref`` is an index, a file name, ``"auto"`` (:func:`~dynremove.video.auto_reference`) or
-    None (the middle image; a note suggests ``--ref auto`` when it is much
-    blurrier than the others).
+    ``ref`` is an index, a file name, a path (exactly that input), ``"auto"``
+    (:func:`~dynremove.video.auto_reference`) or None (the middle image; a note
+    suggests ``--ref auto`` when it is much blurrier than the others).
     """
     valid = getattr(iset, "valid", None)
     if isinstance(ref, str) and ref.strip().lower() == "auto":
         i, note, info = auto_reference(iset.images, iset.names, valid)
         return i, {"chosen_by": "auto", **info}, [note]
-    i = io.resolve_ref(ref, iset.names)
+    i = io.resolve_ref(ref, iset.names, paths=getattr(iset, "paths", None))
     if ref is None or ref == "":
         note = blurry_reference_note(iset.images, i, iset.names, valid)
         return i, {"chosen_by": "middle"}, [note] if note else []

@@ -110,11 +110,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                  span=args.span, pick=args.pick)
         _check_memory(args, iset)
         where.stage = "while choosing the reference"
-        ref_arg = args.ref
-        if ref_arg is not None and str(ref_arg).strip().lower() != "auto":
-            # by path (exactly that file) or by a name no other input has: the index
-            ref_arg = str(io.resolve_ref(ref_arg, iset.names, paths=iset.paths))
-        ref, ref_info, ref_notes = choose_reference(ref_arg, iset)
+        ref, ref_info, ref_notes = choose_reference(args.ref, iset)
         t_load = time.perf_counter() - t0
         where.bar("load", 1.0)
         for n in [*iset.notes, reference_note(args.ref, ref, ref_info, iset.names),
