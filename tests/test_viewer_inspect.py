@@ -101,12 +101,9 @@ def test_no_doubled_pixel_prefix():
 
 
 # -- 2. interrupted recordings: decided on what they hold ---------------------------------
-@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (commands.Terminated, 143)])
-def test_cut_between_start_and_the_first_scan_is_nothing_to_inspect(
-        tmp_path, capsys, monkeypatch, sig, code):
-    """Ctrl-C and SIGTERM after the sink's start (its step-0 snapshot is logged) but
-    before the first scan: the same recording, the same exit 2 "nothing to inspect".
-    (The trial saw exit 0 and "no scan ... final L = ?" when Ctrl-C landed there.)"""
+def _run_cut_at(step, sig, tmp_path, capsys, monkeypatch, code):
+    """``dynremove run --record`` on a small synthetic set, interrupted by ``sig`` raised
+    where the pipeline calls ``step``; checks the exit code, returns the recording."""
     import cv2
 
     from dynremove import pipeline
@@ -120,12 +117,22 @@ def test_cut_between_start_and_the_first_scan_is_nothing_to_inspect(
     def cut(*a, **k):
         raise sig()
 
-    monkeypatch.setattr(pipeline, "run_scans", cut)
+    monkeypatch.setattr(pipeline, step, cut)
     rrd = tmp_path / "run.rrd"
     rc = main(["run", str(folder), "--out", str(tmp_path / "out"), "--record", str(rrd),
                "--quiet"])
     capsys.readouterr()
     assert rc == code
+    return rrd
+
+
+@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (commands.Terminated, 143)])
+def test_cut_between_start_and_the_first_scan_is_nothing_to_inspect(
+        tmp_path, capsys, monkeypatch, sig, code):
+    """Ctrl-C and SIGTERM after the sink's start (its step-0 snapshot is logged) but
+    before the first scan: the same recording, the same exit 2 "nothing to inspect".
+    (The trial saw exit 0 and "no scan ... final L = ?" when Ctrl-C landed there.)"""
+    rrd = _run_cut_at("run_scans", sig, tmp_path, capsys, monkeypatch, code)
     msg = vi.interruption(vi.RrdReader(str(rrd)).stream().collect())  # as the CLI said
     assert msg.startswith("interrupted before the scans began (") and "during scan" not in msg
     for args in (["--pixel", "5,5"], ["--failures"]):
@@ -384,25 +391,7 @@ def test_cut_during_the_refinement_is_after_the_scans(tmp_path, capsys, monkeypa
                                                       code):
     """A real run (one scan) interrupted in the refinement, after the scan's summary
     was recorded: the trial saw "interrupted at scan 0, step 691199" there."""
-    import cv2
-
-    from dynremove import pipeline
-
-    scene = synth.make_scene(seed=0, n_views=4, size=(48, 64))
-    folder = tmp_path / "set"
-    folder.mkdir()
-    for name, im in zip(scene.names, scene.images):
-        cv2.imwrite(str(folder / name), im)
-
-    def cut(*a, **k):
-        raise sig()
-
-    monkeypatch.setattr(pipeline, "refine_mask", cut)
-    rrd = tmp_path / "run.rrd"
-    rc = main(["run", str(folder), "--out", str(tmp_path / "out"), "--record", str(rrd),
-               "--quiet"])
-    capsys.readouterr()
-    assert rc == code
+    rrd = _run_cut_at("refine_mask", sig, tmp_path, capsys, monkeypatch, code)
     msg = "interrupted after the scans (during the refinement)"
     store = vi.load_store(rrd)
     assert vi.interruption(store) == msg and vi._scan_summary(store, "", 0) is not None
