@@ -348,6 +348,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
             msgs.append(f"{n_ns} px ({100 * n_ns / max(1, dyn.sum()):.1f} % of the replaced "
                         "region) were seen free by no source: inpainted (OpenCV Telea)")
             warnings.warn(msgs[-1], stacklevel=2)
+        n_lg = int((dyn & selection.lingering).sum()) if selection.lingering is not None else 0
+        if n_lg >= 5e-4 * dyn.size:  # (a few stray pixels of a mover are no such case)
+            msgs.append(f"{n_lg} px show a mover that most photos show in place; two or more "
+                        "sources saw the background there and filled it (--select-minority 0 "
+                        "keeps the majority's view)")
+            warnings.warn(msgs[-1], stacklevel=2)
     clock.stop()
     timings["total"] = time.perf_counter() - t_all
     result = Result(

@@ -54,7 +54,7 @@ from viewer.verdict import after_scan_message, before_scans_message, more_scans
 
 _REASON_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 120),
                    3: (230, 40, 40, 160), 4: (120, 120, 120, 120), 5: (240, 150, 30, 140),
-                   6: (60, 120, 230, 120)}
+                   6: (60, 120, 230, 120), 7: (200, 40, 200, 160)}
 
 _DIRECTION = {1: "top-left → bottom-right", -1: "bottom-right → top-left"}
 _STAT_STYLE = {  # name: (RGB, label)
@@ -419,6 +419,9 @@ class RerunSink(StepColumns):
                 np.asarray(sel.seams, np.uint8)), static=True)
             self.rec.log(self.p(P.RESULT_EXPLAINED), rr.SegmentationImage(
                 np.asarray(sel.explained, np.uint8)), static=True)
+            if getattr(sel, "lingering", None) is not None:
+                self.rec.log(self.p(P.RESULT_LINGERING), rr.SegmentationImage(
+                    np.asarray(sel.lingering, np.uint8)), static=True)
             for k, mv in enumerate(np.asarray(sel.movers, bool)):
                 name = src_names[k] if k < len(src_names) else f"source{k}"
                 self.rec.log(self.p(f"{P.RESULT_MOVERS}/{name}"),

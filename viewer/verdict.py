@@ -229,7 +229,9 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         others = "; ".join(f"{n}: {why}" for n, why in (sel.get("reasons") or {}).items()
                            if why != "chosen")
         if k > 0:
-            lines.append(f"fill: filled from source {_src_name(h, k - 1)}"
+            why = (" — a mover that lingered: the reference and most sources show it, "
+                   "the sources that saw the background filled it" if sel.get("lingering") else "")
+            lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
             lines.append("fill: reference kept, explained as static 3-D structure "

@@ -18,6 +18,11 @@ that the scan flagged with doubled content.
    structure against the sky, far off the plane) may instead be found by a
    search along its epipolar line (``parallax.epipolar_search``); that weaker
    evidence counts where at least two sources, and half of them, explain it.
+   **A mover that lingered** (``_minority_witnesses``, ``select_minority``):
+   where the reference and most sources show an object and two or more
+   sources, agreeing, show the scene's common colours behind it, L takes the
+   region; there the sources that still show it never fill, and the witnesses'
+   consensus decides even where the set has much parallax.
 2. **Background candidates.** Every source is sampled through its field,
    re-interpolated across the rest of L (``fields.background_field``); where
    the set has parallax, found instead by a plane + parallax sweep for the
@@ -51,14 +56,16 @@ import numpy.typing as npt
 from dynremove.method.correspondence import apply_homography, dense_correspondence, pixel_grid
 from dynremove.method.geometry import TwoView, sampson_sq
 from dynremove.params import Params
-from dynremove.refine.fields import background_field, blurred_lab, sample_bilinear
+from dynremove.refine.fields import (background_field, blurred_lab, interpolate_field,
+                                     sample_bilinear)
 from dynremove.refine.fill import median_fill, realign_fields
 from dynremove.refine.parallax import epipolar_search, fit_parallax, sweep_fields
 from dynremove.refine.montage import expansion_labels, offset_blend, pairwise_distance
-from dynremove.refine.morphology import dilate_disc
+from dynremove.refine.morphology import dilate_disc, fill_holes
 
 _FORBIDDEN = 1e6  # data cost of a label that may not be used
 _DE_CAP = 40.0  # colour distances are capped here in the data cost
+_RING_OK = 0.6  # share of a lingering region's surroundings a witness sees as the reference
 
 
 @dataclass
@@ -82,11 +89,15 @@ class Selection:
     # (S, H, W) uint8, why each source did or did not fill each pixel of the region:
     # REASONS[code]; 0 outside the region
     reasons: npt.NDArray[np.uint8] | None = None
+    # pixels of a mover that lingered: the reference and most sources show it, two
+    # or more sources saw the background (``_minority_witnesses``)
+    lingering: npt.NDArray[np.bool_] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen", 2: "combined (agrees with the chosen one)",
            3: "its own mover", 4: "outside its frame or no content",
-           5: "disagrees with the consensus", 6: "agrees, not chosen"}
+           5: "disagrees with the consensus", 6: "agrees, not chosen",
+           7: "still shows the mover that lingered here"}
 
 
 def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
@@ -178,6 +189,152 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     return ok[lab] & (hit > 0)
 
 
+def _lab_bins(x: np.ndarray, bins: int) -> np.ndarray:
+    """Bin index of Lab colours ``x`` (..., 3) in a ``bins``³ grid (as GrabCut-style
+    colour models here: L* 0–100, a*, b* −64–64)."""
+    lum = np.clip(x[..., 0] / 100 * bins, 0, bins - 1).astype(np.intp)
+    a = np.clip((x[..., 1] + 64) / 128 * bins, 0, bins - 1).astype(np.intp)
+    b = np.clip((x[..., 2] + 64) / 128 * bins, 0, bins - 1).astype(np.intp)
+    return (lum * bins + a) * bins + b
+
+
+def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray,
+                        flow_agree: np.ndarray, mask: np.ndarray, ratio: float, *,
+                        found=None, min_frac: float = 5e-4, tau: float = 10.0,
+                        bins: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """A mover that lingered in most photos, seen free in a minority of the sources.
+
+    The scans' majority rule calls such an object static: the reference and the
+    sources that still show it out-vote the (at least two) sources that saw the
+    background. Which side shows the mover cannot be told by counting: the same
+    counts arise where two sources show their *own* movers over the reference's
+    background. Issue 10 asks for the rule "a region seen free in a minority of
+    the sources (at least 2) is filled from them when they agree with each other
+    and with the surroundings"; here it is (not in the paper):
+
+    1. **Witnesses.** Pixels where at least two sources agree with each other
+       (CIE76 ΔE < ``tau``) and not with the reference, sampled through a match
+       the geometry allows (the flow where it is valid, else the homography plus
+       the parallax of the valid matches around). A source whose flow found the
+       reference's colour anyway (``flow_agree``) still shows that content and
+       is no witness; with ``found(k, region)`` (the epipolar search, used where
+       the set has much parallax), neither is one in which the reference's
+       content lies somewhere on its epipolar line.
+    2. **Surroundings, colour.** The histogram of the reference's Lab over every
+       pixel that no witnesses dispute (outside ``mask``) models the static
+       photo. Where the witnesses' colour is more common there than the
+       reference's own by more than ``ratio`` (log-likelihood ratio, smoothed
+       over σ 3 px), the reference shows something foreign to the scene; where
+       theirs is the rarer colour, they show their own movers.
+    3. **Regions.** Hysteresis (seeds above ``ratio``, grown through witnessed
+       pixels above 1.5), holes filled, components under ``min_frac`` of the
+       image dropped.
+    4. **Surroundings, geometry.** At least two of a region's witnesses must see
+       its surroundings (a ring 3–10 px out) as the reference does on
+       ``_RING_OK`` of it: across a wide baseline a whole neighbourhood differs,
+       and such sources witness nothing about what the reference hides.
+
+    Parameters
+    ----------
+    lab_r : (H, W, 3) float32 ndarray
+        The reference, blurred Lab.
+    lab_w : (S, H, W, 3) float32 ndarray
+        Each source sampled through that match, blurred Lab, exposure matched.
+    geo_ok : (S, H, W) bool ndarray
+        Where that match lies inside the source's frame (and content).
+    flow_agree : (S, H, W) bool ndarray
+        Where the source's flow match agrees with the reference in colour.
+    mask : (H, W) bool ndarray
+        The current dynamic map (excluded from the colour model and the rings).
+    ratio : float
+        ``Params.select_minority`` (>= 1).
+
+    Returns
+    -------
+    region : (H, W) bool ndarray
+        Where the reference shows a mover that two or more witnesses saw past
+        (may overlap ``mask``).
+    witnessed : (H, W) bool ndarray
+        The pixels of ``region`` that the witnesses themselves dispute (before
+        the regions' morphology).
+    """
+    S, H, W = geo_ok.shape
+    out = np.zeros((H, W), bool)
+    if S < 2:
+        return out, out
+    near = geo_ok & (np.linalg.norm(lab_w - lab_r[None], axis=-1) < tau)
+    dis = geo_ok & ~near & ~flow_agree
+
+    raw = np.zeros((H, W), bool)
+
+    def witnessed():
+        ys, xs = np.nonzero(dis.sum(0) >= 2)
+        d = dis[:, ys, xs]  # (S, n)
+        v = lab_w[:, ys, xs]  # (S, n, 3)
+        agree = (np.linalg.norm(v[:, None] - v[None], axis=-1) < tau) & d[:, None] & d[None]
+        count = agree.sum(1)  # (S, n): witnesses agreeing with source k, itself included
+        best = np.argmax(count, 0) if len(ys) else np.zeros(0, np.intp)
+        cand = np.zeros((H, W), np.uint8)
+        cand[ys, xs] = count[best, np.arange(len(ys))] >= 2
+        raw[:] = cand > 0
+        cand = cv2.morphologyEx(cv2.morphologyEx(cand, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)),
+                                cv2.MORPH_CLOSE, np.ones((7, 7), np.uint8))
+        return cand, ys, xs, v[best, np.arange(len(ys))]
+
+    cand, ys, xs, v_best = witnessed()
+    if found is not None and cand.any():
+        # a source in which the reference's content lies somewhere on its epipolar
+        # line still shows it (the match was only misplaced): no witness there
+        for k in range(S):
+            dis[k] &= ~found(k, cand > 0)
+        cand, ys, xs, v_best = witnessed()
+    if not cand.any():
+        return out, out
+    # the colour model of the undisputed static photo
+    undisputed = ~cv2.dilate(cand, np.ones((9, 9), np.uint8)).astype(bool) & ~mask
+    if undisputed.sum() < 0.05 * H * W:
+        return out, out
+    h = np.bincount(_lab_bins(lab_r[undisputed], bins), minlength=bins ** 3).astype(np.float64)
+    h = cv2.GaussianBlur(h.reshape(bins, bins * bins), (3, 3), 0.7).ravel()
+    h = h / h.sum() + 0.05 / bins ** 3  # a floor of 5 % of the uniform density
+    # the witnesses' colour: the best-supported agreeing source at each pixel
+    wit = np.zeros((H, W, 3), np.float32)
+    wit[ys, xs] = v_best
+    llr = np.where(cand > 0, np.log(h[_lab_bins(wit, bins)]) - np.log(h[_lab_bins(lab_r, bins)]),
+                   0.0).astype(np.float32)
+    llr = cv2.GaussianBlur(llr, (0, 0), 3.0)
+    hi = ((cand > 0) & (llr > np.log(ratio))).astype(np.uint8)
+    hi = cv2.morphologyEx(hi, cv2.MORPH_OPEN, np.ones((5, 5), np.uint8))
+    lo = ((cand > 0) & (llr > np.log(1.5))).astype(np.uint8)
+    lo = cv2.morphologyEx(lo, cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8)) | hi
+    n, comp = cv2.connectedComponents(lo, connectivity=8)
+    seeded = np.zeros(n, bool)
+    seeded[np.unique(comp[hi > 0])] = True
+    seeded[0] = False
+    grown = fill_holes(seeded[comp].astype(np.uint8))
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
+    keep = stats[:, cv2.CC_STAT_AREA] >= min_frac * H * W
+    keep[0] = False
+    # the witnesses must see the region's surroundings as the reference does:
+    # where their whole neighbourhood differs (another side of a wide baseline),
+    # they are no witnesses of what the reference hides
+    agree_r = near | flow_agree
+    for c in np.nonzero(keep)[0]:
+        bx, by, bw, bh = stats[c, :4]
+        ya, yb = max(by - 12, 0), min(by + bh + 12, H)
+        xa, xb = max(bx - 12, 0), min(bx + bw + 12, W)
+        R = comp[ya:yb, xa:xb] == c
+        ring = dilate_disc(R, 10) & ~dilate_disc(R, 3) & ~mask[ya:yb, xa:xb]
+        if ring.sum() < 20:
+            keep[c] = False
+            continue
+        is_wit = dis[:, ya:yb, xa:xb][:, R].mean(1) >= 0.5
+        ring_ok = agree_r[:, ya:yb, xa:xb][:, ring].mean(1)
+        keep[c] = (is_wit & (ring_ok >= _RING_OK)).sum() >= 2
+    region = keep[comp]
+    return region, region & raw
+
+
 def member_median(values: npt.NDArray[np.uint8], member: npt.NDArray[np.bool_]
                   ) -> npt.NDArray[np.uint8]:
     """Per-channel median of ``values`` (S, n, 3) uint8 over the sources ``member``
@@ -267,6 +424,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     matched = np.zeros((S, H, W), bool)  # explained by the flow match
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
     base = []
+    if P.select_minority > 0:
+        lab_ws = np.zeros((S, H, W, 3), np.float32)
+        geo_ok = np.zeros((S, H, W), bool)
+        flow_agree = np.zeros((S, H, W), bool)
     for k in range(S):
         v = views[k]
         nf = (flows[k] if flows is not None else
@@ -283,9 +444,30 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         if valid is not None:
             inside &= _valid_at(valid[k], nf)
         lab_w = blurred_lab(warped, 1.0)
-        ok = inside & within & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+        geo = inside & within
         if v.F is not None and P.select_epipolar_px > 0:
-            ok &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
+            geo &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
+        ok = geo & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+        if P.select_minority > 0:
+            # through the fill's match (flow within the gate, else the homography,
+            # which keeps a point on its epipolar line), exposure and white balance
+            # matched (median Lab offset off L)
+            # elsewhere the homography plus the parallax the valid matches around
+            # show (normalised convolution of their departure from it)
+            h_xy = np.stack([hx, hy], -1).astype(np.float32)
+            par_k = interpolate_field(np.where(geo[..., None], nf - h_xy, 0).astype(np.float32),
+                                      ~geo)
+            f_g = np.where(geo[..., None], nf, h_xy + par_k).astype(np.float32)
+            w_b, geo_ok[k] = sample_bilinear(sources[k], f_g)
+            if valid is not None:
+                geo_ok[k] &= _valid_at(valid[k], f_g)
+            # where the flow found the reference's colour (wherever it led), the
+            # source still shows that content: it does not witness against it
+            flow_agree[k] = inside & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+            lab_b = blurred_lab(w_b, 1.0)
+            off = geo_ok[k] & ~mask
+            lab_ws[k] = lab_b + (np.median(lab_r[off] - lab_b[off], axis=0)
+                                 if off.sum() > 100 else 0.0)
         votes[k] = ok * (1.0 - _mover_probability(lab_r, mask, lab_w))
         if mode == "parallax" and P.select_search_de > 0:
             # static 3-D structure whose flow match failed (thin, or far off the
@@ -298,6 +480,27 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         grown = _consensus_growth(lab_r, sources, base, mask, valid, P)
         mask = mask | grown
         region = dilate_disc(mask, P.select_margin_px)
+    minority = np.zeros((H, W), bool)
+    if P.select_minority > 0:
+        def found(k, region):
+            if views[k].F is None:
+                return np.zeros(region.shape, bool)
+            nf = flows[k] if flows is not None else base[k]
+            cost, _ = epipolar_search(lab_r, blurred_lab(sources[k], 1.0), views[k], nf,
+                                      ~dilate_disc(mask | region, 4), region)
+            return cost < max(P.select_search_de, 1e-6)
+
+        # (the search guards the plane + parallax estimate of the match, which
+        # can be far off only where the set has much parallax)
+        region_m, witnessed = _minority_witnesses(
+            lab_r, lab_ws, geo_ok, flow_agree, mask, P.select_minority,
+            found=found if mode == "parallax" else None, tau=tau)
+        # inside what the scans (or the growth) found, only the pixels that the
+        # witnesses themselves dispute change treatment
+        minority = region_m & (~mask | witnessed)
+        del lab_ws, geo_ok, flow_agree
+        mask = mask | minority
+        region = dilate_disc(mask, P.select_margin_px)
     p_ref = _mover_probability(lab_r, mask, lab_r)
     need = max(1, int(np.ceil(0.5 * S - 1e-6)))
     if searched.any():
@@ -305,7 +508,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # match): it counts where at least two sources, and half of them, agree
         found = searched & ((matched | searched).sum(0) >= max(2, need))[None]
         votes = np.maximum(votes, found.astype(np.float32))
-    explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5)
+    explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5) & ~minority
     core = mask & ~explained
 
     # 2. background candidates through the fields, re-aligned
@@ -347,6 +550,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     weight[0] = 1.0  # outside L the reference is a trusted witness
     weight[0][in_mask] = 1.0 - p_mover[0][in_mask]
     dist = pairwise_distance(labs)  # (S+1, S+1, h, w)
+    # where a mover lingered, the sources that still show it (as the reference
+    # does) are no witnesses of the background, and never fill
+    copies = minority[y0:y1, x0:x1][None] & (dist[0, 1:] < tau) & usable[1:]
+    weight[1:][copies] = 0.0
     agree = (dist < tau) & usable[:, None] & usable[None]
     support = (agree * weight[None]).sum(1)
     v_roi = votes[:, y0:y1, x0:x1]
@@ -358,17 +565,20 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         return np.minimum(np.linalg.norm(labs - c[None], axis=-1), _DE_CAP), c
 
     D, cons = consensus(support, 0)
-    if mode == "scan":
-        # inside L the reference is the suspect: the sources' own consensus decides
+    # inside L the reference is the suspect: the sources' own consensus decides
+    # (with much parallax, only where the minority witnesses said so)
+    suspect = in_core if mode == "scan" else in_core & minority[y0:y1, x0:x1]
+    if suspect.any():
         Ds, cons_s = consensus(support[1:], 1)
-        D = np.where(in_core[None], Ds, D)
+        D = np.where(suspect[None], Ds, D)
         ref_cost = P.select_ref_cost
         if S == 1:  # two photos: which one shows the mover is not known; the colour
             # model must say the reference does and the source does not
             ref_cost = np.where((p_mover[0] > 0.5) & (p_mover[1] < 0.5), ref_cost, 0.0)
-        D[0] = np.where(in_core, ref_cost, D[0])
-        cons = np.where(in_core[..., None], cons_s, cons)
+        D[0] = np.where(suspect, ref_cost, D[0])
+        cons = np.where(suspect[..., None], cons_s, cons)
     D[1:] += P.select_kappa + P.select_gamma * p_mover[1:]
+    D[1:][copies] = _FORBIDDEN
     D[~usable] = _FORBIDDEN
     D[1:, ~reg] = _FORBIDDEN
     D[0, ~reg] = 0.0
@@ -378,7 +588,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                            distance=dist, forbidden=_FORBIDDEN)
     rep = lab != 0
     movers = np.zeros((S, H, W), bool)
-    mv = usable[1:] & (p_mover[1:] > 0.5) & (np.linalg.norm(labs[1:] - cons[None], axis=-1) > tau)
+    mv = (usable[1:] & (p_mover[1:] > 0.5) & (np.linalg.norm(labs[1:] - cons[None], axis=-1) > tau)
+          | copies)
     movers[:, y0:y1, x0:x1] = mv & reg[None]
     free = usable[1:] & ~mv
     no_src = rep & in_core & ~free.any(0)
@@ -402,10 +613,17 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     why = np.where(np.linalg.norm(labs[1:] - cons[None], axis=-1) < tau, 6, 5).astype(np.uint8)
     why[members[:, y0:y1, x0:x1]] = 2
     why[mv] = 3
+    why[copies] = 7
     why[~usable[1:]] = 4
     why[lab[None] == np.arange(1, S + 1)[:, None, None]] = 1
     reasons = np.zeros((S, H, W), np.uint8)
     reasons[:, y0:y1, x0:x1] = np.where(reg[None], why, 0)
+    # a lingering mover: witnessed against the reference where the reference and
+    # the sources still showing it are the majority (the case the scans' majority
+    # rule gets wrong; a mover that most sources saw past is no such case)
+    n_copies = copies.sum(0)
+    lingering = np.zeros((H, W), bool)
+    lingering[roi] = minority[roi] & (n_copies + 1 > usable[1:].sum(0) - n_copies)
     label = np.full((H, W), -1, np.int16)
     label[roi] = np.where(reg, lab, -1)
     seams = np.zeros((H, W), bool)
@@ -420,7 +638,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     nos[roi] = no_src
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
-                     consensus_mode=mode, fields=fields, members=members, reasons=reasons)
+                     consensus_mode=mode, fields=fields, members=members, reasons=reasons,
+                     lingering=lingering)
 
 
 __all__ = ["REASONS", "Selection", "member_median", "select_fill"]
