@@ -21,6 +21,7 @@ pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402
 from test_viewer_e2e import Tee  # noqa: E402
 from test_viewer_fixtures import fabricate_run, gt_for  # noqa: E402
+from lingering import paste_at_same_spot  # noqa: E402
 
 from dynremove import MemorySink, preset, remove_dynamic  # noqa: E402
 from dynremove.cli import main  # noqa: E402
@@ -176,6 +177,26 @@ def test_the_fill_is_told(method_run):
         h = vi.pixel_history(method_run["path"], int(xs[0]), int(ys[0]))
         k = int(sel["source"][ys[0], xs[0]])
         assert f"filled from source {h['source_names'][k - 1]}" in " ".join(vd.verdict_lines(h))
+
+
+def test_a_lingering_mover_is_logged_and_told(tmp_path):
+    """A mover that stands still in 3 of the 5 sources: the recording holds the
+    lingering map, and inspect says which source filled a pixel of it and why the
+    sources still showing the mover were rejected."""
+    sc = synth.make_scene(seed=3, n_views=6, size=(240, 432), n_objects=1)
+    ref = sc.ref_index
+    ims = paste_at_same_spot(sc, ref, [k for k in range(6) if k not in (ref, 0, 1)])
+    path = tmp_path / "linger.rrd"
+    with pytest.warns(UserWarning, match="most photos show"):
+        remove_dynamic(ims, ref=ref, sink=RerunSink(path, gt_mask=sc.masks[ref]))
+    sel = vi.read_selection(path)
+    assert sel["lingering"].astype(bool).sum() >= 0.4 * sc.masks[ref].sum()  # (as in test_select)
+    ys, xs = np.nonzero(sel["lingering"].astype(bool) & (sel["source"] > 0))
+    i = len(ys) // 2
+    h = vi.pixel_history(path, int(xs[i]), int(ys[i]))
+    words = " ".join(vd.verdict_lines(h))
+    assert "a mover that lingered" in words
+    assert "still shows the mover that lingered here" in words
 
 
 def test_pixel_outside_the_image(fabricated, capsys):

@@ -198,6 +198,20 @@ def _lab_bins(x: np.ndarray, bins: int) -> np.ndarray:
     return (lum * bins + a) * bins + b
 
 
+def _coarse_fill(values: np.ndarray, valid: np.ndarray, scale: int = 8) -> np.ndarray:
+    """``values`` (H, W, C) float32 filled where not ``valid`` by normalised convolution
+    (``fields.interpolate_field``) on a grid ``scale`` times coarser, upsampled
+    bilinearly: a smooth field's interpolation at 1/scale² of the cost."""
+    H, W = valid.shape
+    h, w = max(1, H // scale), max(1, W // scale)
+    wv = cv2.resize(valid.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+    num = cv2.resize(np.where(valid[..., None], values, 0).astype(np.float32), (w, h),
+                     interpolation=cv2.INTER_AREA).reshape(h, w, -1)
+    coarse = num / np.maximum(wv, 1e-6)[..., None]
+    coarse = interpolate_field(coarse, wv < 0.05)
+    return cv2.resize(coarse, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, -1)
+
+
 def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray,
                         flow_agree: np.ndarray, mask: np.ndarray, ratio: float, *,
                         found=None, min_frac: float = 5e-4, tau: float = 10.0,
@@ -285,8 +299,8 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     if found is not None and cand.any():
         # a source in which the reference's content lies somewhere on its epipolar
         # line still shows it (the match was only misplaced): no witness there
-        for k in range(S):
-            dis[k] &= ~found(k, cand > 0)
+        for k in range(S):  # (searched only where this source would witness)
+            dis[k] &= ~found(k, (cand > 0) & dis[k])
         cand, ys, xs, v_best = witnessed()
     if not cand.any():
         return out, out
@@ -424,6 +438,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     matched = np.zeros((S, H, W), bool)  # explained by the flow match
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
     base = []
+    lab_s: list = [None] * S  # the sources' blurred Lab, where computed
     if P.select_minority > 0:
         lab_ws = np.zeros((S, H, W, 3), np.float32)
         geo_ok = np.zeros((S, H, W), bool)
@@ -447,33 +462,31 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         geo = inside & within
         if v.F is not None and P.select_epipolar_px > 0:
             geo &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
-        ok = geo & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+        near_w = inside & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+        ok = geo & near_w
         if P.select_minority > 0:
-            # through the fill's match (flow within the gate, else the homography,
-            # which keeps a point on its epipolar line), exposure and white balance
-            # matched (median Lab offset off L)
-            # elsewhere the homography plus the parallax the valid matches around
-            # show (normalised convolution of their departure from it)
+            # the minority witnesses' match: the flow where the geometry allows it,
+            # elsewhere the homography plus the parallax that the valid matches
+            # around show; exposure and white balance matched (the median Lab
+            # offset off L, on every 7th pixel)
             h_xy = np.stack([hx, hy], -1).astype(np.float32)
-            par_k = interpolate_field(np.where(geo[..., None], nf - h_xy, 0).astype(np.float32),
-                                      ~geo)
-            f_g = np.where(geo[..., None], nf, h_xy + par_k).astype(np.float32)
+            f_g = np.where(geo[..., None], nf, h_xy + _coarse_fill(nf - h_xy, geo))
             w_b, geo_ok[k] = sample_bilinear(sources[k], f_g)
             if valid is not None:
                 geo_ok[k] &= _valid_at(valid[k], f_g)
             # where the flow found the reference's colour (wherever it led), the
             # source still shows that content: it does not witness against it
-            flow_agree[k] = inside & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+            flow_agree[k] = near_w
             lab_b = blurred_lab(w_b, 1.0)
-            off = geo_ok[k] & ~mask
-            lab_ws[k] = lab_b + (np.median(lab_r[off] - lab_b[off], axis=0)
-                                 if off.sum() > 100 else 0.0)
+            off = np.flatnonzero(geo_ok[k] & ~mask)[::7]
+            lab_ws[k] = lab_b + (np.median(lab_r.reshape(-1, 3)[off] - lab_b.reshape(-1, 3)[off],
+                                           axis=0) if len(off) > 100 else 0.0)
         votes[k] = ok * (1.0 - _mover_probability(lab_r, mask, lab_w))
         if mode == "parallax" and P.select_search_de > 0:
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
-            cost, _ = epipolar_search(lab_r, blurred_lab(sources[k], 1.0), v, nf,
-                                      ~dilate_disc(mask, 4), mask & ~ok)
+            lab_s[k] = blurred_lab(sources[k], 1.0)
+            cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok)
             matched[k], searched[k] = ok, cost < P.select_search_de
     grown = np.zeros((H, W), bool)
     if P.select_grow_px > 0:
@@ -482,12 +495,19 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         region = dilate_disc(mask, P.select_margin_px)
     minority = np.zeros((H, W), bool)
     if P.select_minority > 0:
+        # a coarse test (a third of the search's time at 854×480): a grid of at
+        # least 200 px on its long side, 3×3 cells
+        veto_scale = min(0.5, max(0.25, 200 / max(H, W)))
+
         def found(k, region):
             if views[k].F is None:
                 return np.zeros(region.shape, bool)
             nf = flows[k] if flows is not None else base[k]
-            cost, _ = epipolar_search(lab_r, blurred_lab(sources[k], 1.0), views[k], nf,
-                                      ~dilate_disc(mask | region, 4), region)
+            if lab_s[k] is None:
+                lab_s[k] = blurred_lab(sources[k], 1.0)
+            cost, _ = epipolar_search(lab_r, lab_s[k], views[k], nf,
+                                      ~dilate_disc(mask | region, 4), region,
+                                      scale=veto_scale, box=3)
             return cost < max(P.select_search_de, 1e-6)
 
         # (the search guards the plane + parallax estimate of the match, which

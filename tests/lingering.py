@@ -1,0 +1,42 @@
+"""Synthetic scenes where a mover stands still in some views (a "lingering" mover).
+
+Built from ``evaluation.synth`` scenes: a view's mover is warped into other
+views by the homography of the scene layer it stands on, so that it shows on the
+same scene spot there. Used by tests/test_select.py and tests/test_debugger.py.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def _foot_layer(sc, view):
+    """The scene layer under the lowest point of ``view``'s mover (where it stands)."""
+    m = sc.masks[view]
+    ys, xs = np.nonzero(m)
+    foot = np.float32([[[np.median(xs[ys >= ys.max() - 3]), min(ys.max() + 3, m.shape[0] - 1)]]])
+    for layer, h in enumerate(sc.layer_homographies[view]):
+        x, y = cv2.perspectiveTransform(foot, np.linalg.inv(h))[0, 0]  # in the reference
+        if 0 <= y < m.shape[0] and 0 <= x < m.shape[1] and sc.layer_ids[int(y), int(x)] == layer:
+            return layer
+    raise AssertionError(f"no layer under view {view}'s mover")
+
+
+def warp_mover(sc, frm, to):
+    """View ``frm``'s mover (image, mask) as it shows in view ``to`` if it stood still."""
+    layer = _foot_layer(sc, frm)
+    Hs = sc.layer_homographies
+    h_ft = Hs[to, layer] @ np.linalg.inv(Hs[frm, layer])
+    size = sc.masks[frm].shape[::-1]
+    mask = cv2.warpPerspective(sc.masks[frm].astype(np.uint8) * 255, h_ft, size) > 127
+    return cv2.warpPerspective(sc.images[frm], h_ft, size), mask
+
+
+def paste_at_same_spot(sc, frm, to):
+    """The scene's images with view ``frm``'s mover standing still in the views ``to``."""
+    out = [im.copy() for im in sc.images]
+    for k in to:
+        img, mask = warp_mover(sc, frm, k)
+        out[k][mask] = img[mask]
+    return out
