@@ -361,3 +361,25 @@ def test_lingering_mover_is_reported_and_logged():
     k_stay = [i for i, s in enumerate(r.source_indices) if s in stay]
     at = r.selection.lingering
     assert (r.selection.reasons[k_stay][:, at] == 7).mean() >= 0.5
+
+
+def test_lingering_mover_is_found_when_the_scans_flag_nothing():
+    """select_fill given an empty L (the scans called everything static) still finds
+    a mover that lingered (measured: 87 % of it replaced, 79 % right after); with
+    the step off it returns the reference unchanged."""
+    from dynremove.pipeline import prepare
+    from dynremove.refine.select import select_fill
+
+    sc = synth.make_scene(seed=0, n_views=6, size=(240, 432), n_objects=1)
+    ref = sc.ref_index
+    gt = sc.masks[ref]
+    ims = paste_at_same_spot(sc, ref, [k for k in range(6) if k not in (ref, 0, 1)])
+    P = preset("default")
+    st, views = prepare(ims, ref, P)
+    empty = np.zeros(gt.shape, bool)
+    sel = select_fill(ims[ref], st.src_img, views, empty, P, flows=st.Nf_flow)
+    assert (sel.replaced & gt).sum() >= 0.6 * gt.sum()
+    assert (_de(sel.clean, sc.background)[gt] <= 10).mean() >= 0.6
+    off = select_fill(ims[ref], st.src_img, views, empty, P.replace(select_minority=0.0),
+                      flows=st.Nf_flow)
+    assert not off.replaced.any() and np.array_equal(off.clean, ims[ref])

@@ -423,7 +423,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                       movers=np.zeros((S, H, W), bool), no_source=np.zeros((H, W), bool),
                       seams=np.zeros((H, W), bool), parallax_px=par, consensus_mode=mode)
     region = dilate_disc(mask, P.select_margin_px)
-    if not mask.any() or S == 0:
+    # (an empty L still gets the minority witnesses: a mover that lingered in most
+    # photos may be all the scans left unflagged)
+    if S == 0 or not (mask.any() or P.select_minority > 0):
         return empty
     mask = mask.copy()
     tau = P.select_tau
@@ -521,6 +523,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         del lab_ws, geo_ok, flow_agree
         mask = mask | minority
         region = dilate_disc(mask, P.select_margin_px)
+    if not mask.any():
+        return empty
     p_ref = _mover_probability(lab_r, mask, lab_r)
     need = max(1, int(np.ceil(0.5 * S - 1e-6)))
     if searched.any():
