@@ -22,6 +22,7 @@ the two presets differ, the comment gives the paper preset's value.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 CORRESPONDENCE_METHODS = ("homography+flow", "homography", "flow", "gated")
@@ -107,7 +108,7 @@ class Params:
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
     select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
     select_search_de: float = 8.0  # where the parallax exceeds select_parallax_px, a pixel of L is also explained by its best match on its epipolar line in a source: CIE76 ΔE, mean over ~10 px, under this (0 = off)
-    select_minority: float = 4.0  # L also takes regions that two or more sources agree on against the reference, where their colours are this many times more common in the static photo than the reference's (a mover that lingered; 0 = off)
+    select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)
     select_sweep: bool = False  # above that parallax, matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
@@ -116,6 +117,10 @@ class Params:
     def __post_init__(self) -> None:
         if self.patch_size < 3 or self.patch_size % 2 == 0:
             raise ValueError(f"patch_size must be odd and >= 3, got {self.patch_size}")
+        for f in dataclasses.fields(self):  # NaN passes every comparison below
+            v = getattr(self, f.name)
+            if isinstance(v, float) and not math.isfinite(v):
+                raise ValueError(f"{f.name} must be a finite number, got {v}")
         if self.dbscan_eps <= 0:
             raise ValueError(f"dbscan_eps must be > 0, got {self.dbscan_eps}")
         if self.dbscan_min_pts < 1:
@@ -143,13 +148,12 @@ class Params:
         for name in ("select_tau", "select_beta"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.select_minority != 0 and not self.select_minority >= 1:
+            raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
-                     "select_parallax_px", "select_margin_px", "select_search_de",
-                     "select_minority"):
+                     "select_parallax_px", "select_margin_px", "select_search_de"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if 0 < self.select_minority < 1:
-            raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         if self.fuse_combine not in ("median", "medoid"):
             raise ValueError(f"fuse_combine must be median/medoid, got {self.fuse_combine!r}")
         if not self.fuse_realign_max_px > 0:
@@ -160,8 +164,6 @@ class Params:
                      "fuse_margin_px", "snap_inner_px", "snap_outer_px", "snap_iters"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if 0 < self.select_minority < 1:
-            raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         if self.hog_bins < 2:
             raise ValueError(f"hog_bins must be >= 2, got {self.hog_bins}")
         if self.candidate_set not in (True, False):

@@ -641,6 +641,13 @@ def test_bad_parameters_api():
         preset("paper").replace(dbscan_eps=-1)
     with pytest.raises(ValueError, match="unknown preset"):
         preset("fastest")
+    # NaN passes every range comparison; infinities are no parameter values either
+    for name in ("select_kappa", "select_minority", "t_r", "flow_gate"):
+        for bad in (float("nan"), float("inf")):
+            with pytest.raises(ValueError, match=f"{name} must be a finite number"):
+                preset("default").replace(**{name: bad})
+    with pytest.raises(ValueError, match="select_minority must be 0"):
+        preset("default").replace(select_minority=0.5)
 
 
 # --- a few through a real process (exit status, C-level stderr) --------------------------
@@ -703,3 +710,20 @@ def test_cli_other_exceptions_are_internal_errors(tmp_path, monkeypatch, capsys)
     assert main(["demo", "--no-record", "--quiet", "--out", str(tmp_path / "d")]) == 1
     err = capsys.readouterr().err
     assert "internal error: ValueError" in err and len(err.strip().splitlines()) == 1
+
+
+def test_views_without_any_motion_between_them_run():
+    """A tripod set: no camera motion at all (and the reference's mover copied into
+    three views). OpenCV's MAGSAC rejects the fundamental matrix of such matches
+    with an assertion; the run goes on without F instead of an internal error."""
+    from dynremove import remove_dynamic
+    from dynremove.evaluation import synth
+
+    sc = synth.make_scene(seed=0, n_views=6, n_objects=1, parallax=0, camera_shake_px=0,
+                          size=(360, 640))
+    ref, m = sc.ref_index, sc.masks[sc.ref_index]
+    ims = [im.copy() for im in sc.images]
+    for i in (0, 1, 2):
+        ims[i][m] = sc.images[ref][m]
+    r = remove_dynamic(ims, ref=ref)
+    assert r.clean.shape == ims[ref].shape and r.dynamic.any()

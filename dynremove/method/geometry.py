@@ -61,7 +61,9 @@ def estimate_two_view(xy_r: npt.NDArray[np.float32], xy_s: npt.NDArray[np.float3
                       seed: int = 0) -> TwoView:
     """F (USAC_MAGSAC) and H (USAC_MAGSAC) from matched points (M, 2) each.
 
-    With fewer than ``MIN_MATCHES`` matches, F is None and H the identity.
+    With fewer than ``MIN_MATCHES`` matches, F is None and H the identity; F is
+    None too where OpenCV finds none or rejects the set as degenerate (views
+    without any motion between them make MAGSAC's model empty).
     """
     n = len(xy_r)
     F = None
@@ -70,7 +72,10 @@ def estimate_two_view(xy_r: npt.NDArray[np.float32], xy_s: npt.NDArray[np.float3
     parallax = float("inf")
     if n >= MIN_MATCHES:
         cv2.setRNGSeed(int(seed))
-        F_est, inl = cv2.findFundamentalMat(xy_r, xy_s, cv2.USAC_MAGSAC, 1.0, 0.999, 10000)
+        try:
+            F_est, inl = cv2.findFundamentalMat(xy_r, xy_s, cv2.USAC_MAGSAC, 1.0, 0.999, 10000)
+        except cv2.error:  # a degenerate set (e.g. views without any motion): no F
+            F_est, inl = None, None
         inl_F = None
         if F_est is not None and F_est.shape == (3, 3) and inl is not None:
             nF = int(inl.sum())
@@ -100,8 +105,11 @@ def fit_homography(xy_a: npt.NDArray[np.float32], xy_b: npt.NDArray[np.float32],
     Returns ``(H, n_inliers)``; ``(None, 0)`` when OpenCV finds none.
     """
     cv2.setRNGSeed(int(seed))
-    H, inl = cv2.findHomography(xy_a, xy_b, cv2.USAC_MAGSAC, threshold_px,
-                                maxIters=max_iters, confidence=confidence)
+    try:
+        H, inl = cv2.findHomography(xy_a, xy_b, cv2.USAC_MAGSAC, threshold_px,
+                                    maxIters=max_iters, confidence=confidence)
+    except cv2.error:  # a degenerate set: as when OpenCV finds none
+        return None, 0
     if H is None or inl is None or H.shape != (3, 3):
         return None, 0
     return H.astype(np.float64), int(inl.sum())

@@ -271,11 +271,15 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     witnessed : (H, W) bool ndarray
         The pixels of ``region`` that the witnesses themselves dispute (before
         the regions' morphology).
+    witnesses : (S, H, W) bool ndarray
+        Over each region, the sources that witnessed it (and see its
+        surroundings): the only ones that may fill it.
     """
     S, H, W = geo_ok.shape
     out = np.zeros((H, W), bool)
+    none = (out, out, np.zeros((S, H, W), bool))
     if S < 2:
-        return out, out
+        return none
     near = geo_ok & (np.linalg.norm(lab_w - lab_r[None], axis=-1) < tau)
     dis = geo_ok & ~near & ~flow_agree
 
@@ -303,11 +307,11 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
             dis[k] &= ~found(k, (cand > 0) & dis[k])
         cand, ys, xs, v_best = witnessed()
     if not cand.any():
-        return out, out
+        return none
     # the colour model of the undisputed static photo
     undisputed = ~cv2.dilate(cand, np.ones((9, 9), np.uint8)).astype(bool) & ~mask
     if undisputed.sum() < 0.05 * H * W:
-        return out, out
+        return none
     h = np.bincount(_lab_bins(lab_r[undisputed], bins), minlength=bins ** 3).astype(np.float64)
     h = cv2.GaussianBlur(h.reshape(bins, bins * bins), (3, 3), 0.7).ravel()
     h = h / h.sum() + 0.05 / bins ** 3  # a floor of 5 % of the uniform density
@@ -333,6 +337,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     # where their whole neighbourhood differs (another side of a wide baseline),
     # they are no witnesses of what the reference hides
     agree_r = near | flow_agree
+    wit_map = np.zeros((S, H, W), bool)
     for c in np.nonzero(keep)[0]:
         bx, by, bw, bh = stats[c, :4]
         ya, yb = max(by - 12, 0), min(by + bh + 12, H)
@@ -344,9 +349,12 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
             continue
         is_wit = dis[:, ya:yb, xa:xb][:, R].mean(1) >= 0.5
         ring_ok = agree_r[:, ya:yb, xa:xb][:, ring].mean(1)
-        keep[c] = (is_wit & (ring_ok >= _RING_OK)).sum() >= 2
+        good = is_wit & (ring_ok >= _RING_OK)
+        keep[c] = good.sum() >= 2
+        if keep[c]:
+            wit_map[:, ya:yb, xa:xb] |= good[:, None, None] & R[None]
     region = keep[comp]
-    return region, region & raw
+    return region, region & raw, wit_map
 
 
 def member_median(values: npt.NDArray[np.uint8], member: npt.NDArray[np.bool_]
@@ -496,6 +504,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         mask = mask | grown
         region = dilate_disc(mask, P.select_margin_px)
     minority = np.zeros((H, W), bool)
+    wit_map = np.zeros((S, H, W), bool)
     if P.select_minority > 0:
         # a coarse test (a third of the search's time at 854×480): a grid of at
         # least 200 px on its long side, 3×3 cells
@@ -514,7 +523,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
         # (the search guards the plane + parallax estimate of the match, which
         # can be far off only where the set has much parallax)
-        region_m, witnessed = _minority_witnesses(
+        region_m, witnessed, wit_map = _minority_witnesses(
             lab_r, lab_ws, geo_ok, flow_agree, mask, P.select_minority,
             found=found if mode == "parallax" else None, tau=tau)
         # inside what the scans (or the growth) found, only the pixels that the
@@ -574,9 +583,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     weight[0] = 1.0  # outside L the reference is a trusted witness
     weight[0][in_mask] = 1.0 - p_mover[0][in_mask]
     dist = pairwise_distance(labs)  # (S+1, S+1, h, w)
-    # where a mover lingered, the sources that still show it (as the reference
-    # does) are no witnesses of the background, and never fill
-    copies = minority[y0:y1, x0:x1][None] & (dist[0, 1:] < tau) & usable[1:]
+    # where a mover lingered, the sources that did not witness the background
+    # there still show it (as the reference does): they never fill
+    copies = minority[y0:y1, x0:x1][None] & ~wit_map[:, y0:y1, x0:x1] & usable[1:]
     weight[1:][copies] = 0.0
     agree = (dist < tau) & usable[:, None] & usable[None]
     support = (agree * weight[None]).sum(1)
