@@ -109,10 +109,7 @@ def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
         return np.zeros(values.shape[:-1], np.float32)
 
     def q(x):
-        lum = np.clip(x[..., 0] / 100 * bins, 0, bins - 1).astype(np.intp)
-        a = np.clip((x[..., 1] + 64) / 128 * bins, 0, bins - 1).astype(np.intp)
-        b = np.clip((x[..., 2] + 64) / 128 * bins, 0, bins - 1).astype(np.intp)
-        return (lum * bins + a) * bins + b
+        return _lab_bins(x, bins)
 
     def hist(m):
         h = np.bincount(q(lab_ref[m]), minlength=bins ** 3).astype(np.float64)
