@@ -524,8 +524,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             lab_r, lab_ws, geo_ok, flow_agree, mask, P.select_minority,
             found=found if mode == "parallax" else None, tau=tau)
         # inside what the scans (or the growth) found, only the pixels that the
-        # witnesses themselves dispute change treatment
-        minority = region_m & (~mask | witnessed)
+        # witnesses themselves dispute change treatment; outside it, what is added
+        # is at least 5 px wide (a rim along a mover's outline is not a mover)
+        added = cv2.morphologyEx((region_m & ~mask).astype(np.uint8), cv2.MORPH_OPEN,
+                                 cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))) > 0
+        minority = added | (region_m & mask & witnessed)
         del lab_ws, geo_ok, flow_agree
         mask = mask | minority
         region = dilate_disc(mask, P.select_margin_px)
