@@ -412,21 +412,18 @@ def test_before_the_scans_a_starting_scan_is_not_said_to_run():
     assert vd.before_scans_message() == "interrupted before the scans began"
 
 
-def test_cut_between_two_scans_and_after_the_last(tmp_path):
+@pytest.mark.parametrize("scans_done, where, said", [
+    (1, "after scan 0", "interrupted after scan 0, before scan 1 began"),
+    (3, "during fill by selection", "interrupted after the scans (during the fill by selection)"),
+])
+def test_cut_between_two_scans_and_after_the_last(tmp_path, scans_done, where, said):
     """The sink: a run stopped after scan 0 finished, with more scans to come (the
     fabricated run allows 3 and finds dynamic pixels), then after all three."""
-    between = tmp_path / "between.rrd"
-    sink = RerunSink(between, record_every_rows=8)
-    fabricate_run([sink], H=H, W=W, S=S, n_scans=3, stop_after_scans=1)
-    sink.interrupted("after scan 0")
-    assert vi.interruption(vi.load_store(between)) == \
-        "interrupted after scan 0, before scan 1 began"
-    after = tmp_path / "after.rrd"
-    sink = RerunSink(after, record_every_rows=8)
-    fabricate_run([sink], H=H, W=W, S=S, n_scans=3, stop_after_scans=3)
-    sink.interrupted("during fill by selection")
-    assert vi.interruption(vi.load_store(after)) == \
-        "interrupted after the scans (during the fill by selection)"
+    path = tmp_path / "cut.rrd"
+    sink = RerunSink(path, record_every_rows=8)
+    fabricate_run([sink], H=H, W=W, S=S, n_scans=3, stop_after_scans=scans_done)
+    sink.interrupted(where)
+    assert vi.interruption(vi.load_store(path)) == said
 
 
 def test_recording_of_an_older_sink_cut_after_the_scans(tmp_path):

@@ -108,17 +108,9 @@ def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
     if not core.any() or not ring.any():
         return np.zeros(values.shape[:-1], np.float32)
 
-    def q(x):
-        return _lab_bins(x, bins)
-
-    def hist(m):
-        h = np.bincount(q(lab_ref[m]), minlength=bins ** 3).astype(np.float64)
-        h = cv2.GaussianBlur(h.reshape(bins, bins * bins), (3, 3), 0.7).ravel()
-        return h / max(h.sum(), 1e-9)
-
-    hf, hb = hist(core), hist(ring)
+    hf, hb = _lab_hist(lab_ref[core], bins), _lab_hist(lab_ref[ring], bins)
     post = (hf + 1e-4) / (hf + hb + 2e-4)
-    return post[q(values)].astype(np.float32)
+    return post[_lab_bins(values, bins)].astype(np.float32)
 
 
 def _valid_at(valid: np.ndarray, field: np.ndarray) -> np.ndarray:
@@ -195,6 +187,14 @@ def _lab_bins(x: np.ndarray, bins: int) -> np.ndarray:
     return (lum * bins + a) * bins + b
 
 
+def _lab_hist(values: np.ndarray, bins: int) -> np.ndarray:
+    """Normalised histogram (bins³,) float64 of Lab colours ``values`` (n, 3), blurred
+    over neighbouring (a, b) bins (σ 0.7 bin) so that close colours share mass."""
+    h = np.bincount(_lab_bins(values, bins), minlength=bins ** 3).astype(np.float64)
+    h = cv2.GaussianBlur(h.reshape(bins, bins * bins), (3, 3), 0.7).ravel()
+    return h / max(h.sum(), 1e-9)
+
+
 def _coarse_fill(values: np.ndarray, valid: np.ndarray, scale: int = 8) -> np.ndarray:
     """``values`` (H, W, C) float32 filled where not ``valid`` by normalised convolution
     (``fields.interpolate_field``) on a grid ``scale`` times coarser, upsampled
@@ -212,7 +212,7 @@ def _coarse_fill(values: np.ndarray, valid: np.ndarray, scale: int = 8) -> np.nd
 def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray,
                         flow_agree: np.ndarray, mask: np.ndarray, ratio: float, *,
                         found=None, min_frac: float = 5e-4, tau: float = 10.0,
-                        bins: int = 12) -> tuple[np.ndarray, np.ndarray]:
+                        bins: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A mover that lingered in most photos, seen free in a minority of the sources.
 
     The scans' majority rule calls such an object static: the reference and the
@@ -309,9 +309,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     undisputed = ~cv2.dilate(cand, np.ones((9, 9), np.uint8)).astype(bool) & ~mask
     if undisputed.sum() < 0.05 * H * W:
         return none
-    h = np.bincount(_lab_bins(lab_r[undisputed], bins), minlength=bins ** 3).astype(np.float64)
-    h = cv2.GaussianBlur(h.reshape(bins, bins * bins), (3, 3), 0.7).ravel()
-    h = h / h.sum() + 0.05 / bins ** 3  # a floor of 5 % of the uniform density
+    h = _lab_hist(lab_r[undisputed], bins) + 0.05 / bins ** 3  # floor: 5 % of uniform
     # the witnesses' colour: the best-supported agreeing source at each pixel
     wit = np.zeros((H, W, 3), np.float32)
     wit[ys, xs] = v_best
