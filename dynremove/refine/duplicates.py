@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from dynremove.refine.colour import delta_e
 from dynremove.refine.fields import blurred_lab
 
 
@@ -56,7 +57,7 @@ def agreement_with_reference(reference: npt.NDArray[np.uint8],
         inside = cv2.erode(inside, np.ones((5, 5), np.uint8)).astype(bool)
         if inside.sum() < 0.25 * h * w:
             continue
-        d = np.linalg.norm(blurred_lab(warped, 1.5) - lab_r, axis=-1)
+        d = delta_e(blurred_lab(warped, 1.5), lab_r)
         out[k] = float((d[inside] < de_max).mean())
     return out
 

@@ -30,6 +30,7 @@ import maxflow
 import numpy as np
 import numpy.typing as npt
 
+from dynremove.refine.colour import delta_e, pairwise_delta_e
 from dynremove.refine.fields import harmonic_fill
 from dynremove.refine.morphology import dilate_disc
 
@@ -41,13 +42,7 @@ DECAY_PX = 3.0
 
 def pairwise_distance(colours: np.ndarray) -> np.ndarray:
     """(L, L, H, W) float32: |I_a(p) - I_b(p)| for every label pair (0 on the diagonal)."""
-    nl = len(colours)
-    out = np.zeros((nl, nl) + colours.shape[1:3], np.float32)
-    for a in range(nl):
-        for b in range(a + 1, nl):
-            d = colours[a] - colours[b]
-            out[a, b] = out[b, a] = np.sqrt(np.einsum("...c,...c->...", d, d))
-    return out
+    return pairwise_delta_e(colours).astype(np.float32, copy=False)
 
 
 def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32], *,
@@ -201,7 +196,7 @@ def ring_agrees(difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool
     if not usable.any():
         return usable.copy()
     med = np.median(difference[usable], axis=0)
-    return usable & (np.linalg.norm(difference - med, axis=-1) < max_de)
+    return usable & (delta_e(difference, med) < max_de)
 
 
 def add_offset(source: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32]

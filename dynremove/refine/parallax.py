@@ -36,6 +36,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.method.geometry import TwoView, sampson_sq
+from dynremove.refine.colour import delta_e
 from dynremove.refine.fields import remap_points
 
 _CAP = 30.0  # ΔE cap of one source's distance to the median in the sweep cost
@@ -262,7 +263,7 @@ def sweep_fields(src_labs: list[np.ndarray], views: list[TwoView], model: Parall
                                 borderMode=cv2.BORDER_REPLICATE)
             inside[j] = (fx >= 0) & (fx <= Ww - 1) & (fy >= 0) & (fy <= Hh - 1)
         med = np.median(labs, axis=0)
-        dE = np.minimum(np.linalg.norm(labs - med[None], axis=-1), _CAP)
+        dE = np.minimum(delta_e(labs, med), _CAP)
         c = np.where(inside, dE, _CAP).mean(0)
         pen[:] = prior * np.minimum(np.abs(g - g_base) * px_per_gamma / prior_px, 1.0)
         c += pen
@@ -382,8 +383,7 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
         smp = remap_points(lab_s, fx.ravel(), fy.ravel(),
                            borderMode=cv2.BORDER_REPLICATE).reshape(k, n, 3)
         inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
-        diff = smp - ref_c[None]
-        d = np.minimum(np.sqrt(np.einsum("knc,knc->kn", diff, diff)), _CAP)
+        d = np.minimum(delta_e(smp, ref_c), _CAP)
         buf[py_b, px_b, :k] = np.where(inside, d, _CAP).T
         bf = cv2.boxFilter(buf[..., :k], -1, (box, box)).reshape(bh, bw, k)[qy_b, qx_b]
         j = np.argmin(bf, axis=1)  # the first of equal costs, as a sequential sweep

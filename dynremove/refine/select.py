@@ -56,6 +56,7 @@ import numpy.typing as npt
 from dynremove.method.correspondence import apply_homography, dense_correspondence, pixel_grid
 from dynremove.method.geometry import TwoView, sampson_sq
 from dynremove.params import Params
+from dynremove.refine.colour import delta_e, pairwise_delta_e
 from dynremove.refine.fields import (background_field, blurred_lab, interpolate_field,
                                      sample_bilinear)
 from dynremove.refine.fill import median_fill, realign_fields
@@ -157,13 +158,13 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
         ok.append(ins[ys, xs])
     labs, ok = np.stack(labs), np.stack(ok)  # (S, n, 3), (S, n)
     tau = P.select_tau
-    d = np.linalg.norm(labs[:, None] - labs[None], axis=-1)  # (S, S, n)
+    d = pairwise_delta_e(labs)  # (S, S, n)
     agree = (d < tau) & ok[:, None] & ok[None]
     count = agree.sum(1)  # sources agreeing with source k (itself included)
     best = np.argmax(count, 0)
     n_best = count[best, np.arange(len(ys))]
     cons = labs[best, np.arange(len(ys))]
-    d_ref = np.linalg.norm(lab_rb[ys, xs] - cons, axis=-1)
+    d_ref = delta_e(lab_rb[ys, xs], cons)
     need = max(2, int(np.ceil(0.5 * S - 1e-6)))
     hit = np.zeros(mask.shape, np.uint8)
     hit[ys + y0, xs + x0] = (n_best >= need) & (d_ref >= tau)
@@ -277,7 +278,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     none = (out, out, np.zeros((S, H, W), bool))
     if S < 2:
         return none
-    near = geo_ok & (np.linalg.norm(lab_w - lab_r[None], axis=-1) < tau)
+    near = geo_ok & (delta_e(lab_w, lab_r) < tau)
     dis = geo_ok & ~near & ~flow_agree
 
     raw = np.zeros((H, W), bool)
@@ -286,7 +287,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
         ys, xs = np.nonzero(dis.sum(0) >= 2)
         d = dis[:, ys, xs]  # (S, n)
         v = lab_w[:, ys, xs]  # (S, n, 3)
-        agree = (np.linalg.norm(v[:, None] - v[None], axis=-1) < tau) & d[:, None] & d[None]
+        agree = (pairwise_delta_e(v) < tau) & d[:, None] & d[None]
         count = agree.sum(1)  # (S, n): witnesses agreeing with source k, itself included
         best = np.argmax(count, 0) if len(ys) else np.zeros(0, np.intp)
         cand = np.zeros((H, W), np.uint8)
@@ -375,7 +376,7 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     chosen = lab[ys, xs]
     lab_c = labs[chosen, ys, xs]  # (n, 3)
     tau = np.broadcast_to(tau, rep.shape)[ys, xs]
-    member = free[:, ys, xs] & (np.linalg.norm(labs[1:, ys, xs] - lab_c[None], axis=-1) < tau)
+    member = free[:, ys, xs] & (delta_e(labs[1:, ys, xs], lab_c) < tau)
     member[chosen - 1, np.arange(len(ys))] = True
     out[chosen, ys, xs] = member_median(cand_img[1:, ys, xs], member)
     members = np.zeros((len(cand_img) - 1,) + rep.shape, bool)
@@ -467,7 +468,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         geo = inside & within
         if v.F is not None and P.select_epipolar_px > 0:
             geo &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
-        near_w = inside & (np.linalg.norm(lab_w - lab_r, axis=-1) < tau)
+        near_w = inside & (delta_e(lab_w, lab_r) < tau)
         ok = geo & near_w
         if P.select_minority > 0:
             # the minority witnesses' match: the flow where the geometry allows it,
@@ -593,7 +594,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     def consensus(sup, first):
         best = first + np.argmax(sup + 1e-3 * (np.arange(len(sup)) == 0)[:, None, None], 0)
         c = np.take_along_axis(labs, best[None, ..., None].repeat(3, -1), 0)[0]
-        return np.minimum(np.linalg.norm(labs - c[None], axis=-1), _DE_CAP), c
+        return np.minimum(delta_e(labs, c), _DE_CAP), c
 
     D, cons = consensus(support, 0)
     # inside L the reference is the suspect: the sources' own consensus decides
@@ -619,7 +620,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                            distance=dist, forbidden=_FORBIDDEN)
     rep = lab != 0
     movers = np.zeros((S, H, W), bool)
-    mv = (usable[1:] & (p_mover[1:] > 0.5) & (np.linalg.norm(labs[1:] - cons[None], axis=-1) > tau)
+    d_cons = delta_e(labs[1:], cons)
+    mv = (usable[1:] & (p_mover[1:] > 0.5) & (d_cons > tau)
           | copies)
     movers[:, y0:y1, x0:x1] = mv & reg[None]
     free = usable[1:] & ~mv
@@ -641,7 +643,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
-    why = np.where(np.linalg.norm(labs[1:] - cons[None], axis=-1) < tau, 6, 5).astype(np.uint8)
+    why = np.where(d_cons < tau, 6, 5).astype(np.uint8)
     why[members[:, y0:y1, x0:x1]] = 2
     why[mv] = 3
     why[copies] = 7
@@ -662,7 +664,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                         | (np.diff(lab, axis=1, prepend=lab[:, :1]) != 0))
     # the dynamic map: replaced pixels of L, and those outside it where the
     # reference differed from what replaced it (not mere seam placement)
-    d_chosen = np.take_along_axis(np.linalg.norm(labs - labs[0][None], axis=-1), lab[None], 0)[0]
+    d_chosen = np.take_along_axis(delta_e(labs, labs[0]), lab[None], 0)[0]
     replaced = np.zeros((H, W), bool)
     replaced[roi] = rep & (in_mask | (d_chosen >= tau))
     nos = np.zeros((H, W), bool)
