@@ -10,13 +10,14 @@ results equal NumPy's bit for bit (checked in ``tests/test_colour.py``).
 
 from __future__ import annotations
 
+import threading
+
 import numba
 import numpy as np
 import numpy.typing as npt
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
-def _delta_e(a, b, out):
+def _delta_e_loop(a, b, out):
     """out[i] = |a[i] - b[i % M]| for a (N, 3), b (M, 3), N a multiple of M,
     as NumPy's norm computes it: sqrt((x² + y²) + z²)."""
     m = b.shape[0]
@@ -26,6 +27,12 @@ def _delta_e(a, b, out):
         y = a[i, 1] - b[j, 1]
         z = a[i, 2] - b[j, 2]
         out[i] = np.sqrt((x * x + y * y) + z * z)
+
+
+# on all cores from the main thread; serial from the fill's per-source threads
+# (numba's fallback "workqueue" threading layer allows no concurrent launches)
+_delta_e_parallel = numba.njit(cache=True, nogil=True, parallel=True)(_delta_e_loop)
+_delta_e_serial = numba.njit(cache=True, nogil=True)(_delta_e_loop)
 
 
 def delta_e(a: npt.ArrayLike, b: npt.ArrayLike) -> np.ndarray:
@@ -65,7 +72,9 @@ def delta_e(a: npt.ArrayLike, b: npt.ArrayLike) -> np.ndarray:
     b2 = np.ascontiguousarray(b, dtype).reshape(-1, 3)
     out = np.empty(a2.shape[0], dtype)
     if out.size and b2.shape[0]:
-        _delta_e(a2, b2, out)
+        kernel = (_delta_e_parallel if threading.current_thread() is threading.main_thread()
+                  else _delta_e_serial)
+        kernel(a2, b2, out)
     return out.reshape(shape[:-1])
 
 

@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.method.correspondence import pixel_grid
+from dynremove.refine.concurrency import for_each_source
 
 
 def interpolate_field(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *,
@@ -225,10 +226,13 @@ def source_votes(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8
     """
     lab_r = blurred_lab(reference, blur_sigma)
     D = np.empty((len(sources),) + hole.shape, np.float32)
-    for s in range(len(sources)):
+
+    def vote(s):
         warped, inside = sample_bilinear(sources[s], background_field(Nf[s], hole))
         d = np.sqrt(((blurred_lab(warped, blur_sigma) - lab_r) ** 2).sum(-1))
         D[s] = np.where(inside, d, np.inf)
+
+    for_each_source(vote, len(sources))
     return D
 
 

@@ -18,6 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.method.correspondence import dense_correspondence
+from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.fields import background_field, sample_bilinear
 from dynremove.refine.morphology import dilate_disc
 
@@ -121,16 +122,17 @@ def realign_fields(clean, src_grays, fields, hole, homographies, flow_preset, ma
     shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
     g_clean = cv2.cvtColor(np.ascontiguousarray(clean[y0:y1, x0:x1]), cv2.COLOR_BGR2GRAY)
     sub_hole = hole[y0:y1, x0:x1]
-    out = []
-    for s, g_src in enumerate(src_grays):
-        n2 = dense_correspondence(g_clean, g_src, homographies[s] @ shift,
+
+    def one(s):
+        n2 = dense_correspondence(g_clean, src_grays[s], homographies[s] @ shift,
                                   method="homography+flow", flow_preset=flow_preset)
         f = fields[s].copy()
         cur = f[y0:y1, x0:x1]
         use = sub_hole & (np.linalg.norm(n2 - cur, axis=-1) <= max_px)
         cur[use] = n2[use]
-        out.append(f)
-    return out
+        return f
+
+    return for_each_source(one, len(src_grays))
 
 
 __all__ = ["fuse_background", "median_fill", "realign_fields"]

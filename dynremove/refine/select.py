@@ -57,6 +57,7 @@ from dynremove.method.correspondence import apply_homography, dense_corresponden
 from dynremove.method.geometry import TwoView, sampson_sq
 from dynremove.params import Params
 from dynremove.refine.colour import delta_e, pairwise_delta_e
+from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.fields import (background_field, blurred_lab, interpolate_field,
                                      sample_bilinear)
 from dynremove.refine.fill import median_fill, realign_fields
@@ -142,8 +143,8 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     ys, xs = np.nonzero(near[box])
     ring_b = ring[box]
     lab_rb = lab_r[box]
-    labs, ok = [], []
-    for k in range(S):
+
+    def sample(k):
         f = np.ascontiguousarray(base[k][box])
         warped, ins = sample_bilinear(sources[k], f)
         if valid is not None:
@@ -154,9 +155,11 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
         around = ring_b & ins
         if around.sum() > 50:
             lab_k = lab_k + np.median(lab_rb[around] - lab_k[around], axis=0)
-        labs.append(lab_k[ys, xs])
-        ok.append(ins[ys, xs])
-    labs, ok = np.stack(labs), np.stack(ok)  # (S, n, 3), (S, n)
+        return lab_k[ys, xs], ins[ys, xs]
+
+    per_source = for_each_source(sample, S)
+    labs = np.stack([lab for lab, _ in per_source])  # (S, n, 3)
+    ok = np.stack([ins for _, ins in per_source])  # (S, n)
     tau = P.select_tau
     d = pairwise_delta_e(labs)  # (S, S, n)
     agree = (d < tau) & ok[:, None] & ok[None]
@@ -443,13 +446,13 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     votes = np.zeros((S, H, W), np.float32)
     matched = np.zeros((S, H, W), bool)  # explained by the flow match
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
-    base = []
+    base: list = [None] * S
     lab_s: list = [None] * S  # the sources' blurred Lab, where computed
     if P.select_minority > 0:
         lab_ws = np.zeros((S, H, W, 3), np.float32)
         geo_ok = np.zeros((S, H, W), bool)
         flow_agree = np.zeros((S, H, W), bool)
-    for k in range(S):
+    def match(k):
         v = views[k]
         nf = (flows[k] if flows is not None else
               dense_correspondence(g_r, src_gray[k], v.H, method="homography+flow",
@@ -460,7 +463,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         within = off_h <= bound
         # the fill's field keeps flow as far as the scan's gate allows
         keep = off_h <= max(bound, P.flow_gate * max(H, W))
-        base.append(np.where(keep[..., None], nf, np.stack([hx, hy], -1)).astype(np.float32))
+        base[k] = np.where(keep[..., None], nf, np.stack([hx, hy], -1)).astype(np.float32)
         warped, inside = sample_bilinear(sources[k], nf)
         if valid is not None:
             inside &= _valid_at(valid[k], nf)
@@ -494,6 +497,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             lab_s[k] = blurred_lab(sources[k], 1.0)
             cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok)
             matched[k], searched[k] = ok, cost < P.select_search_de
+
+    for_each_source(match, S)
     grown = np.zeros((H, W), bool)
     if P.select_grow_px > 0:
         grown = _consensus_growth(lab_r, sources, base, mask, valid, P)
@@ -546,7 +551,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # 2. background candidates through the fields, re-aligned
     hole = cv2.dilate(dilate_disc(core, 2).astype(np.uint8), np.ones((7, 7), np.uint8)
                       ).astype(bool)
-    fields = [background_field(base[k], hole) for k in range(S)]
+    fields = for_each_source(lambda k: background_field(base[k], hole), S)
     if P.select_sweep and mode == "parallax" and core.any():
         # hidden 3-D structure: the depth at which the sources agree, not a membrane
         model = fit_parallax(base, views, ~dilate_disc(mask, 4), seed=P.seed)
@@ -566,12 +571,16 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     reg, in_core, in_mask = region[roi], core[roi], mask[roi]
     cand = [reference[roi]]
     inside = [np.ones(reg.shape, bool)]
-    for k in range(S):
+
+    def sample(k):
         warped, ins = sample_bilinear(sources[k], fields[k])
         if valid is not None:
             ins &= _valid_at(valid[k], fields[k])
-        cand.append(warped[roi])
-        inside.append(ins[roi])
+        return warped[roi], ins[roi]
+
+    for warped, ins in for_each_source(sample, S):
+        cand.append(warped)
+        inside.append(ins)
     cand_img = np.stack(cand)
     usable = np.stack(inside)
     labs = np.stack([blurred_lab(c, 1.0) for c in cand_img])
