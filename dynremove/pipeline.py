@@ -25,6 +25,7 @@ from dynremove.method import correspondence, features, geometry
 from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
 from dynremove.params import DEFAULT, Params
+from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.duplicates import agreement_with_reference
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges
@@ -163,18 +164,16 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
         on_geometry(views)
 
     clock.start("correspondence")
-    Ns = []
     # the ungated homography + flow matches, kept for the fill by selection
     flows = (np.empty((len(srcs),) + g8[ref].shape + (2,), np.float32)
              if params.correspondence in ("homography+flow", "gated") else None)
-    for k, s in enumerate(srcs):
-        Ns.append(correspondence.dense_correspondence(
-            g8[ref], g8[s], views[k].H, method=params.correspondence,
-            flow_preset=params.flow_preset,
-            gate_px=params.flow_gate * max(g8[ref].shape),
-            F=views[k].F, epipolar_px=params.flow_gate_epipolar_px,
-            flow_out=None if flows is None else flows[k]))
-        clock.tick((k + 1) / len(srcs))
+    Ns = for_each_source(lambda k: correspondence.dense_correspondence(
+        g8[ref], g8[srcs[k]], views[k].H, method=params.correspondence,
+        flow_preset=params.flow_preset,
+        gate_px=params.flow_gate * max(g8[ref].shape),
+        F=views[k].F, epipolar_px=params.flow_gate_epipolar_px,
+        flow_out=None if flows is None else flows[k]),
+        len(srcs), on_done=lambda k: clock.tick((k + 1) / len(srcs)))
     Nf = np.ascontiguousarray(np.stack(Ns))
     N = correspondence.round_matches(Nf)
 

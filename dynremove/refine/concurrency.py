@@ -19,14 +19,22 @@ import joblib
 T = TypeVar("T")
 
 
-def for_each_source(fn: Callable[[int], T], n: int) -> list[T]:
+def for_each_source(fn: Callable[[int], T], n: int, *,
+                    on_done: Callable[[int], None] | None = None) -> list[T]:
     """``[fn(k) for k in range(n)]``, on threads (joblib) when OpenCV may use more
     than one (not inside an ``eval --jobs`` worker). ``fn`` must write only its
-    own source's slots; exceptions propagate."""
+    own source's slots; exceptions propagate. ``on_done(k)`` is called on the
+    calling thread as each result arrives, in source order (progress)."""
     if n > 1 and cv2.getNumThreads() > 1 and (os.cpu_count() or 1) > 1:
-        return joblib.Parallel(n_jobs=min(n, os.cpu_count() or 1), prefer="threads")(
-            joblib.delayed(fn)(k) for k in range(n))
-    return [fn(k) for k in range(n)]
-
+        results = joblib.Parallel(n_jobs=min(n, os.cpu_count() or 1), prefer="threads",
+                                  return_as="generator")(joblib.delayed(fn)(k) for k in range(n))
+    else:
+        results = (fn(k) for k in range(n))
+    out = []
+    for k, r in enumerate(results):
+        out.append(r)
+        if on_done is not None:
+            on_done(k)
+    return out
 
 __all__ = ["for_each_source"]
