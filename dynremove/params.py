@@ -106,6 +106,7 @@ class Params:
     select_epipolar_px: float = 2.0  # a flow match explaining the reference is this near its line
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
+    select_grow_alone: bool = True  # L also grows where no source agrees with the reference (at least two see it, even if they disagree among themselves) and the reference shows the colours of L's movers
     select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
     select_search_de: float = 8.0  # where the parallax exceeds select_parallax_px, a pixel of L is also explained by its best match on its epipolar line in a source: CIE76 ΔE, mean over ~10 px, under this (0 = off)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)

@@ -383,3 +383,42 @@ def test_lingering_mover_is_found_when_the_scans_flag_nothing():
     off = select_fill(ims[ref], st.src_img, views, empty, P.replace(select_minority=0.0),
                       flows=st.Nf_flow)
     assert not off.replaced.any() and np.array_equal(off.clean, ims[ref])
+
+
+@pytest.mark.parametrize("alone", [True, False])
+def test_growth_where_no_source_agrees_with_the_reference(alone):
+    """Three photos: L holds the left part of a red mover; its right part, missed,
+    is seen as background by source 0 and covered by source 1's own (blue) mover,
+    so the sources disagree with each other and neither agrees with the
+    reference. ``select_grow_alone`` takes that part. Further right, the reference
+    shows the scene while both sources show their own movers (a video's trail):
+    never taken, the reference's colour is the scene's."""
+    import dataclasses
+
+    from dynremove.refine.fields import blurred_lab
+    from dynremove.refine.select import _consensus_growth
+
+    rng = np.random.default_rng(0)
+    H, W = 120, 180
+    bg = cv2.GaussianBlur(rng.integers(90, 170, (H, W, 3)).astype(np.uint8), (0, 0), 2)
+    ref = bg.copy()
+    ref[40:80, 40:100] = (30, 30, 220)  # the red mover
+    s0, s1 = bg.copy(), bg.copy()
+    s1[30:90, 78:125] = (220, 60, 30)  # source 1's own mover (blue)
+    s0[40:80, 104:122] = (40, 200, 40)  # source 0's own mover (green), on the trail
+    mask = np.zeros((H, W), bool)
+    mask[40:80, 40:80] = True
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    base = [np.stack([gx, gy], -1)] * 2
+    P = dataclasses.replace(preset("default"), select_grow_alone=alone)
+    grown, by_alone = _consensus_growth(blurred_lab(ref, 1.0), np.stack([s0, s1]), base, mask,
+                                        None, P)
+    missed = np.zeros((H, W), bool)
+    missed[42:78, 82:98] = True  # the missed part, away from its edges' blur
+    trail = np.zeros((H, W), bool)
+    trail[42:78, 106:120] = True
+    if alone:
+        assert grown[missed].mean() > 0.95 and by_alone[missed].mean() > 0.95
+    else:
+        assert grown[missed].mean() < 0.05 and not by_alone.any()
+    assert not grown[trail].any()

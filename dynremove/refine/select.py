@@ -127,12 +127,20 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     """Pixels near L that the reference alone shows differently (a cast shadow, a
     part of the mover the scan missed): at least ``max(2, S/2)`` sources, sampled
     through their geometry-bounded matches, agree with one another and the
-    reference disagrees with all of them (ΔE >= ``select_tau``). Only components
-    touching L are kept, so the consensus never acts far from a detected mover."""
+    reference disagrees with all of them (ΔE >= ``select_tau``). With
+    ``select_grow_alone``, also where no source agrees with the reference, at
+    least two see the pixel (even if they disagree among themselves: with three
+    photos, one source often shows its own mover there) and the reference's
+    colour is more likely a mover's than the scene's (``_mover_probability``). Only components
+    touching L are kept, so the consensus never acts far from a detected mover.
+
+    Returns ``(grown, alone)`` (H, W) bool: the pixels added to L, and those of
+    them that only the second rule added (weaker evidence: the caller may veto
+    them where the geometry explains the reference)."""
     S = len(sources)
     near = dilate_disc(mask, P.select_grow_px) & ~mask
     if S < 2 or not near.any():
-        return np.zeros(mask.shape, bool)
+        return np.zeros(mask.shape, bool), np.zeros(mask.shape, bool)
     ring = dilate_disc(mask, 2 * P.select_grow_px) & ~mask
     # only the box of the ring (which holds ``near``) is sampled, 8 px wider so
     # that the 1 px blur there equals the whole image's
@@ -170,7 +178,18 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     d_ref = delta_e(lab_rb[ys, xs], cons)
     need = max(2, int(np.ceil(0.5 * S - 1e-6)))
     hit = np.zeros(mask.shape, np.uint8)
-    hit[ys + y0, xs + x0] = (n_best >= need) & (d_ref >= tau)
+    agreed = (n_best >= need) & (d_ref >= tau)
+    hit[ys + y0, xs + x0] = agreed
+    alone = np.zeros(mask.shape, bool)
+    if P.select_grow_alone:
+        # no source agrees with the reference (those outside their frame aside),
+        # and the reference shows the colours of L's movers there: a pixel next
+        # to the mover whose sources show their own movers (its trail in a
+        # video) keeps the scene's colours and is left alone
+        unmatched = (((delta_e(labs, lab_rb[ys, xs]) >= tau) | ~ok).all(0) & (ok.sum(0) >= 2)
+                     & (_mover_probability(lab_r, mask, lab_rb[ys, xs]) > 0.5))
+        hit[ys + y0, xs + x0] |= unmatched
+        alone[ys + y0, xs + x0] = unmatched & ~agreed
     hit = cv2.morphologyEx(hit, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
     n, lab = cv2.connectedComponents((hit | mask).astype(np.uint8), connectivity=8)
     # a component grows by at most its own detected area (a shadow is no larger
@@ -179,7 +198,8 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     a_hit = np.bincount(lab[(hit > 0) & ~mask], minlength=n)
     ok = (a_mask > 0) & (a_hit <= a_mask)
     ok[0] = False
-    return ok[lab] & (hit > 0)
+    grown = ok[lab] & (hit > 0)
+    return grown, grown & alone
 
 
 def _lab_bins(x: np.ndarray, bins: int) -> np.ndarray:
@@ -501,7 +521,25 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     for_each_source(match, S)
     grown = np.zeros((H, W), bool)
     if P.select_grow_px > 0:
-        grown = _consensus_growth(lab_r, sources, base, mask, valid, P)
+        grown, alone = _consensus_growth(lab_r, sources, base, mask, valid, P)
+        if alone.any() and mode == "parallax" and P.select_search_de > 0:
+            # where the set has much parallax, a pixel that no source's match agrees
+            # with may be 3-D structure matched off its line: the epipolar search
+            # keeps it static if any source shows its content on the line
+            scale = min(0.5, max(0.25, 200 / max(H, W)))
+            visible = ~dilate_disc(mask | alone, 4)
+
+            def on_line(k):
+                if views[k].F is None:
+                    return np.zeros((H, W), bool)
+                if lab_s[k] is None:
+                    lab_s[k] = blurred_lab(sources[k], 1.0)
+                cost, _ = epipolar_search(lab_r, lab_s[k], views[k],
+                                          flows[k] if flows is not None else base[k],
+                                          visible, alone, scale=scale, box=3)
+                return cost < P.select_search_de
+
+            grown &= ~(alone & np.any(for_each_source(on_line, S), axis=0))
         mask = mask | grown
         region = dilate_disc(mask, P.select_margin_px)
     minority = np.zeros((H, W), bool)
