@@ -35,11 +35,14 @@ def test_delta_e_float64_and_mixed():
     assert delta_e(a, b).dtype == np.float64
 
 
-def test_pairwise_delta_e_equals_numpy():
+@pytest.mark.parametrize("shape", [(6, 500), (4, 20, 30), (1, 7)])
+def test_pairwise_delta_e_equals_numpy(shape):
     rng = np.random.default_rng(2)
-    v = _lab(rng, (6, 500))
+    v = _lab(rng, shape)
     want = np.linalg.norm(v[:, None] - v[None], axis=-1)
-    np.testing.assert_array_equal(pairwise_delta_e(v), want)
+    got = pairwise_delta_e(v)
+    assert got.shape == want.shape and got.dtype == want.dtype
+    np.testing.assert_array_equal(got, want)
 
 
 def test_delta_e_refuses_non_colour_arrays():

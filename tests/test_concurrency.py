@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dynremove.refine.colour import delta_e
+from dynremove.refine.colour import delta_e, pairwise_delta_e
 from dynremove.refine.concurrency import for_each_source
 
 
@@ -15,10 +15,12 @@ def test_results_in_source_order_and_delta_e_off_the_main_thread():
     rng = np.random.default_rng(0)
     a = rng.random((5, 64, 64, 3), dtype=np.float32) * 100
     b = rng.random((64, 64, 3), dtype=np.float32) * 100
-    out = for_each_source(lambda k: (k, delta_e(a[k], b)), 5)
-    assert [k for k, _ in out] == list(range(5))
-    np.testing.assert_array_equal(np.stack([d for _, d in out]),
+    out = for_each_source(lambda k: (k, delta_e(a[k], b), pairwise_delta_e(a[:, k])), 5)
+    assert [k for k, _, _ in out] == list(range(5))
+    np.testing.assert_array_equal(np.stack([d for _, d, _ in out]),
                                   np.linalg.norm(a - b, axis=-1))
+    for k, _, pw in out:
+        np.testing.assert_array_equal(pw, np.linalg.norm(a[:, k][:, None] - a[:, k][None], axis=-1))
 
 
 def test_an_error_in_one_source_is_raised():

@@ -78,16 +78,39 @@ def delta_e(a: npt.ArrayLike, b: npt.ArrayLike) -> np.ndarray:
     return out.reshape(shape[:-1])
 
 
+def _pairwise_loop(v, out):
+    """out[a, b, i] = out[b, a, i] = |v[a, i] - v[b, i]| for v (K, N, 3), as ``_delta_e_loop``."""
+    K = v.shape[0]
+    for i in numba.prange(v.shape[1]):
+        for a in range(K):
+            out[a, a, i] = 0.0
+            for b in range(a + 1, K):
+                x = v[a, i, 0] - v[b, i, 0]
+                y = v[a, i, 1] - v[b, i, 1]
+                z = v[a, i, 2] - v[b, i, 2]
+                d = np.sqrt((x * x + y * y) + z * z)
+                out[a, b, i] = d
+                out[b, a, i] = d
+
+
+_pairwise_parallel = numba.njit(cache=True, nogil=True, parallel=True)(_pairwise_loop)
+_pairwise_serial = numba.njit(cache=True, nogil=True)(_pairwise_loop)
+
+
 def pairwise_delta_e(values: npt.NDArray[np.floating]) -> np.ndarray:
     """``(K, K, ...)`` ΔE between every pair of ``values`` (K, ..., 3), 0 on the
     diagonal; equal bit for bit to ``np.linalg.norm(v[:, None] - v[None], axis=-1)``."""
     values = np.asarray(values)
     K = len(values)
-    out = np.zeros((K, K) + values.shape[1:-1], np.result_type(values, np.float32))
-    for i in range(K):
-        for j in range(i + 1, K):
-            out[i, j] = out[j, i] = delta_e(values[i], values[j])
-    return out
+    dtype = np.result_type(values, np.float32)
+    rest = values.shape[1:-1]
+    v = np.ascontiguousarray(values, dtype).reshape(K, -1, 3)
+    out = np.empty((K, K, v.shape[1]), dtype)
+    if out.size:
+        kernel = (_pairwise_parallel if threading.current_thread() is threading.main_thread()
+                  else _pairwise_serial)
+        kernel(v, out)
+    return out.reshape((K, K) + rest)
 
 
 __all__ = ["delta_e", "pairwise_delta_e"]
