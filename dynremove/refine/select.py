@@ -131,8 +131,9 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     ``select_grow_alone``, also where no source agrees with the reference, at
     least two see the pixel (even if they disagree among themselves: with three
     photos, one source often shows its own mover there) and the reference's
-    colour is more likely a mover's than the scene's (``_mover_probability``). Only components
-    touching L are kept, so the consensus never acts far from a detected mover.
+    colour is more likely a mover's than the scene's (``_mover_probability``).
+    Only components touching L are kept, so the consensus never acts far from a
+    detected mover.
 
     Returns ``(grown, alone)`` (H, W) bool: the pixels added to L, and those of
     them that only the second rule added (weaker evidence: the caller may veto
@@ -472,6 +473,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         lab_ws = np.zeros((S, H, W, 3), np.float32)
         geo_ok = np.zeros((S, H, W), bool)
         flow_agree = np.zeros((S, H, W), bool)
+
     def match(k):
         v = views[k]
         nf = (flows[k] if flows is not None else
@@ -518,7 +520,25 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok)
             matched[k], searched[k] = ok, cost < P.select_search_de
 
+
     for_each_source(match, S)
+    # a coarse test (a third of the search's time at 854×480): a grid of at
+    # least 200 px on its long side, 3×3 cells
+    veto_scale = min(0.5, max(0.25, 200 / max(H, W)))
+
+    def found(k, region):
+        """Where source k shows the reference's content of ``region`` somewhere on its
+        epipolar line (the veto of the weaker evidence below; L as it stands then)."""
+        if views[k].F is None:
+            return np.zeros(region.shape, bool)
+        nf = flows[k] if flows is not None else base[k]
+        if lab_s[k] is None:
+            lab_s[k] = blurred_lab(sources[k], 1.0)
+        cost, _ = epipolar_search(lab_r, lab_s[k], views[k], nf,
+                                  ~dilate_disc(mask | region, 4), region,
+                                  scale=veto_scale, box=3)
+        return cost < max(P.select_search_de, 1e-6)
+
     grown = np.zeros((H, W), bool)
     if P.select_grow_px > 0:
         grown, alone = _consensus_growth(lab_r, sources, base, mask, valid, P)
@@ -526,40 +546,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # where the set has much parallax, a pixel that no source's match agrees
             # with may be 3-D structure matched off its line: the epipolar search
             # keeps it static if any source shows its content on the line
-            scale = min(0.5, max(0.25, 200 / max(H, W)))
-            visible = ~dilate_disc(mask | alone, 4)
-
-            def on_line(k):
-                if views[k].F is None:
-                    return np.zeros((H, W), bool)
-                if lab_s[k] is None:
-                    lab_s[k] = blurred_lab(sources[k], 1.0)
-                cost, _ = epipolar_search(lab_r, lab_s[k], views[k],
-                                          flows[k] if flows is not None else base[k],
-                                          visible, alone, scale=scale, box=3)
-                return cost < P.select_search_de
-
-            grown &= ~(alone & np.any(for_each_source(on_line, S), axis=0))
+            grown &= ~(alone & np.any(for_each_source(lambda k: found(k, alone), S), axis=0))
         mask = mask | grown
         region = dilate_disc(mask, P.select_margin_px)
     minority = np.zeros((H, W), bool)
     wit_map = np.zeros((S, H, W), bool)
     if P.select_minority > 0:
-        # a coarse test (a third of the search's time at 854×480): a grid of at
-        # least 200 px on its long side, 3×3 cells
-        veto_scale = min(0.5, max(0.25, 200 / max(H, W)))
-
-        def found(k, region):
-            if views[k].F is None:
-                return np.zeros(region.shape, bool)
-            nf = flows[k] if flows is not None else base[k]
-            if lab_s[k] is None:
-                lab_s[k] = blurred_lab(sources[k], 1.0)
-            cost, _ = epipolar_search(lab_r, lab_s[k], views[k], nf,
-                                      ~dilate_disc(mask | region, 4), region,
-                                      scale=veto_scale, box=3)
-            return cost < max(P.select_search_de, 1e-6)
-
         # (the search guards the plane + parallax estimate of the match, which
         # can be far off only where the set has much parallax)
         region_m, witnessed, wit_map = _minority_witnesses(
