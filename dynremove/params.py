@@ -90,6 +90,7 @@ class Params:
     snap_inner_px: int = 6  # deeper than this inside the map: sure object
     snap_outer_px: int = 12  # ring of probable background around the map
     snap_iters: int = 3  # GrabCut iterations
+    snap_veto: bool = True  # where the set has parallax (above select_parallax_px), GrabCut adds no pixel that refine_shrink_frac of the sources' votes agree with (refine.mask.veto_agreed)
     fuse: bool = True  # refill L after the scans, as --fill says (selection or median); off: keep the scans' patch writes (paper)
     fuse_margin_px: int = 2  # the fused region is L dilated by this
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples

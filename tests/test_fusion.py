@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -116,3 +117,34 @@ def test_snap_to_edges_moves_the_border_onto_the_object():
         assert jaccard(snapped, obj) > 0.95
     empty = np.zeros((H, W), bool)
     assert not mask.snap_to_edges(img, empty, params).any()
+
+
+def test_veto_agreed_drops_static_growth_and_keeps_the_object(scene):
+    """The snap's growth is vetoed where the sources agree with the reference (a
+    false positive in the static scene, grown) and kept where they do not (the
+    object)."""
+    sources, Nf = _true_fields(scene)
+    ref = scene.images[scene.ref_index]
+    gt = scene.masks[scene.ref_index]
+    params = preset("default")
+    # a static patch flagged by mistake, as far as can be from every view's mover
+    movers = np.any(np.stack(scene.masks), axis=0)
+    dist = cv2.distanceTransform((~movers).astype(np.uint8), cv2.DIST_L2, 5)
+    dist[:20], dist[-20:], dist[:, :20], dist[:, -20:] = 0, 0, 0, 0
+    cy, cx = np.unravel_index(np.argmax(dist), dist.shape)
+    assert dist[cy, cx] > 25, "the scene has room for it"
+    H, W = gt.shape
+    fp = _disc_hole(H, W, cx, cy, 8)
+    before = gt | fp
+    grown = before | morphology.dilate_disc(fp, 6)
+    kept = mask.veto_agreed(ref, sources, Nf, before, grown, params)
+    added = grown & ~before
+    np.testing.assert_array_equal(kept & before, before)  # the map it started from stays
+    assert (kept & added).sum() < 0.1 * added.sum()
+    # a map that stopped 4 px short of the object's outline, grown back onto it: kept
+    cut = gt & ~morphology.dilate_disc(~gt, 4)
+    regrown = mask.veto_agreed(ref, sources, Nf, cut, gt, params)
+    assert (regrown & gt & ~cut).sum() > 0.9 * (gt & ~cut).sum()
+    assert not (regrown & ~gt).any()
+    # nothing added: nothing to veto
+    np.testing.assert_array_equal(mask.veto_agreed(ref, sources, Nf, gt, gt, params), gt)

@@ -112,9 +112,20 @@ def test_coverage_png_and_report_say_what_was_inpainted(tmp_path):
     """coverage.png is 0 inside the mask exactly where the fill inpainted (no source
     showed the background free), and report.json's ``uncovered_dynamic_px`` is the
     count the note gives (seed 3: 3 px; it said 518 when the coverage was the
-    scans' agreement with the reference, and coverage.png was black on all 518)."""
+    scans' agreement with the reference, and coverage.png was black on all 518).
+    No source sees the left part of the mover: its frames are transparent there."""
     sc = synth.make_scene(seed=3, n_views=6, size=(360, 640))
     synth.write_scene(sc, tmp_path / "set")
+    gt = sc.masks[sc.ref_index]
+    xs = np.flatnonzero(gt.any(0))
+    blind = np.zeros(gt.shape, bool)
+    blind[:, xs[0] - 8:xs[0] + (xs[-1] - xs[0]) // 3] = True
+    valid = []
+    for i, name in enumerate(sc.names):
+        valid.append(~blind if i != sc.ref_index else np.ones(gt.shape, bool))
+        if i != sc.ref_index:  # alpha 0 = no content (dynremove.validity)
+            rgba = np.dstack([sc.images[i], np.where(blind, 0, 255).astype(np.uint8)])
+            cv2.imwrite(str(tmp_path / "set" / "frames" / name), rgba)
     out = tmp_path / "out"
     assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(out), "--quiet"]) == 0
     rep = json.loads((out / "report.json").read_text())
@@ -125,7 +136,7 @@ def test_coverage_png_and_report_say_what_was_inpainted(tmp_path):
     n = int(re.match(r"(\d+) px ", notes[0]).group(1))
     assert n > 0 and rep["uncovered_dynamic_px"] == n == int((mask & (cov == 0)).sum())
     with pytest.warns(UserWarning, match=f"{n} px .* seen free by no source"):
-        r = remove_dynamic(sc.images, ref=sc.ref_index)  # the same run: where it inpainted
+        r = remove_dynamic(sc.images, ref=sc.ref_index, valid_masks=valid)  # the same run
     np.testing.assert_array_equal(mask & (cov == 0), r.selection.no_source & r.dynamic)
 
 

@@ -422,3 +422,21 @@ def test_growth_where_no_source_agrees_with_the_reference(alone):
     else:
         assert grown[missed].mean() < 0.05 and not by_alone.any()
     assert not grown[trail].any()
+
+
+def test_lab_offset_is_the_exposure_difference_despite_movers():
+    """A source 12 L units brighter and bluer, with a fifth of the pixels showing
+    something else: the offset is the exposure difference, not pulled by them."""
+    from dynremove.refine.select import _lab_offset
+
+    rng = np.random.default_rng(3)
+    lab_w = rng.uniform((20, -30, -30), (80, 30, 30), (60, 80, 3)).astype(np.float32)
+    lab_r = lab_w + np.array([-12.0, 1.5, 4.0], np.float32)
+    other = rng.random((60, 80)) < 0.2
+    lab_r[other] = rng.uniform((0, -60, -60), (100, 60, 60), (int(other.sum()), 3))
+    where = np.ones((60, 80), bool)
+    np.testing.assert_allclose(_lab_offset(lab_r, lab_w, where), (-12.0, 1.5, 4.0), atol=0.6)
+    # too few pixels to measure: no offset
+    few = np.zeros((60, 80), bool)
+    few[:5, :100 // 5] = True
+    np.testing.assert_array_equal(_lab_offset(lab_r, lab_w, few), 0.0)

@@ -2,7 +2,9 @@
 
 Two steps after the scans, each a ``Params`` switch: pixel votes of the
 sources at L's border (``refine_mask``, ``Params.refine_tau``) and a graph cut
-of the border onto colour edges (``snap_to_edges``, ``Params.snap``).
+of the border onto colour edges (``snap_to_edges``, ``Params.snap``), whose
+growth the sources' votes may veto where the set has parallax
+(``veto_agreed``, ``Params.snap_veto``).
 """
 
 from __future__ import annotations
@@ -98,4 +100,32 @@ def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
     return fill_holes(out.astype(np.uint8)).astype(bool)
 
 
-__all__ = ["refine_mask", "snap_to_edges"]
+def veto_agreed(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
+                before: npt.NDArray[np.bool_], after: npt.NDArray[np.bool_], params: Params
+                ) -> npt.NDArray[np.bool_]:
+    """``after`` without the pixels it added to ``before`` that the sources vouch for.
+
+    A graph cut that moves L's border onto colour edges (``snap_to_edges``) also
+    grows it around a false positive of the scans: static 3-D structure that the
+    parallax of a wide-baseline set made look dynamic. An added pixel is dropped
+    where at least ``refine_shrink_frac`` of the sources that see it agree with
+    the reference (CIE Lab distance under ``refine_tau`` through the background
+    field, matches re-interpolated across ``before``: ``fields.source_votes``),
+    the rule by which ``refine_mask`` drops a pixel of L's rim.
+
+    reference (H, W, 3) uint8; sources (S, H, W, 3) uint8; Nf (S, H, W, 2)
+    float32 matches; before, after (H, W) bool. Returns (H, W) bool, a subset of
+    ``after`` that contains ``after & before``.
+    """
+    added = after & ~before
+    if not added.any():
+        return after.copy()
+    hole = cv2.dilate(before.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    D = source_votes(reference, sources, Nf, hole)
+    valid = np.isfinite(D).sum(0)
+    agree = (D < params.refine_tau).sum(0)
+    need = np.maximum(1, np.ceil(params.refine_shrink_frac * valid - 1e-6))
+    return after & ~(added & (agree >= need) & (valid > 0))
+
+
+__all__ = ["refine_mask", "snap_to_edges", "veto_agreed"]

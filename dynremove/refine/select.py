@@ -220,6 +220,17 @@ def _lab_hist(values: np.ndarray, bins: int) -> np.ndarray:
     return h / max(h.sum(), 1e-9)
 
 
+def _lab_offset(lab_r: np.ndarray, lab_w: np.ndarray, where: np.ndarray) -> np.ndarray:
+    """A source's exposure and white-balance offset: the median of the reference's
+    Lab minus the source's matched Lab (both (H, W, 3) float32) over every 7th
+    pixel of ``where`` (H, W) bool. (3,) float32; zero with 100 pixels or fewer."""
+    off = np.flatnonzero(where)[::7]
+    if len(off) <= 100:
+        return np.zeros(3, np.float32)
+    return np.median(lab_r.reshape(-1, 3)[off] - lab_w.reshape(-1, 3)[off], axis=0
+                     ).astype(np.float32)
+
+
 def _coarse_fill(values: np.ndarray, valid: np.ndarray, scale: int = 8) -> np.ndarray:
     """``values`` (H, W, C) float32 filled where not ``valid`` by normalised convolution
     (``fields.interpolate_field``) on a grid ``scale`` times coarser, upsampled
@@ -408,6 +419,14 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     return out, members
 
 
+def set_parallax_px(views: list[TwoView]) -> float:
+    """The set's parallax: the median over the sources of ``TwoView.parallax_px``
+    (px; a source without a measure counts 0), 0 without sources. Above
+    ``Params.select_parallax_px`` the default preset treats the set as 3-D."""
+    return float(np.median([v.parallax_px if np.isfinite(v.parallax_px) else 0.0
+                            for v in views])) if views else 0.0
+
+
 def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
                 views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params, *,
                 valid: npt.NDArray[np.bool_] | None = None,
@@ -443,8 +462,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     H, W = mask.shape
     S = len(sources)
     P = params
-    par = float(np.median([v.parallax_px if np.isfinite(v.parallax_px) else 0.0
-                           for v in views])) if views else 0.0
+    par = set_parallax_px(views)
     mode = "parallax" if par > P.select_parallax_px else "scan"
     empty = Selection(clean=reference.copy(), replaced=np.zeros((H, W), bool),
                       label=np.full((H, W), -1, np.int16), explained=np.zeros((H, W), bool),
@@ -468,7 +486,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     matched = np.zeros((S, H, W), bool)  # explained by the flow match
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
     base: list = [None] * S
-    lab_s: list = [None] * S  # the sources' blurred Lab, where computed
+    lab_s: list = [None] * S  # the sources' blurred Lab, exposure matched, where computed
+    offsets: list = [None] * S  # the reference's Lab minus each source's (median off L)
     if P.select_minority > 0:
         lab_ws = np.zeros((S, H, W, 3), np.float32)
         geo_ok = np.zeros((S, H, W), bool)
@@ -494,6 +513,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         if v.F is not None and P.select_epipolar_px > 0:
             geo &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
         near_w = inside & (delta_e(lab_w, lab_r) < tau)
+        # exposure and white balance: the epipolar search compares the reference
+        # with the source itself, not with its samples at matches that agree
+        offsets[k] = _lab_offset(lab_r, lab_w, geo & ~mask)
         ok = geo & near_w
         if P.select_minority > 0:
             # the minority witnesses' match: the flow where the geometry allows it,
@@ -509,14 +531,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # source still shows that content: it does not witness against it
             flow_agree[k] = near_w
             lab_b = blurred_lab(w_b, 1.0)
-            off = np.flatnonzero(geo_ok[k] & ~mask)[::7]
-            lab_ws[k] = lab_b + (np.median(lab_r.reshape(-1, 3)[off] - lab_b.reshape(-1, 3)[off],
-                                           axis=0) if len(off) > 100 else 0.0)
+            lab_ws[k] = lab_b + _lab_offset(lab_r, lab_b, geo_ok[k] & ~mask)
         votes[k] = ok * (1.0 - _mover_probability(lab_r, mask, lab_w))
         if mode == "parallax" and P.select_search_de > 0:
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
-            lab_s[k] = blurred_lab(sources[k], 1.0)
+            lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
             cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok)
             matched[k], searched[k] = ok, cost < P.select_search_de
 
@@ -533,7 +553,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             return np.zeros(region.shape, bool)
         nf = flows[k] if flows is not None else base[k]
         if lab_s[k] is None:
-            lab_s[k] = blurred_lab(sources[k], 1.0)
+            lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
         cost, _ = epipolar_search(lab_r, lab_s[k], views[k], nf,
                                   ~dilate_disc(mask | region, 4), region,
                                   scale=veto_scale, box=3)
@@ -714,4 +734,4 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      lingering=lingering)
 
 
-__all__ = ["REASONS", "Selection", "member_median", "select_fill"]
+__all__ = ["REASONS", "Selection", "member_median", "select_fill", "set_parallax_px"]
