@@ -440,3 +440,37 @@ def test_lab_offset_is_the_exposure_difference_despite_movers():
     few = np.zeros((60, 80), bool)
     few[:5, :100 // 5] = True
     np.testing.assert_array_equal(_lab_offset(lab_r, lab_w, few), 0.0)
+
+
+def test_near_the_border_the_sources_that_see_a_pixel_decide():
+    """Six sources of a static scene; L holds a red mover and a strip of static
+    scene at the right border, where only two sources reach (the others' frames
+    end before it). Both show the strip as the reference does: it is explained
+    (kept), though two is no majority of all six. The mover is filled from them."""
+    from dynremove.method.geometry import TwoView
+    from dynremove.refine.select import select_fill
+
+    rng = np.random.default_rng(1)
+    H, W = 96, 160
+    bg = cv2.GaussianBlur(rng.integers(60, 200, (H, W, 3)).astype(np.uint8), (0, 0), 1.5)
+    ref = bg.copy()
+    ref[30:80, 40:90] = (30, 30, 220)  # the mover
+    mask = np.zeros((H, W), bool)
+    mask[30:80, 40:90] = True
+    strip = np.zeros((H, W), bool)
+    strip[10:30, 146:160] = True  # static, flagged by mistake
+    mask |= strip
+    S = 6
+    valid = np.ones((S, H, W), bool)
+    valid[2:, :, 130:] = False  # four sources end 30 px before the right border
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    flows = np.repeat(np.stack([gx, gy], -1)[None], S, 0)
+    views = [TwoView(F=None, H=np.eye(3), n_matches=100, n_inliers_F=0, n_inliers_H=100,
+                     parallax_px=1.0) for _ in range(S)]
+    sel = select_fill(ref, np.repeat(bg[None], S, 0), views, mask, preset("default"),
+                      valid=valid, flows=flows)
+    assert sel.explained[strip].mean() > 0.9
+    assert not sel.explained[30:80, 40:90].any()
+    inner = np.zeros((H, W), bool)
+    inner[34:76, 44:86] = True
+    assert (_de(sel.clean, bg)[inner] < 5).mean() > 0.95

@@ -12,8 +12,10 @@ that the scan flagged with doubled content.
    departs from the homography by no more than the parallax the static scene
    shows between the two views (``TwoView.parallax_px``, measured on the F
    inliers; a rotation or a planar scene allows ~1 px, a wide baseline tens).
-   Pixels of L explained by at least half of the sources are static 3-D
-   structure that the scan's homography-gated matches could not follow.
+   Pixels of L explained by at least half of the sources that see them (their
+   match inside the source's frame; at least two, or one of two sources) are
+   static 3-D structure that the scan's homography-gated matches could not
+   follow: near the border, the sources that do not reach a pixel do not vote.
    Where the set has parallax, a pixel whose flow match failed (thin
    structure against the sky, far off the plane) may instead be found by a
    search along its epipolar line (``parallax.epipolar_search``); that weaker
@@ -485,6 +487,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     votes = np.zeros((S, H, W), np.float32)
     matched = np.zeros((S, H, W), bool)  # explained by the flow match
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
+    seen = np.zeros((S, H, W), bool)  # the flow match inside the source's content
     base: list = [None] * S
     lab_s: list = [None] * S  # the sources' blurred Lab, exposure matched, where computed
     offsets: list = [None] * S  # the reference's Lab minus each source's (median off L)
@@ -510,6 +513,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             inside &= _valid_at(valid[k], nf)
         lab_w = blurred_lab(warped, 1.0)
         geo = inside & within
+        seen[k] = inside
         if v.F is not None and P.select_epipolar_px > 0:
             geo &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
         near_w = inside & (delta_e(lab_w, lab_r) < tau)
@@ -589,11 +593,14 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     if not mask.any():
         return empty
     p_ref = _mover_probability(lab_r, mask, lab_r)
-    need = max(1, int(np.ceil(0.5 * S - 1e-6)))
+    # half of the sources that see the pixel (in their frame), at least min(2, S / 2):
+    # near the image border, where some sources do not reach, the others decide
+    need = np.maximum(min(2, max(1, int(np.ceil(0.5 * S - 1e-6)))),
+                      np.ceil(0.5 * seen.sum(0) - 1e-6)).astype(np.int64)
     if searched.any():
         # the epipolar search is weaker evidence (any colour on the line may
         # match): it counts where at least two sources, and half of them, agree
-        found = searched & ((matched | searched).sum(0) >= max(2, need))[None]
+        found = searched & ((matched | searched).sum(0) >= np.maximum(2, need))[None]
         votes = np.maximum(votes, found.astype(np.float32))
     explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5) & ~minority
     core = mask & ~explained
