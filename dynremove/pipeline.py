@@ -30,7 +30,7 @@ from dynremove.refine.duplicates import agreement_with_reference
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
-from dynremove.refine.select import Selection, select_fill, set_parallax_px
+from dynremove.refine.select import Selection, median_parallax_px, select_fill
 from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
@@ -317,7 +317,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     if params.snap:
         snapped = snap_to_edges(ref_img, dyn, params)
         if params.snap_veto and params.refine_tau > 0 and \
-                set_parallax_px(views) > params.select_parallax_px:
+                median_parallax_px(views) > params.select_parallax_px:
             snapped = veto_agreed(ref_img, st.src_img, st.Nf, dyn, snapped, params)
         dyn = stages["snap"] = snapped
     clock.stop()

@@ -421,10 +421,11 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     return out, members
 
 
-def set_parallax_px(views: list[TwoView]) -> float:
-    """The set's parallax: the median over the sources of ``TwoView.parallax_px``
-    (px; a source without a measure counts 0), 0 without sources. Above
-    ``Params.select_parallax_px`` the default preset treats the set as 3-D."""
+def median_parallax_px(views: list[TwoView]) -> float:
+    """The parallax of the photo set: the median over the sources of
+    ``TwoView.parallax_px`` (px; a source without a measure counts 0), 0 without
+    sources. Above ``Params.select_parallax_px`` the default preset treats the
+    set as 3-D (``Selection.consensus_mode`` "parallax", ``Params.snap_veto``)."""
     return float(np.median([v.parallax_px if np.isfinite(v.parallax_px) else 0.0
                             for v in views])) if views else 0.0
 
@@ -464,7 +465,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     H, W = mask.shape
     S = len(sources)
     P = params
-    par = set_parallax_px(views)
+    par = median_parallax_px(views)
     mode = "parallax" if par > P.select_parallax_px else "scan"
     empty = Selection(clean=reference.copy(), replaced=np.zeros((H, W), bool),
                       label=np.full((H, W), -1, np.int16), explained=np.zeros((H, W), bool),
@@ -741,4 +742,4 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      lingering=lingering)
 
 
-__all__ = ["REASONS", "Selection", "member_median", "select_fill", "set_parallax_px"]
+__all__ = ["REASONS", "Selection", "median_parallax_px", "member_median", "select_fill"]
