@@ -81,7 +81,7 @@ class Params:
     # --- engineered steps (dynremove.refine; all off in the paper preset) ---
     clean_mask: bool = True  # morphological clean-up of L (open/close, holes)
     min_region_px: int = 64  # drop dynamic components smaller than this (paper preset 0)
-    refine_tau: float = 16.0  # pixel votes at L's border (refine.mask.refine_mask): Lab; 0 = off
+    refine_tau: float = 16.0  # pixel votes at L's border (refine.mask.refine_mask): a source agrees with the reference under this CIE76 ΔE; 0 = off
     refine_shrink_frac: float = 0.8  # drop a rim pixel when this share of sources agree
     refine_rim_px: int = 3  # width of the inner rim that may be dropped
     refine_ring_px: int = 6  # width of the outer ring that may be added (no source agrees)
@@ -90,7 +90,7 @@ class Params:
     snap_inner_px: int = 6  # deeper than this inside the map: sure object
     snap_outer_px: int = 12  # ring of probable background around the map
     snap_iters: int = 3  # GrabCut iterations
-    snap_veto: bool = True  # where the set has parallax (above select_parallax_px), GrabCut adds no pixel that refine_shrink_frac of the sources' votes agree with (refine.mask.veto_agreed)
+    snap_veto: bool = True  # in a set whose median parallax exceeds --select-parallax-px, GrabCut may not add a pixel where --refine-shrink-frac of the sources agree with the reference (ΔE under --refine-tau; refine.mask.veto_agreed)
     fuse: bool = True  # refill L after the scans, as --fill says (selection or median); off: keep the scans' patch writes (paper)
     fuse_margin_px: int = 2  # the fused region is L dilated by this
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
@@ -108,10 +108,10 @@ class Params:
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
     select_grow_alone: bool = True  # L also grows where no source agrees with the reference (at least two see it, even if they disagree among themselves) and the reference shows the colours of L's movers
-    select_parallax_px: float = 8.0  # median measured parallax above which colour consensus may keep the reference in L
-    select_search_de: float = 8.0  # where the parallax exceeds select_parallax_px, a pixel of L is also explained by its best match on its epipolar line in a source: CIE76 ΔE, mean over ~10 px, under this (0 = off)
+    select_parallax_px: float = 8.0  # the set's median measured parallax (analysis px) above which it is treated as 3-D: colour consensus may keep the reference in L, the epipolar search and --snap-veto run
+    select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px) is under this (0 = off)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)
-    select_sweep: bool = False  # above that parallax, matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
+    select_sweep: bool = False  # in a 3-D set (see --select-parallax-px), matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
     candidate_set: bool = True  # P as a set (the paper): a repeated (s, x, y) candidate counts once
