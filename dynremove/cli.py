@@ -150,6 +150,15 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # type: ignore[override]
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        # an unknown flag is the sub-command's error, so the hint names its help
+        ns, extra = self.parse_known_args(args, namespace)
+        if extra:
+            subs = getattr(self, "subcommands", {})
+            subs.get(getattr(ns, "cmd", None), self).error(
+                "unrecognized arguments: " + " ".join(extra))
+        return ns
+
 
 def build_parser() -> argparse.ArgumentParser:
     ap = _Parser(
@@ -160,6 +169,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     ap.add_argument("--version", action="version", version=f"dynremove {__version__}")
     sub = ap.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+    ap.subcommands = sub.choices  # name -> its parser, for ``_Parser.parse_args``
 
     r = sub.add_parser("run", help="remove dynamic objects from a reference image",
                        description="Remove the moving objects from the reference image of a "

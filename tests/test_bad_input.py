@@ -324,6 +324,13 @@ def test_a_mistyped_flag_value_is_one_line(capsys):
     assert e.value.code == 2
     assert err.count("\n") == 1 and "invalid choice: 'half'" in err
     assert "see 'dynremove run --help'" in err
+    # an unknown flag is the sub-command's too: its hint names that command's help
+    for cmd in ("run", "eval"):
+        with pytest.raises(SystemExit) as e:
+            main([cmd, "x", "--bogus"])
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and err.count("\n") == 1
+        assert "unrecognized arguments: --bogus" in err and f"see 'dynremove {cmd} --help'" in err
 
 
 def test_record_path_that_is_a_folder_is_bad_input(tmp_path, capsys, scene):
