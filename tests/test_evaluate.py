@@ -116,6 +116,13 @@ def test_progress_line_counts_failed_methods_in_words(capsys):
     _stderr_progress(2, 2, {"set": "s", "seconds": 1.0, "rows": rows})
     err = capsys.readouterr().err.splitlines()
     assert err[0].endswith("  1 method failed") and err[1].endswith("  2 methods failed")
+    # a set with neither a true mask nor a background says why its row is '-'
+    rows = [{"method": "median", "jaccard": None}]
+    for has in (False, True):
+        _stderr_progress(1, 1, {"set": "s", "seconds": 1.0, "rows": rows,
+                                "info": {"has_mask": has, "has_background": False}})
+    err = capsys.readouterr().err.splitlines()
+    assert "nothing to score" in err[0] and "nothing to score" not in err[1]
 
 
 def _static_set(folder, n=5):

@@ -378,8 +378,12 @@ def _stderr_progress(k: int, n: int, res: dict) -> None:
     js = [f"{r['method']} {r['jaccard']:.3f}" for r in res["rows"]
           if r.get("jaccard") is not None][:2]
     err = sum(1 for r in res["rows"] if "error" in r)
+    info = res.get("info", {})
+    unscored = not (info.get("has_mask", True) or info.get("has_background", True))
     print(f"[{k}/{n}] {res['set']}: {res['seconds']:.1f} s"
           + (f"  (J {', '.join(js)})" if js else "")
+          + ("  (no masks/<reference>.png and no background.png: nothing to score, '-' "
+             "in the table)" if unscored else "")
           + (f"  {_count(err, 'method')} failed" if err else ""), file=sys.stderr,
           flush=True)
 
