@@ -13,7 +13,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import blurred_lab
-from dynremove.refine.montage import DECAY_PX, PLATEAU_PX
+from dynremove.refine.montage import DECAY_PX, PLATEAU_PX, component_offsets
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.upsample import grow_replaced
 
@@ -132,6 +132,14 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
             fade = np.exp(-np.maximum(dist - plateau_px, 0.0) / decay_px).astype(np.float32)
             off = m + dep * fade[..., None]
         out[sel] = src[sel] + off[sel]
+        # the small regions' own offsets: the same function as the fast code's
+        # (its ring pixels handed over densely, row-major)
+        ry, rx = np.nonzero(ring)
+        for cy, cx, coff in component_offsets(
+                reference[ry, rx], candidates[lbl][ry, rx], diff[ry, rx], usable[lbl][ry, rx],
+                ring, sel, replaced, ring_px=ring_px, max_de=max_de,
+                plateau_px=plateau_px, decay_px=decay_px):
+            out[cy, cx] = src[cy, cx] + coff
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 

@@ -85,6 +85,46 @@ def test_offset_blend_matches_a_darker_reference(brighter):
     assert np.array_equal(out[~rep], ref[~rep])
 
 
+def test_small_regions_take_their_own_offset():
+    """One source fills a large region (the mover) where it matches the reference, and
+    a small one where the light differs (it sees a glossy table brighter): the small
+    region is brought to its own surroundings' level, which the source's one offset
+    (measured mostly around the large region) cannot do."""
+    from dynremove.refine.montage import component_offsets
+
+    rng = np.random.default_rng(2)
+    H, W = 120, 200
+    bg = cv2.GaussianBlur(rng.integers(60, 160, (H, W, 3)).astype(np.uint8), (0, 0), 2)
+    light = np.zeros((H, W), np.float32)
+    light[:, 130:] = 35.0
+    light = cv2.GaussianBlur(light, (0, 0), 4)  # brighter on the right, in this source
+    src = np.clip(bg + light[..., None], 0, 255).astype(np.uint8)
+    rep = np.zeros((H, W), bool)
+    rep[20:100, 20:90] = True  # the mover, where the light is the same
+    yy, xx = np.mgrid[0:H, 0:W]
+    blob = (xx - 165) ** 2 + (yy - 60) ** 2 <= 11 ** 2  # a small region on the right
+    rep |= blob
+    ref = bg.copy()
+    ref[rep] = (20, 200, 20)
+    cand = np.stack([ref, src])
+    labels = rep.astype(np.intp)
+    usable = np.ones((2, H, W), bool)
+    labs = np.stack([_lab(ref), _lab(src)])
+    out = offset_blend(ref, cand, labels, rep, usable, labs)
+    assert np.median(_de(out, bg)[blob]) < 3.0
+    assert np.median(_de(out, bg)[20:100, 20:90]) < 3.0
+    # the component rule took the blob, not the large region
+    ring = dilate_disc(rep, 3) & ~rep
+    ry, rx = np.nonzero(ring)
+    comps = component_offsets(ref[ry, rx], src[ry, rx], labs[0, ry, rx] - labs[1, ry, rx],
+                              usable[1, ry, rx], ring, rep, rep, ring_px=3)
+    assert len(comps) == 1 and blob[comps[0][0], comps[0][1]].all()
+    # with the source's one offset only, the blob stays brighter
+    one = ref.copy()
+    one[blob] = np.clip(src[blob].astype(int), 0, 255)
+    assert np.median(_de(one, bg)[blob]) > 10.0
+
+
 def test_offset_blend_keeps_ring_content_near_the_ring_only():
     """A source 20 levels darker, a few levels darker still along one side of the
     ring (a misaligned edge, within ring_agrees' tolerance): the middle of the fill

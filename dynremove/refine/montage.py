@@ -174,10 +174,76 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
         if lbl == 0:
             continue
         sel = replaced & (labels == lbl)
-        good = ring_agrees(labs[0, ry, rx] - labs[lbl, ry, rx], usable[lbl, ry, rx], max_de)
+        diff = labs[0, ry, rx] - labs[lbl, ry, rx]
+        good = ring_agrees(diff, usable[lbl, ry, rx], max_de)
         sy, sx = np.nonzero(sel)
         off = ring_offset(ref_ring, candidates[lbl, ry, rx], good, (ry, rx), sel)
         out[sy, sx] = add_offset(candidates[lbl, sy, sx], off)
+        for cy, cx, coff in component_offsets(ref_ring, candidates[lbl, ry, rx], diff,
+                                              usable[lbl, ry, rx], ring, sel, replaced,
+                                              ring_px=ring_px, max_de=max_de):
+            out[cy, cx] = add_offset(candidates[lbl, cy, cx], coff)
+    return out
+
+
+def component_offsets(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8],
+                      difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool_],
+                      ring: npt.NDArray[np.bool_], sel: npt.NDArray[np.bool_],
+                      replaced: npt.NDArray[np.bool_], *, ring_px: int, max_de: float = 15.0,
+                      plateau_px: float = PLATEAU_PX, decay_px: float = DECAY_PX):
+    """The offsets of the small regions that take one source, each from its own ring.
+
+    One offset per source (``ring_offset`` over the ring of everything the source
+    fills) is right for the photos' exposure and white balance, but light that
+    changes across the photo (a glossy table seen from elsewhere, vignetting)
+    leaves a small refilled region brighter or darker than its surroundings.
+    A connected component of ``sel`` (8-connected) takes its own offset, measured
+    on its own ring (the pixels within ``ring_px`` of it outside ``replaced``),
+    when that ring is at least half of its band and at least half its area (a
+    small region, mostly surrounded by the photo; a large one, the mover itself,
+    keeps the source's offset, whose ring is larger). Each is solved on a box
+    ``ring_px + 2`` px around it.
+
+    Parameters
+    ----------
+    ref_ring, src_ring : (R, 3) uint8 ndarrays
+        The reference and the source at the ``R`` pixels of ``ring`` (row-major).
+    difference : (R, 3) float32 ndarray
+        Their blurred Lab difference there (``ring_agrees``); usable : (R,) bool.
+    ring, sel, replaced : (H, W) bool ndarrays
+        The ring of the whole replaced region, the pixels taking this source, and
+        the replaced region.
+
+    Returns
+    -------
+    list of (ys, xs, offset)
+        Per component taken: its pixels (row-major) and their (M, 3) float32 offset.
+    """
+    H, W = sel.shape
+    n, cc, stats, _ = cv2.connectedComponentsWithStats(sel.view(np.uint8), connectivity=8)
+    if n <= 2:  # one region: the source's own ring is its ring
+        return []
+    ring_index = np.full((H, W), -1, np.int32)
+    gy, gx = np.nonzero(ring)
+    ring_index[gy, gx] = np.arange(len(gy), dtype=np.int32)
+    m = ring_px + 2
+    out = []
+    for i in range(1, n):
+        x, y, w, h, area = (int(v) for v in stats[i])
+        y0, y1, x0, x1 = max(y - m, 0), min(y + h + m, H), max(x - m, 0), min(x + w + m, W)
+        comp = cc[y0:y1, x0:x1] == i
+        band = dilate_disc(comp, ring_px) & ~comp
+        own = band & ~replaced[y0:y1, x0:x1]
+        n_own = int(np.count_nonzero(own))
+        if n_own < max(20, 0.5 * np.count_nonzero(band), 0.5 * area):
+            continue
+        cy, cx = np.nonzero(own)
+        idx = ring_index[cy + y0, cx + x0]
+        good = ring_agrees(difference[idx], usable[idx], max_de)
+        off = ring_offset(ref_ring[idx], src_ring[idx], good, (cy, cx), comp,
+                          plateau_px=plateau_px, decay_px=decay_px)
+        qy, qx = np.nonzero(comp)
+        out.append((qy + y0, qx + x0, off))
     return out
 
 
@@ -269,5 +335,5 @@ def ring_fade(known: npt.NDArray[np.bool_], sel: npt.NDArray[np.bool_], plateau_
     dist = cv2.distanceTransform((~known).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[sel]
     return np.exp(-np.maximum(dist - plateau_px, 0.0) / decay_px).astype(np.float32)
 
-__all__ = ["add_offset", "expansion_labels", "offset_blend", "pairwise_distance", "ring_agrees",
-           "ring_fade", "ring_offset"]
+__all__ = ["add_offset", "component_offsets", "expansion_labels", "offset_blend",
+           "pairwise_distance", "ring_agrees", "ring_fade", "ring_offset"]

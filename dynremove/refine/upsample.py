@@ -34,7 +34,8 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import mask_boxes, remap_points
-from dynremove.refine.montage import DECAY_PX, PLATEAU_PX, add_offset, ring_agrees, ring_offset
+from dynremove.refine.montage import (DECAY_PX, PLATEAU_PX, add_offset, component_offsets,
+                                      ring_agrees, ring_offset)
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.select import Selection, member_median
 
@@ -154,12 +155,22 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     # each source plus its offset to the reference, measured on the ring
     ref_ring = reference[ry + y0, rx + x0]
     out = np.empty((len(qy), 3), np.uint8)
+    rep_index = np.full(shape, -1, np.int32)  # a replaced pixel's row in ``out``
+    rep_index[qy, qx] = np.arange(len(qy), dtype=np.int32)
     for lbl in np.unique(chosen):
         good = ring_agrees(diff[lbl], usable[lbl, ring_i], _MAX_DE)
         mine = chosen == lbl
-        off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), rep & (lab == lbl),
+        sel = rep & (lab == lbl)
+        off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), sel,
                           plateau_px=PLATEAU_PX * blur, decay_px=DECAY_PX * blur)
         out[mine] = add_offset(cand[lbl, rep_i[mine]], off)
+        for cy, cx, coff in component_offsets(ref_ring, cand[lbl, ring_i], diff[lbl],
+                                              usable[lbl, ring_i], ring, sel, rep,
+                                              ring_px=ring_px, max_de=_MAX_DE,
+                                              plateau_px=PLATEAU_PX * blur,
+                                              decay_px=DECAY_PX * blur):
+            at = rep_index[cy, cx]
+            out[at] = add_offset(cand[lbl, rep_i[at]], coff)
     no_src = _resize_nearest(selection.no_source.view(np.uint8), size)[y0:y1, x0:x1] > 0
     no_src &= rep
     if no_src.any():
