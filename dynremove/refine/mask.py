@@ -18,6 +18,19 @@ from dynremove.refine.fields import source_votes
 from dynremove.refine.morphology import clean_mask, dilate_disc, disc, drop_small, fill_holes
 
 
+def _votes(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
+           hole: npt.NDArray[np.bool_], params: Params):
+    """The sources' pixel votes (``fields.source_votes``, matches re-interpolated
+    across ``hole``): per pixel, (H, W) ints, how many agree with the reference
+    (CIE Lab distance < ``refine_tau``), how many see it, and how many agreeing
+    drop a pixel (``refine_shrink_frac`` of those that see it, at least 1)."""
+    D = source_votes(reference, sources, Nf, hole)
+    valid = np.isfinite(D).sum(0)
+    agree = (D < params.refine_tau).sum(0)
+    need = np.maximum(1, np.ceil(params.refine_shrink_frac * valid - 1e-6))
+    return agree, valid, need
+
+
 def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
                 mask: npt.NDArray[np.bool_], params: Params) -> npt.NDArray[np.bool_]:
     """Pixel-level correction of the borders of a dynamic map (default preset).
@@ -40,10 +53,7 @@ def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
         ring = dilate_disc(m, params.refine_ring_px) & ~m
         rim = m & ~cv2.erode(mu, disc(params.refine_rim_px)).astype(bool)
         hole = cv2.dilate((m | ring).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-        D = source_votes(reference, sources, Nf, hole)
-        valid = np.isfinite(D).sum(0)
-        agree = (D < params.refine_tau).sum(0)
-        need = np.maximum(1, np.ceil(params.refine_shrink_frac * valid - 1e-6))
+        agree, valid, need = _votes(reference, sources, Nf, hole, params)
         new = m.copy()
         new[rim & (agree >= need)] = False
         new[ring & (agree == 0) & (valid > 0)] = True
@@ -121,11 +131,8 @@ def veto_agreed(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
     if not added.any():
         return after.copy()
     hole = cv2.dilate(before.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    D = source_votes(reference, sources, Nf, hole)
-    valid = np.isfinite(D).sum(0)
-    agree = (D < params.refine_tau).sum(0)
-    need = np.maximum(1, np.ceil(params.refine_shrink_frac * valid - 1e-6))
-    return after & ~(added & (agree >= need) & (valid > 0))
+    agree, _, need = _votes(reference, sources, Nf, hole, params)
+    return after & ~(added & (agree >= need))
 
 
 __all__ = ["refine_mask", "snap_to_edges", "veto_agreed"]
