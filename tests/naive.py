@@ -13,7 +13,8 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import blurred_lab
-from dynremove.refine.montage import DECAY_PX, PLATEAU_PX, component_offsets
+from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, component_offsets,
+                                      consistent_departures)
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.upsample import grow_replaced
 
@@ -107,7 +108,8 @@ def _distance(known):
 
 
 def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
-                 ring_px=3, max_de=15.0, plateau_px=PLATEAU_PX, decay_px=DECAY_PX):
+                 ring_px=3, max_de=15.0, plateau_px=PLATEAU_PX, decay_px=DECAY_PX,
+                 light_sigma_px=LIGHT_SIGMA_PX):
     """``montage.offset_blend`` on whole images."""
     out = reference.astype(np.float32)
     ring = dilate_disc(replaced, ring_px) & ~replaced
@@ -127,6 +129,10 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
                 off[:] = np.median(d[good], axis=0)
         else:
             m = np.median(d[good], axis=0)
+            gy, gx = np.nonzero(good)
+            ok = consistent_departures(gy, gx, (d - m)[gy, gx], light_sigma_px)
+            good = np.zeros_like(good)
+            good[gy[ok], gx[ok]] = True
             dep = harmonic_fill(np.where(good[..., None], d - m, 0).astype(np.float32), ~good)
             dist = _distance(good).astype(np.float32)
             fade = np.exp(-np.maximum(dist - plateau_px, 0.0) / decay_px).astype(np.float32)
@@ -138,7 +144,7 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
         for cy, cx, coff in component_offsets(
                 reference[ry, rx], candidates[lbl][ry, rx], diff[ry, rx], usable[lbl][ry, rx],
                 ring, sel, replaced, ring_px=ring_px, max_de=max_de,
-                plateau_px=plateau_px, decay_px=decay_px):
+                plateau_px=plateau_px, decay_px=decay_px, light_sigma_px=light_sigma_px):
             out[cy, cx] = src[cy, cx] + coff
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
@@ -198,7 +204,8 @@ def full_resolution(reference, sources, clean_working, dynamic, selection):
     labs = np.stack([blurred_lab(c, max(sx, sy)) for c in cand])
     scale = max(sx, sy)  # the fade's distances are full-size pixels
     out = offset_blend(reference[roi], cand, lab, rep_roi, usable, labs, ring_px=ring_px,
-                       plateau_px=PLATEAU_PX * scale, decay_px=DECAY_PX * scale)
+                       plateau_px=PLATEAU_PX * scale, decay_px=DECAY_PX * scale,
+                       light_sigma_px=LIGHT_SIGMA_PX * scale)
     no_src = cv2.resize(selection.no_source.astype(np.uint8), size,
                         interpolation=cv2.INTER_NEAREST)[roi] > 0
     if no_src.any():

@@ -152,6 +152,40 @@ def test_offset_blend_keeps_ring_content_near_the_ring_only():
     assert full[k].min() >= 22  # 20 + the left edge's share
 
 
+def test_a_halo_on_the_ring_draws_no_ghost():
+    """The replaced region hugs a thin mover: along its outline the reference still
+    shows a 1-px halo, 12 levels lighter (within ring_agrees' tolerance). The
+    halo's departure is not its neighbours', so it sets no offset: the fill is the
+    background, with no lighter outline of the mover (which the halo drew before)."""
+    from dynremove.refine.montage import consistent_departures
+
+    rng = np.random.default_rng(4)
+    H, W = 100, 120
+    bg = cv2.GaussianBlur(rng.integers(90, 150, (H, W, 3)).astype(np.uint8), (0, 0), 3)
+    rep = np.zeros((H, W), bool)
+    rep[10:90, 50:66] = True  # a leg
+    ref = bg.copy()
+    ref[rep] = (40, 60, 90)
+    halo = dilate_disc(rep, 1) & ~rep
+    halo[:, :57] = False  # on its right side only
+    ref[halo] = np.clip(ref[halo].astype(int) + 12, 0, 255).astype(np.uint8)
+    cand = np.stack([ref, bg])
+    usable = np.ones((2, H, W), bool)
+    labs = np.stack([_lab(ref), _lab(bg)])
+    out = offset_blend(ref, cand, rep.astype(np.intp), rep, usable, labs)
+    inner = rep & ~dilate_disc(~rep, 3)  # 3 px or more inside
+    right = rep.copy()
+    right[:, :58] = False
+    assert np.abs(out[right].astype(int) - bg[right].astype(int)).max() <= 1
+    assert np.abs(out[inner].astype(int) - bg[inner].astype(int)).max() <= 1
+    # the halo's pixels are the ones left out
+    ring = dilate_disc(rep, 3) & ~rep
+    ry, rx = np.nonzero(ring)
+    dep = ref[ry, rx].astype(np.float32) - bg[ry, rx].astype(np.float32)
+    keep = consistent_departures(ry, rx, dep, 4.0)
+    assert not keep[halo[ry, rx]].any() and keep[~halo[ry, rx]].all()
+
+
 def test_ring_agrees_keeps_the_common_offset_and_drops_content():
     """The ring's median difference is the photos' exposure offset, however large;
     a pixel whose difference departs from it (another object) is not used."""

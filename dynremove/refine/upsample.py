@@ -34,8 +34,8 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import mask_boxes, remap_points
-from dynremove.refine.montage import (DECAY_PX, PLATEAU_PX, add_offset, component_offsets,
-                                      ring_agrees, ring_offset)
+from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, add_offset,
+                                      component_offsets, ring_agrees, ring_offset)
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.select import Selection, member_median
 
@@ -162,13 +162,15 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
         mine = chosen == lbl
         sel = rep & (lab == lbl)
         off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), sel,
-                          plateau_px=PLATEAU_PX * blur, decay_px=DECAY_PX * blur)
+                          plateau_px=PLATEAU_PX * blur, decay_px=DECAY_PX * blur,
+                          light_sigma_px=LIGHT_SIGMA_PX * blur)
         out[mine] = add_offset(cand[lbl, rep_i[mine]], off)
         for cy, cx, coff in component_offsets(ref_ring, cand[lbl, ring_i], diff[lbl],
                                               usable[lbl, ring_i], ring, sel, rep,
                                               ring_px=ring_px, max_de=_MAX_DE,
                                               plateau_px=PLATEAU_PX * blur,
-                                              decay_px=DECAY_PX * blur):
+                                              decay_px=DECAY_PX * blur,
+                                              light_sigma_px=LIGHT_SIGMA_PX * blur):
             at = rep_index[cy, cx]
             out[at] = add_offset(cand[lbl, rep_i[at]], coff)
     no_src = _resize_nearest(selection.no_source.view(np.uint8), size)[y0:y1, x0:x1] > 0
