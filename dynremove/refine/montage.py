@@ -372,6 +372,9 @@ def consistent_departures(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
     departure : (R, C) float32 ndarray
         Reference minus source, minus the ring's median (levels of 0-255).
     sigma_px : float
+        σ of the neighbourhood, in pixels. From 8 px up (the full-size output
+        of large photos) the sums are taken per cell of ⌊σ / 4⌋² pixels and
+        blurred with σ / ⌊σ / 4⌋, at the cost of the working size's.
 
     Returns
     -------
@@ -380,18 +383,26 @@ def consistent_departures(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
     keep = np.ones(len(ys), bool)
     if len(ys) == 0:
         return keep
-    r = int(math.ceil(3 * sigma_px))
-    oy, ox = ys - ys.min() + r, xs - xs.min() + r
+    # on a grid ``step`` times coarser where σ is large (the full-size output):
+    # the sums per cell, blurred with σ / step, cost what the working size's do
+    step = max(1, int(sigma_px // 4))
+    sigma = sigma_px / step
+    r = int(math.ceil(3 * sigma))
+    oy, ox = (ys - ys.min()) // step + r, (xs - xs.min()) // step + r
     shape = (int(oy.max()) + r + 1, int(ox.max()) + r + 1)
     k = 2 * r + 1
     dep = departure.astype(np.float32)
     for _ in range(passes):
         w = np.zeros(shape, np.float32)
-        w[oy[keep], ox[keep]] = 1.0
         f = np.zeros(shape + dep.shape[1:], np.float32)
-        f[oy[keep], ox[keep]] = dep[keep]
-        ws = cv2.GaussianBlur(w, (k, k), sigma_px, borderType=cv2.BORDER_CONSTANT)[oy, ox]
-        fs = cv2.GaussianBlur(f, (k, k), sigma_px, borderType=cv2.BORDER_CONSTANT)
+        if step == 1:  # one pixel per cell
+            w[oy[keep], ox[keep]] = 1.0
+            f[oy[keep], ox[keep]] = dep[keep]
+        else:
+            np.add.at(w, (oy[keep], ox[keep]), 1.0)
+            np.add.at(f, (oy[keep], ox[keep]), dep[keep])
+        ws = cv2.GaussianBlur(w, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)[oy, ox]
+        fs = cv2.GaussianBlur(f, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
         fs = fs.reshape(shape + dep.shape[1:])[oy, ox] / np.maximum(ws, 1e-6)[:, None]
         keep = np.abs(dep - fs).max(axis=1) < max_dev
     return keep
