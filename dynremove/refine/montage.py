@@ -395,12 +395,8 @@ def consistent_departures(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
     for _ in range(passes):
         w = np.zeros(shape, np.float32)
         f = np.zeros(shape + dep.shape[1:], np.float32)
-        if step == 1:  # one pixel per cell
-            w[oy[keep], ox[keep]] = 1.0
-            f[oy[keep], ox[keep]] = dep[keep]
-        else:
-            np.add.at(w, (oy[keep], ox[keep]), 1.0)
-            np.add.at(f, (oy[keep], ox[keep]), dep[keep])
+        np.add.at(w, (oy[keep], ox[keep]), 1.0)  # sums per cell (one pixel each at step 1)
+        np.add.at(f, (oy[keep], ox[keep]), dep[keep])
         ws = cv2.GaussianBlur(w, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)[oy, ox]
         fs = cv2.GaussianBlur(f, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
         fs = fs.reshape(shape + dep.shape[1:])[oy, ox] / np.maximum(ws, 1e-6)[:, None]
