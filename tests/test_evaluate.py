@@ -75,8 +75,8 @@ def _whole_report(n_sets: int) -> dict:
         for m, left in (("dynremove", 20.0 + k), ("median", 40.0 + k)):
             r = dict.fromkeys(SCORE_KEYS)
             r.update(set=s, method=m, jaccard=0.5, psnr=20.0, ssim=0.5, psnr_whole=30.0,
-                     ssim_whole=0.9, damage=1.0, leftover=left, unrecoverable=12.5 + k,
-                     seconds=1.0)
+                     ssim_whole=0.9, damage=1.0, leftover=left, leftover_kept=left / 4,
+                     leftover_refilled=3 * left / 4, unrecoverable=12.5 + k, seconds=1.0)
             rows.append(r)
     return {"methods": ["dynremove", "median"], "sets": rows, "set_info": info}
 
@@ -95,6 +95,8 @@ def test_whole_photo_table_labels_the_mean_unrecoverable_and_counts_sets():
     left = row("mean leftover %")
     assert "12.5" not in left and left[:col_end].strip() == "mean leftover %"
     assert left.split()[-2:] == ["20.0", "40.0"]  # the methods' mean leftover
+    assert row("  kept as input %").split()[-2:] == ["5.0", "10.0"]
+    assert row("  refilled wrong %").split()[-2:] == ["15.0", "30.0"]
     unrec = row("mean unrec %")
     assert unrec[:col_end].endswith("12.5") and unrec == unrec[:col_end]  # nothing else
     assert "mean J (1 set) " in text and "mean PSNR dB (1 set) " in text

@@ -25,8 +25,8 @@ import pytest
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.evaluate import SCORE_KEYS, find_sets, format_table, run_eval
 from dynremove.evaluation.metrics import psnr_in_mask, ssim_in_mask
-from dynremove.evaluation.whole_photo import (damage_percent, delta_e76, leftover_percent, psnr,
-                                              ssim)
+from dynremove.evaluation.whole_photo import (damage_percent, delta_e76, leftover_percent,
+                                              leftover_split, psnr, ssim)
 
 N = 200
 BG = (120, 130, 140)
@@ -115,6 +115,38 @@ def test_leftover_with_a_recoverable_map(case):
     assert 100 * 18**2 / 1800 <= left <= 100 * (22**2 + 60) / 1800
     # nothing recoverable: leftover undefined, all of it unrecoverable
     assert leftover_percent(out, bg, mask, np.zeros((N, N), bool)) == (None, 100.0)
+
+
+@pytest.mark.parametrize("sigma", [0.0, 1.0])
+def test_leftover_split_tells_a_missed_mover_from_a_wrong_fill(case, sigma):
+    bg, ref, _, mask = case
+    out = bg.copy()
+    out[LEFT] = MOVER  # 20 x 20 left as the input showed it
+    out[60:80, 20:80] = DAMAGE  # 20 x 60 changed, but not into the background
+    left, _ = leftover_percent(out, bg, mask, blur_sigma=sigma)
+    kept, refilled = leftover_split(out, ref, bg, mask, blur_sigma=sigma)
+    assert kept + refilled == pytest.approx(left)
+    if sigma == 0:
+        assert (kept, refilled) == (pytest.approx(100 * 400 / 3600),
+                                    pytest.approx(100 * 1200 / 3600))
+    else:  # blurred, the restored pixels next to either patch mix in its colour: up
+        # to 4 rows above the wrong fill, a 2 px ring around the mover (neither is
+        # the input's colour, so both count as refilled)
+        assert ring_bounds(20, 3600)[0] <= kept <= ring_bounds(20, 3600)[1]
+        assert 100 * 19 * 60 / 3600 <= refilled <= 100 * (24 * 60 + 24**2 - 20**2) / 3600
+    # a method that returns its input kept all of it; one that paints it over, none
+    assert leftover_split(ref, ref, bg, mask, blur_sigma=sigma) == (100.0, 0.0)
+    painted = bg.copy()
+    painted[mask] = DAMAGE
+    assert leftover_split(painted, ref, bg, mask, blur_sigma=sigma) == (0.0, 100.0)
+    # with a recoverable map, over the same pixels as the leftover; none: undefined
+    free = np.zeros((N, N), bool)
+    free[:, :50] = True
+    left, _ = leftover_percent(out, bg, mask, free, blur_sigma=sigma)
+    assert sum(leftover_split(out, ref, bg, mask, free, blur_sigma=sigma)) == pytest.approx(left)
+    assert leftover_split(out, ref, bg, mask, np.zeros((N, N), bool)) == (None, None)
+    with pytest.raises(ValueError):
+        leftover_split(out, ref[:10], bg, mask)
 
 
 @pytest.mark.parametrize("sigma", [0.0, 1.0])

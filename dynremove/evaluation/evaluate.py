@@ -36,7 +36,10 @@ input reference and are wrong in the output (CIE76 ΔE > 10 after a 1 px
 blur); ``leftover`` = percent of the recoverable true-mask pixels (``free.png``;
 the whole true mask without it) still wrong in the output; ``unrecoverable`` =
 percent of the true mask that no other view saw free (``null`` without
-``free.png``).
+``free.png``); ``leftover_kept`` + ``leftover_refilled`` = ``leftover``, split
+into the pixels the output left as the input showed them (a missed detection)
+and those it changed into something still wrong (a wrong fill)
+(:func:`~dynremove.evaluation.whole_photo.leftover_split`).
 
 Parallelism and clusters
 ------------------------
@@ -86,7 +89,8 @@ from dynremove import io
 from dynremove.errors import InputError
 from dynremove.evaluation import baselines
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask, ssim_in_mask
-from dynremove.evaluation.whole_photo import damage_percent, leftover_percent, psnr, ssim
+from dynremove.evaluation.whole_photo import (damage_percent, leftover_percent, leftover_split,
+                                              psnr, ssim)
 from dynremove.params import Params, preset
 from dynremove.pipeline import remove_dynamic
 
@@ -94,7 +98,7 @@ METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan"
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
 #: Figures of a row (``null`` where they do not apply).
 SCORE_KEYS = ("jaccard", "psnr", "ssim", "psnr_whole", "ssim_whole", "damage", "leftover",
-              "unrecoverable")
+              "leftover_kept", "leftover_refilled", "unrecoverable")
 
 # Variants of the base preset for ``--ablation`` (field -> value). A variant whose
 # fields are not all Params fields, or whose values Params rejects, is skipped with
@@ -260,6 +264,8 @@ def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None
         out["damage"] = float(damage_percent(ls.images[ls.ref], clean, ls.background, ls.gt))
         left, unrec = leftover_percent(clean, ls.background, ls.gt, ls.free)
         out["leftover"], out["unrecoverable"] = left, unrec
+        out["leftover_kept"], out["leftover_refilled"] = leftover_split(
+            clean, ls.images[ls.ref], ls.background, ls.gt, ls.free)
     return out
 
 
@@ -497,6 +503,8 @@ def run_ablation(data_dir: str | Path, *, base: Any, names: Sequence[str] | None
               "mean_psnr": summ[n]["psnr"], "mean_ssim": summ[n]["ssim"],
               "mean_psnr_whole": summ[n]["psnr_whole"], "mean_damage": summ[n]["damage"],
               "mean_leftover": summ[n]["leftover"],
+              "mean_leftover_kept": summ[n]["leftover_kept"],
+              "mean_leftover_refilled": summ[n]["leftover_refilled"],
               "mean_seconds": summ[n]["seconds"], "n_sets": summ[n]["n_jaccard"]}
              for n, ch, _ in variants]
     return {"ablation": table, "sets": rows, "set_info": [res["info"] for res in results],
@@ -598,13 +606,18 @@ def _format_whole(report: dict, methods: Sequence[str], by: dict, info: dict,
     table.append(["mean SSIM", ""] + [_fmt(summ[m]["ssim_whole"], ".3f") for m in methods])
     table.append(["mean damage %", ""] + [_fmt(summ[m]["damage"], ".2f") for m in methods])
     table.append(["mean leftover %", ""] + [_fmt(summ[m]["leftover"], ".1f") for m in methods])
+    table.append(["  kept as input %", ""]
+                 + [_fmt(summ[m]["leftover_kept"], ".1f") for m in methods])
+    table.append(["  refilled wrong %", ""]
+                 + [_fmt(summ[m]["leftover_refilled"], ".1f") for m in methods])
     # the only figure of the unrec% column: a row of its own, the methods' cells blank
     table.append(["mean unrec %", _fmt(mean_unrec, ".1f")] + [""] * len(methods))
     head = ["whole photo, cells: PSNR(dB) SSIM damage% leftover%",
             "  damage%: of all pixels, outside the true mask + 5 px: right in the input, "
             "wrong in the output (CIE76 dE > 10, 1 px blur)",
-            "  leftover%: of the recoverable true mask, still wrong; "
-            "unrec%: of the true mask, seen free by no other view"]
+            "  leftover%: of the recoverable true mask, still wrong (kept as input: the "
+            "output still shows the input there; refilled wrong: changed, still wrong)",
+            "  unrec%: of the true mask, seen free by no other view"]
     return head + _render(table, len(bg_sets), n_left=1)
 
 

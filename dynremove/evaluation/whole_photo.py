@@ -2,7 +2,9 @@
 
 PSNR / SSIM of the whole image, :func:`delta_e76` (CIE76 colour difference),
 :func:`damage_percent` (good pixels the method broke) and
-:func:`leftover_percent` (mover pixels it could have removed but did not).
+:func:`leftover_percent` (mover pixels it could have removed but did not) and
+:func:`leftover_split` (of those, the ones left as the input showed them and
+the ones changed, but wrongly).
 Pure functions on plain arrays, like :mod:`dynremove.evaluation.metrics`
 (masks ``(H, W)`` indexed ``[y, x]``, images ``(H, W)`` or ``(H, W, C)``).
 """
@@ -23,6 +25,7 @@ __all__ = [
     "delta_e76",
     "damage_percent",
     "leftover_percent",
+    "leftover_split",
     "DAMAGE_DILATE_PX",
     "DE_MAX",
     "DE_BLUR_SIGMA",
@@ -357,3 +360,75 @@ def leftover_percent(
         return None, unrec
     wrong = np.linalg.norm(_lab(out_, s) - _lab(bg_, s), axis=2) > dm
     return 100.0 * int(np.count_nonzero(wrong & count)) / n, unrec
+
+
+def leftover_split(
+    output: npt.ArrayLike,
+    reference: npt.ArrayLike,
+    background: npt.ArrayLike,
+    true_mask: npt.ArrayLike,
+    recoverable: npt.ArrayLike | None = None,
+    *,
+    de_max: float = DE_MAX,
+    blur_sigma: float = DE_BLUR_SIGMA,
+) -> tuple[float | None, float | None]:
+    """The leftover of :func:`leftover_percent` split by cause: kept and refilled.
+
+    Of the recoverable true-mask pixels still wrong in the output (``ΔE(output,
+    background) > de_max``), *kept* counts those whose output still matches the
+    input reference (``ΔE(output, reference) <= de_max``: the method left the
+    mover there, a miss of its detection) and *refilled* those it changed but
+    not into the background (a wrong fill). Both are percents of the same
+    recoverable true mask, so they add up to the leftover. The split needs no
+    mask from the method, so it applies to every method alike.
+
+    Parameters
+    ----------
+    output, reference, background : (H, W, 3) ndarray
+        The method's cleaned reference, the input reference and the true clean
+        reference, BGR 0..255.
+    true_mask, recoverable, de_max, blur_sigma
+        As in :func:`leftover_percent`.
+
+    Returns
+    -------
+    kept, refilled : float or None
+        Percents in ``[0, 100]``; ``None`` where :func:`leftover_percent` gives
+        ``None`` (no recoverable true-mask pixel).
+
+    Raises
+    ------
+    ValueError
+        As :func:`leftover_percent`, and when ``reference`` is not the output's shape.
+
+    Examples
+    --------
+    A 4x4 mover: the output restored its top row, left its second row as the
+    input had it and filled its bottom half with a wrong colour:
+
+    >>> import numpy as np
+    >>> bg = np.full((8, 8, 3), 128, np.uint8)
+    >>> mask = np.zeros((8, 8), bool); mask[2:6, 2:6] = True
+    >>> ref = bg.copy(); ref[mask] = (0, 0, 255)
+    >>> out = ref.copy(); out[2, 2:6] = 128; out[4:6, 2:6] = (255, 0, 0)
+    >>> leftover_split(out, ref, bg, mask, blur_sigma=0)
+    (25.0, 50.0)
+    """
+    left, _ = leftover_percent(output, background, true_mask, recoverable,
+                               de_max=de_max, blur_sigma=blur_sigma)
+    if left is None:
+        return None, None
+    s = _check_sigma(blur_sigma)
+    out_, ref_, bg_ = (_bgr(output, "output"), _bgr(reference, "reference"),
+                       _bgr(background, "background"))
+    _check_same_shape(out_, ref_, "output", "reference")
+    count = _as_mask(true_mask, "true_mask")
+    if recoverable is not None:
+        count = count & _as_mask(recoverable, "recoverable")
+    lab_out = _lab(out_, s)
+    wrong = np.linalg.norm(lab_out - _lab(bg_, s), axis=2) > float(de_max)
+    as_input = np.linalg.norm(lab_out - _lab(ref_, s), axis=2) <= float(de_max)
+    n = int(np.count_nonzero(count))
+    kept = 100.0 * int(np.count_nonzero(wrong & as_input & count)) / n
+    refilled = 100.0 * int(np.count_nonzero(wrong & ~as_input & count)) / n
+    return kept, refilled
