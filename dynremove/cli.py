@@ -24,7 +24,7 @@ import cv2
 
 from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, Terminated, cmd_batch, cmd_bench,
                                 cmd_composite, cmd_demo, cmd_eval, cmd_export, cmd_inspect,
-                                cmd_run, cmd_view)
+                                cmd_run, cmd_view, interruption)
 from dynremove.errors import InputError
 from dynremove.evaluation.evaluate import ABLATIONS, METHODS
 from dynremove.params import DEFAULT, FIELD_CHOICES, PAPER, PRESETS, Params, field_docs
@@ -417,6 +417,25 @@ def viewer_module(name: str):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The ``dynremove`` command; returns its exit status.
+
+    Run as the program (``argv`` None), an interruption (130, 143) ends the
+    process at once with ``os._exit`` once the outputs are settled: native worker
+    threads (OpenCV, numba) still busy at interpreter shutdown would otherwise
+    abort it ("terminate called without an active exception", SIGABRT).
+    """
+    rc = _main(argv)
+    if argv is None and rc in (130, 143):
+        for f in (sys.stdout, sys.stderr):
+            try:
+                f.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(rc)
+    return rc
+
+
+def _main(argv: Sequence[str] | None) -> int:
     ap = build_parser()
     args = ap.parse_args(argv)
     args.viewer = viewer_module
@@ -446,6 +465,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"dynremove: error: {_one_line(e)}", file=sys.stderr)
         return EXIT_INPUT
     except Exception as e:  # noqa: BLE001 - one line, not a traceback
+        stop = interruption(e)  # a Ctrl-C that surfaced as another exception
+        if stop is not None:
+            terminated = isinstance(stop, Terminated)
+            print(f"dynremove: {'terminated' if terminated else 'interrupted'}",
+                  file=sys.stderr)
+            return 143 if terminated else 130
         if debug:
             raise
         print(f"dynremove: internal error: {type(e).__name__}: {_one_line(e)} "

@@ -43,6 +43,23 @@ class Terminated(BaseException):
     """SIGTERM, raised in the main thread between chunks of work."""
 
 
+def interruption(e: BaseException | None) -> BaseException | None:
+    """The KeyboardInterrupt or Terminated behind ``e``: ``e`` itself, or one in its
+    ``__cause__`` / ``__context__`` chain; None if there is none.
+
+    A Ctrl-C that lands inside a compiled (numba) call can surface as a
+    ``SystemError`` ("returned a result with an exception set") whose context is
+    the KeyboardInterrupt: that is still an interruption, not an internal error.
+    """
+    seen: set[int] = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, (KeyboardInterrupt, Terminated)):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return None
+
+
 # --- parameters as flags -------------------------------------------------------------
 def params_from_args(args: argparse.Namespace) -> Params:
     """The preset named by ``--preset`` with the flags' changes; InputError if rejected."""
@@ -158,9 +175,14 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                        valid_masks=iset.valid_masks)
                 _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic "
                      f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
-    except (KeyboardInterrupt, Terminated):
+    except BaseException as e:
+        stop = interruption(e)
+        if stop is None:
+            raise
         _record_interruption(args, where.stage, iset, ref, rec, [sink, sink_b])
-        raise
+        if stop is e:
+            raise
+        raise stop from e
     finally:
         where.close()
         if hasattr(sink, "close"):

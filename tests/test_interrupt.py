@@ -285,3 +285,52 @@ def test_interrupted_before_the_sink_exists(tmp_path, monkeypatch, capsys, where
     with pytest.raises(vi.InputError, match=r"before the scans began \(" + stage):
         vi.load_store(rrd)
     assert signal.getsignal(signal.SIGINT) is before  # restored
+
+
+def test_ctrl_c_inside_a_compiled_call_is_an_interruption(tmp_path, monkeypatch, capsys):
+    """numba reports a Ctrl-C that lands inside a compiled call as a SystemError
+    ("returned a result with an exception set") whose context is the
+    KeyboardInterrupt: exit 130 with "interrupted", the recording ended as
+    interrupted, not "internal error"."""
+    from dynremove import commands
+    from dynremove.cli import main
+
+    def compiled_call(*a, **k):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("CPUDispatcher(<function _assemble_sift>) returned a result "
+                              "with an exception set")
+
+    monkeypatch.setattr(commands, "remove_dynamic", compiled_call)
+    images = _write_set(tmp_path / "set", (48, 64))
+    rrd = tmp_path / "run.rrd"
+    rc = main(["run", str(images), "--out", str(tmp_path / "out"), "--record", str(rrd),
+               "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 130 and err.strip() == "dynremove: interrupted", err
+    assert not (tmp_path / "out").exists()
+    assert _log_texts(rrd)[-1] == "interrupted before the scans began (during features)"
+    # anywhere else (no recording): the same exit, not an internal error
+    rc = main(["run", str(images), "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 130 and err.strip() == "dynremove: interrupted", err
+
+
+def test_interruption_walks_the_cause_chain():
+    from dynremove.commands import Terminated, interruption
+
+    k = KeyboardInterrupt()
+    assert interruption(k) is k
+    try:
+        try:
+            raise Terminated()
+        except Terminated:
+            raise SystemError("wrapped")
+    except SystemError as e:
+        assert isinstance(interruption(e), Terminated)
+    assert interruption(ValueError("plain")) is None
+    loop = ValueError("a")
+    loop.__context__ = ValueError("b")
+    loop.__context__.__context__ = loop  # a cycle ends the walk
+    assert interruption(loop) is None
