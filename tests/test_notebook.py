@@ -54,7 +54,8 @@ def test_teaching_notebook_runs(tmp_path, monkeypatch):
     text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code"
                    for o in c.get("outputs", []) if o.get("output_type") == "stream")
     assert "4 scans" in text
-    assert "pixel (80, 60): dynamic in scan 0" in text
+    assert "pixel (80, 60): removed (in the final mask)" in text
+    assert "the scans: dynamic in scan 0" in text
     assert "M =" in text and "final L = dynamic, ground truth = dynamic" in text
     errors = [o for c in nb.cells for o in c.get("outputs", []) if o.get("output_type") == "error"]
     assert not errors

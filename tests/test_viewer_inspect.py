@@ -77,8 +77,9 @@ def test_compare_recording_with_its_roots(compare_rrd, capsys, root, want):
     assert vi.resolve_root(compare_rrd, root) == want
     rc, out, err = _inspect(capsys, compare_rrd, "--pixel", "5,5", "--root", root)
     assert rc == 0 and err == [], err
-    first = out.splitlines()[0]
-    assert first.startswith("pixel (5, 5): static in ") and first.count("pixel (") == 1, out
+    first, second = out.splitlines()[:2]
+    assert first == "pixel (5, 5): kept (not in the final mask)", out
+    assert second.startswith("  the scans: static in ") and first.count("pixel (") == 1, out
     n_scans = 2 if want == "runs/main" else 1
     assert f"scan {n_scans - 1} step" in out  # the run of that root, not the other
 

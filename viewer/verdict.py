@@ -252,6 +252,26 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     return lines
 
 
+def outcome_line(h: dict[str, Any]) -> str:
+    """What became of the pixel, in a few words: "removed (in the final mask), filled
+    from view1.png" or "kept (not in the final mask)". Needs ``final_dynamic``."""
+    sel = h.get("selection") or {}
+    if not h.get("final_dynamic"):
+        return "kept (not in the final mask)"
+    k = sel.get("source", 0)
+    if k > 0:
+        return f"removed (in the final mask), filled from {_src_name(h, k - 1)}"
+    if "source" in sel:
+        return "in the final mask, but the reference kept there"
+    return "removed (in the final mask)"
+
+
+LEGEND = ("(M: how alike the pixel and the winning cluster A_m of its candidate matches "
+          "are, Sec. 3.2.1; at or under t_r it is called dynamic. b_m: A_m's weight, the "
+          "sum of its candidates' confidences B_l. step: the visiting order, the viewer's "
+          "`step` timeline)")
+
+
 def _fold(events: list[tuple[int, str]], max_lines: int) -> list[str]:
     """Sort by step; print at most ``max_lines`` lines, eliding the middle."""
     events.sort(key=lambda e: e[0])
@@ -268,8 +288,16 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     Runs of patch writes over the pixel are folded into one line per scan;
     the whole text stays within ``max_lines`` lines.
     """
-    lines = [f"pixel ({h['x']}, {h['y']}): " + verdict_lines(h)[0]]
-    lines += ["  " + v for v in verdict_lines(h)[1:]]
+    verdict = verdict_lines(h)
+    fin = h.get("final_dynamic")
+    if fin is None or not (h.get("scans") or h["decisions"]):
+        lines = [f"pixel ({h['x']}, {h['y']}): " + verdict[0]]
+    else:  # the outcome first, then how the scans and the steps after them got there
+        lines = [f"pixel ({h['x']}, {h['y']}): " + outcome_line(h),
+                 "  the scans: " + verdict[0]]
+    lines += ["  " + v for v in verdict[1:]]
+    if any(("M = " in ln or "b_m" in ln) for ln in lines):
+        lines.append("  " + LEGEND)
     ev: list[tuple[int, str]] = []
     dec_scans = {d["scan"] for d in h["decisions"]}
     for sc in h.get("scans", []):
