@@ -199,3 +199,34 @@ def test_epipolar_search_finds_static_structure_and_not_a_mover():
         p1 = px.project(views[k].H, e, mu[block].astype(np.float64), gx_, gy_)
         p0 = px.project(views[k].H, e, true_mu, gx_, gy_)
         assert np.median(np.hypot(p1[0] - p0[0], p1[1] - p0[1])) < 2.0
+
+
+def test_the_anchor_is_the_source_of_widest_parallax_not_the_noisiest():
+    """γ is measured in the source whose matches depart most from its homography.
+    On a mostly planar scene (blocks standing out of a flat wall) every source's
+    median departure sits on the wall: there, matches with more noise would win,
+    and γ would be that noise (the other k_s fitted near 0)."""
+    rng = np.random.default_rng(3)
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float64), np.arange(H, dtype=np.float64))
+    gamma = np.zeros((H, W))
+    gamma[10:60, 10:70] = 6.0  # blocks on a flat wall: about 30 % of the image
+    gamma[70:110, 90:150] = 4.0
+    views, fields = [], []
+    true_k = [1.0, -0.7, 1.4, 0.2]
+    for k in range(4):
+        Hm = np.array([[1.0, 0.002 * k, 8.0 * (k - 1.5)], [-0.001 * k, 1.0, 3.0 * (k % 2)],
+                       [0.0, 0.0, 1.0]])
+        e = np.array([1.0, 0.15 * (k - 1.5), 0.0])
+        e /= np.linalg.norm(e)
+        fx, fy = px.project(Hm, e, true_k[k] * gamma, gx, gy)
+        field = np.stack([fx, fy], -1).astype(np.float32)
+        if k == 3:  # the smallest parallax, the noisiest matches (on its lines)
+            field += (rng.normal(0, 0.6, (H, W))[..., None] * e[:2]).astype(np.float32)
+        F = _cross(e) @ Hm
+        views.append(TwoView(F=F / np.linalg.norm(F), H=Hm, n_matches=100, n_inliers_F=100,
+                             n_inliers_H=100, parallax_px=12.0))
+        fields.append(field)
+    m = px.fit_parallax(fields, views, np.ones((H, W), bool))
+    assert m is not None and m.anchor == 2, m
+    np.testing.assert_allclose(np.abs(m.coef[:3, 0] / m.coef[2, 0]),
+                               np.abs(np.array(true_k[:3]) / true_k[2]), rtol=0.05)

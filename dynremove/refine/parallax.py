@@ -88,7 +88,8 @@ def fit_parallax(fields: list[np.ndarray], views: list[TwoView], visible: np.nda
     source (H_s, F_s); visible (H, W) bool: pixels whose matches are trusted
     (outside L). A match counts only within ``line_px`` (Sampson) of its epipolar
     line. μ_s of every match is solved in closed form; γ is the μ of the source
-    of widest parallax; k, a, b, c by iteratively reweighted least squares.
+    of widest parallax (the 90th percentile of its matches' distance from the
+    homography); k, a, b, c by iteratively reweighted least squares.
     The residual is measured in pixels, by reprojection. None when fewer than
     two sources have F, or when the visible parallax departs from a plane's by
     less than ``min_depth_px`` (90th percentile, in the anchor source): then
@@ -115,7 +116,9 @@ def fit_parallax(fields: list[np.ndarray], views: list[TwoView], visible: np.nda
         ok[k] = good
         mu[k] = _mu_of(v.H, e, gx, gy, m[:, 0], m[:, 1])
         hx, hy = project(v.H, e, 0.0, gx, gy)
-        spread[k] = float(np.median(np.hypot(m[:, 0] - hx, m[:, 1] - hy)[good]))
+        # a high percentile: the median sits on the dominant plane (where the
+        # homography holds) for every source, so there it measures noise
+        spread[k] = float(np.percentile(np.hypot(m[:, 0] - hx, m[:, 1] - hy)[good], 90))
     if len(mu) < 2:
         return None
     anchor = max(mu, key=lambda k: spread[k])
