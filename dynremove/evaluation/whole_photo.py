@@ -336,6 +336,18 @@ def leftover_percent(
     >>> leftover_percent(out, bg, mask, blur_sigma=0)
     (75.0, None)
     """
+    count, unrec, wrong, _ = _leftover_pixels(output, background, true_mask, recoverable,
+                                              de_max, blur_sigma)
+    n = int(np.count_nonzero(count))
+    if n == 0:
+        return None, unrec
+    return 100.0 * int(np.count_nonzero(wrong & count)) / n, unrec
+
+
+def _leftover_pixels(output, background, true_mask, recoverable, de_max, blur_sigma):
+    """The checks and pixels behind :func:`leftover_percent`: ``(count, unrec, wrong,
+    lab_out)``: the recoverable true mask, the unrecoverable percent, where the
+    output is wrong (None when ``count`` is empty) and the output's Lab."""
     dm = float(de_max)
     if not (math.isfinite(dm) and dm > 0):
         raise ValueError(f"de_max must be a finite positive number, got {de_max}")
@@ -355,11 +367,11 @@ def leftover_percent(
         count = m & rec
         if n_mask:
             unrec = 100.0 * (n_mask - int(np.count_nonzero(count))) / n_mask
-    n = int(np.count_nonzero(count))
-    if n == 0:
-        return None, unrec
-    wrong = np.linalg.norm(_lab(out_, s) - _lab(bg_, s), axis=2) > dm
-    return 100.0 * int(np.count_nonzero(wrong & count)) / n, unrec
+    if not count.any():
+        return count, unrec, None, None
+    lab_out = _lab(out_, s)
+    wrong = np.linalg.norm(lab_out - _lab(bg_, s), axis=2) > dm
+    return count, unrec, wrong, lab_out
 
 
 def leftover_split(
@@ -414,20 +426,14 @@ def leftover_split(
     >>> leftover_split(out, ref, bg, mask, blur_sigma=0)
     (25.0, 50.0)
     """
-    left, _ = leftover_percent(output, background, true_mask, recoverable,
-                               de_max=de_max, blur_sigma=blur_sigma)
-    if left is None:
+    count, _, wrong, lab_out = _leftover_pixels(output, background, true_mask, recoverable,
+                                                de_max, blur_sigma)
+    if wrong is None:
         return None, None
-    s = _check_sigma(blur_sigma)
-    out_, ref_, bg_ = (_bgr(output, "output"), _bgr(reference, "reference"),
-                       _bgr(background, "background"))
-    _check_same_shape(out_, ref_, "output", "reference")
-    count = _as_mask(true_mask, "true_mask")
-    if recoverable is not None:
-        count = count & _as_mask(recoverable, "recoverable")
-    lab_out = _lab(out_, s)
-    wrong = np.linalg.norm(lab_out - _lab(bg_, s), axis=2) > float(de_max)
-    as_input = np.linalg.norm(lab_out - _lab(ref_, s), axis=2) <= float(de_max)
+    ref_ = _bgr(reference, "reference")
+    _check_same_shape(lab_out, ref_, "output", "reference")
+    as_input = (np.linalg.norm(lab_out - _lab(ref_, _check_sigma(blur_sigma)), axis=2)
+                <= float(de_max))
     n = int(np.count_nonzero(count))
     kept = 100.0 * int(np.count_nonzero(wrong & as_input & count)) / n
     refilled = 100.0 * int(np.count_nonzero(wrong & ~as_input & count)) / n
