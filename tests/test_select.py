@@ -470,7 +470,7 @@ def test_growth_where_no_source_agrees_with_the_reference(alone):
     import dataclasses
 
     from dynremove.refine.fields import blurred_lab
-    from dynremove.refine.select import _consensus_growth
+    from dynremove.refine.select import _consensus_growth, _mover_model
 
     rng = np.random.default_rng(0)
     H, W = 120, 180
@@ -485,8 +485,9 @@ def test_growth_where_no_source_agrees_with_the_reference(alone):
     gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
     base = [np.stack([gx, gy], -1)] * 2
     P = dataclasses.replace(preset("default"), select_grow_alone=alone)
-    grown, by_alone = _consensus_growth(blurred_lab(ref, 1.0), np.stack([s0, s1]), base, mask,
-                                        None, P)
+    lab_r = blurred_lab(ref, 1.0)
+    grown, by_alone = _consensus_growth(lab_r, np.stack([s0, s1]), base, mask, None, P,
+                                        _mover_model(lab_r, mask))
     missed = np.zeros((H, W), bool)
     missed[42:78, 82:98] = True  # the missed part, away from its edges' blur
     trail = np.zeros((H, W), bool)

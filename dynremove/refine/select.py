@@ -104,17 +104,28 @@ REASONS = {0: "not considered", 1: "chosen", 2: "combined (agrees with the chose
            7: "still shows the mover that lingered here"}
 
 
-def _mover_probability(lab_ref: np.ndarray, L: np.ndarray, values: np.ndarray,
-                       bins: int = 12) -> np.ndarray:
-    """P(mover | colour): histograms of L's core against a ring around L (Lab)."""
+_BINS = 12  # per Lab axis, in the movers' colour model
+
+
+def _mover_model(lab_ref: np.ndarray, L: np.ndarray) -> np.ndarray | None:
+    """The movers' colour model, as GrabCut's: P(mover | Lab bin) (``_BINS``³,)
+    float64 from the histograms of the reference's Lab ``lab_ref`` (H, W, 3) in
+    L's core (L eroded by 5×5) against a ring around L (4 to 30 px); None when
+    either is empty. Built once per L, read by ``_mover_probability``."""
     core = cv2.erode(L.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     ring = dilate_disc(L, 30) & ~dilate_disc(L, 4)
     if not core.any() or not ring.any():
-        return np.zeros(values.shape[:-1], np.float32)
+        return None
+    hf, hb = _lab_hist(lab_ref[core], _BINS), _lab_hist(lab_ref[ring], _BINS)
+    return (hf + 1e-4) / (hf + hb + 2e-4)
 
-    hf, hb = _lab_hist(lab_ref[core], bins), _lab_hist(lab_ref[ring], bins)
-    post = (hf + 1e-4) / (hf + hb + 2e-4)
-    return post[_lab_bins(values, bins)].astype(np.float32)
+
+def _mover_probability(model: np.ndarray | None, values: np.ndarray) -> np.ndarray:
+    """P(mover | colour) of Lab ``values`` (..., 3) under ``_mover_model``'s
+    ``model``: (...) float32, zero where there is no model."""
+    if model is None:
+        return np.zeros(values.shape[:-1], np.float32)
+    return model[_lab_bins(values, _BINS)].astype(np.float32)
 
 
 def _valid_at(valid: np.ndarray, field: np.ndarray) -> np.ndarray:
@@ -125,7 +136,7 @@ def _valid_at(valid: np.ndarray, field: np.ndarray) -> np.ndarray:
     return m.astype(bool)
 
 
-def _consensus_growth(lab_r, sources, base, mask, valid, P):
+def _consensus_growth(lab_r, sources, base, mask, valid, P, model):
     """Pixels near L that the reference alone shows differently (a cast shadow, a
     part of the mover the scan missed): at least ``max(2, S/2)`` sources, sampled
     through their geometry-bounded matches, agree with one another and the
@@ -133,7 +144,8 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
     ``select_grow_alone``, also where no source agrees with the reference, at
     least two see the pixel (even if they disagree among themselves: with three
     photos, one source often shows its own mover there) and the reference's
-    colour is more likely a mover's than the scene's (``_mover_probability``).
+    colour is more likely a mover's than the scene's (``model``: the ``_mover_model`` of
+    ``mask``).
     Only components touching L are kept, so the consensus never acts far from a
     detected mover.
 
@@ -190,7 +202,7 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P):
         # to the mover whose sources show their own movers (its trail in a
         # video) keeps the scene's colours and is left alone
         unmatched = (((delta_e(labs, lab_rb[ys, xs]) >= tau) | ~ok).all(0) & (ok.sum(0) >= 2)
-                     & (_mover_probability(lab_r, mask, lab_rb[ys, xs]) > 0.5))
+                     & (_mover_probability(model, lab_rb[ys, xs]) > 0.5))
         hit[ys + y0, xs + x0] |= unmatched
         alone[ys + y0, xs + x0] = unmatched & ~agreed
     hit = cv2.morphologyEx(hit, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
@@ -497,6 +509,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         geo_ok = np.zeros((S, H, W), bool)
         flow_agree = np.zeros((S, H, W), bool)
 
+    model = _mover_model(lab_r, mask)  # the colours of L as the refinement left it
+
     def match(k):
         v = views[k]
         nf = (flows[k] if flows is not None else
@@ -537,7 +551,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             flow_agree[k] = near_w
             lab_b = blurred_lab(w_b, 1.0)
             lab_ws[k] = lab_b + _lab_offset(lab_r, lab_b, geo_ok[k] & ~mask)
-        votes[k] = ok * (1.0 - _mover_probability(lab_r, mask, lab_w))
+        votes[k] = ok * (1.0 - _mover_probability(model, lab_w))
         if mode == "parallax" and P.select_search_de > 0:
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
@@ -566,7 +580,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
     grown = np.zeros((H, W), bool)
     if P.select_grow_px > 0:
-        grown, alone = _consensus_growth(lab_r, sources, base, mask, valid, P)
+        grown, alone = _consensus_growth(lab_r, sources, base, mask, valid, P, model)
         if alone.any() and mode == "parallax" and P.select_search_de > 0:
             # where the set has much parallax, a pixel that no source's match agrees
             # with may be 3-D structure matched off its line: the epipolar search
@@ -593,7 +607,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         region = dilate_disc(mask, P.select_margin_px)
     if not mask.any():
         return empty
-    p_ref = _mover_probability(lab_r, mask, lab_r)
+    model = _mover_model(lab_r, mask)  # L grown as above
+    p_ref = _mover_probability(model, lab_r)
     # half of the sources that see the pixel (in their frame), at least min(2, S / 2):
     # near the image border, where some sources do not reach, the others decide
     need = np.maximum(min(2, max(1, int(np.ceil(0.5 * S - 1e-6)))),
@@ -644,7 +659,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     labs = np.stack([blurred_lab(c, 1.0) for c in cand_img])
 
     # 3. weighted consensus
-    p_mover = _mover_probability(lab_r, mask, labs)
+    p_mover = _mover_probability(model, labs)
     weight = (1.0 - p_mover) * usable
     weight[0] = 1.0  # outside L the reference is a trusted witness
     weight[0][in_mask] = 1.0 - p_mover[0][in_mask]
