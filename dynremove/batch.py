@@ -48,7 +48,7 @@ from dynremove.params import Params
 from dynremove.pipeline import full_resolution_output, remove_dynamic
 from dynremove.video import auto_reference, blurry_reference_note
 
-OUTPUT_FILES = ("clean.png", "dynamic_mask.png", "coverage.png", "report.json")
+OUTPUT_FILES = (*io.RUN_OUTPUTS, "report.json")
 SUMMARY_FIELDS = ("set", "status", "skipped", "n_images", "reference", "dynamic_fraction",
                   "jaccard_vs_gt", "seconds", "notes", "error", "inputs", "out")
 NOTES_SEP = " | "  # between the notes of a set in summary.csv (a list in summary.json)

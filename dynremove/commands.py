@@ -100,7 +100,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     created = not Path(args.out).exists()
     try:
-        out = io.prepare_out_dir(args.out)
+        out = io.prepare_out_dir(args.out, args.images)
         if args.record:
             io.check_out_file(args.record, "--record")
         return _run(args, params, out)

@@ -125,13 +125,18 @@ def _listing(names: list[str], n: int = 5) -> str:
     return ", ".join(names[:n]) + (" …" if len(names) > n else "")
 
 
+# what ``dynremove run`` writes beside its report.json (``batch.write_outputs``)
+RUN_OUTPUTS = ("clean.png", "dynamic_mask.png", "coverage.png")
+
+
 def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str]]:
     """Expand folders and files; return image paths and notes.
 
     In a folder, a file is an image when its suffix is a common image suffix
     (``IMAGE_EXTS``; it must then decode) or when OpenCV or Pillow recognise its
-    content; other files are skipped with a note that names them. Files given
-    one by one are always read as images.
+    content; other files are skipped with a note that names them. An earlier
+    run's outputs (``RUN_OUTPUTS`` in a folder that holds a ``report.json``) are
+    skipped with a note. Files given one by one are always read as images.
     """
     paths: list[Path] = []
     notes: list[str] = []
@@ -145,7 +150,14 @@ def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str
             files = sorted((q for q in entries if q.is_file() and not q.name.startswith(".")),
                            key=natural_key)
             imgs, videos, skipped = [], [], []
+            ours = ({q.name for q in files if q.name in RUN_OUTPUTS}
+                    if any(q.name == "report.json" for q in files) else set())
+            if ours:
+                notes.append(f"{p}: skipped {', '.join(sorted(ours))}: the outputs of an "
+                             "earlier dynremove run (its report.json is beside them)")
             for q in files:
+                if q.name in ours:
+                    continue
                 if q.suffix.lower() in IMAGE_EXTS or is_image_file(q):
                     imgs.append(q)
                 elif is_video_file(q):
@@ -453,11 +465,25 @@ def _file_in_the_way(p: Path) -> Path | None:
     return None
 
 
-def prepare_out_dir(out: str | os.PathLike) -> Path:
-    """Create the output folder; InputError if it is a file or not writable."""
+def prepare_out_dir(out: str | os.PathLike, inputs: Sequence[str | os.PathLike] = ()
+                    ) -> Path:
+    """Create the output folder; InputError if it is a file or not writable, if it
+    is one of the ``inputs`` folders (the outputs would be read as photos by the
+    next run there), or if an output (``RUN_OUTPUTS``, report.json) would
+    overwrite one of the ``inputs`` files."""
     p = Path(out)
     if p.exists() and not p.is_dir():
         raise InputError(f"--out {p}: exists and is not a folder")
+    target = p.resolve()
+    written = {target / n for n in (*RUN_OUTPUTS, "report.json")}
+    for a in inputs:
+        q = Path(a)
+        if q.is_dir() and q.resolve() == target:
+            raise InputError(f"--out {p}: is the folder of the input photos (the outputs "
+                             "would be read as photos by the next run there); choose "
+                             "another folder")
+        if q.resolve() in written:
+            raise InputError(f"--out {p}: would overwrite the input {q}")
     blocker = _file_in_the_way(p.parent)
     if blocker is not None:
         raise InputError(f"--out {p}: cannot create it: {blocker} is a file, not a folder")

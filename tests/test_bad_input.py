@@ -170,6 +170,40 @@ def test_non_image_files_are_skipped_with_a_note(tmp_path, capsys, scene):
     assert "notes.txt" in note and "Thumbs.db" in note and "skipped 2" in note
 
 
+def test_out_in_the_input_folder_or_over_an_input_is_refused(tmp_path, capsys, scene):
+    """The outputs would become photos of the next run there, or replace an input."""
+    d = tmp_path / "set"
+    paths = write_set(d, scene.images[:3])
+    before = sorted(files_under(d))
+    rc, _, err = run_cli(capsys, d, "--out", d, *FAST)
+    assert_input_error(rc, err, str(d), "is the folder of the input photos")
+    assert sorted(files_under(d)) == before  # nothing written, nothing replaced
+    clean = tmp_path / "res" / "clean.png"
+    clean.parent.mkdir()
+    clean.write_bytes(paths[0].read_bytes())  # a photo that happens to sit there
+    rc, _, err = run_cli(capsys, clean, *paths[1:], "--out", clean.parent, *FAST)
+    assert_input_error(rc, err, "would overwrite the input", str(clean))
+    assert clean.read_bytes() == paths[0].read_bytes()
+
+
+def test_an_earlier_runs_outputs_are_not_read_as_photos(tmp_path, capsys, scene):
+    """A folder that holds an earlier run's outputs beside its report.json (copied
+    there with the photos): they are skipped with a note, not read as photos."""
+    d = tmp_path / "set"
+    write_set(d, scene.images[:3])
+    first = tmp_path / "first"
+    rc, _, err = run_cli(capsys, d, "--out", first, *FAST)
+    assert_ok_run(rc, err, first)
+    for name in ("clean.png", "dynamic_mask.png", "coverage.png", "report.json"):
+        (d / name).write_bytes((first / name).read_bytes())
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out, *FAST)
+    report = assert_ok_run(rc, err, out)
+    assert report["inputs"] == [str(d / f"view{i}.png") for i in range(3)]
+    (note,) = [n for n in notes_of(err) if "earlier dynremove run" in n]
+    assert "clean.png" in note and "coverage.png" in note and "dynamic_mask.png" in note
+
+
 def test_too_few_images_left_after_skipping(tmp_path, capsys, scene):
     d = tmp_path / "mixed"
     write_set(d, scene.images[:1])

@@ -509,7 +509,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         geo_ok = np.zeros((S, H, W), bool)
         flow_agree = np.zeros((S, H, W), bool)
 
-    model = _mover_model(lab_r, mask)  # the colours of L as the refinement left it
+    colours = _mover_model(lab_r, mask)  # the colours of L as the refinement left it
 
     def match(k):
         v = views[k]
@@ -551,7 +551,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             flow_agree[k] = near_w
             lab_b = blurred_lab(w_b, 1.0)
             lab_ws[k] = lab_b + _lab_offset(lab_r, lab_b, geo_ok[k] & ~mask)
-        votes[k] = ok * (1.0 - _mover_probability(model, lab_w))
+        votes[k] = ok * (1.0 - _mover_probability(colours, lab_w))
         if mode == "parallax" and P.select_search_de > 0:
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
@@ -580,7 +580,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
     grown = np.zeros((H, W), bool)
     if P.select_grow_px > 0:
-        grown, alone = _consensus_growth(lab_r, sources, base, mask, valid, P, model)
+        grown, alone = _consensus_growth(lab_r, sources, base, mask, valid, P, colours)
         if alone.any() and mode == "parallax" and P.select_search_de > 0:
             # where the set has much parallax, a pixel that no source's match agrees
             # with may be 3-D structure matched off its line: the epipolar search
@@ -607,8 +607,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         region = dilate_disc(mask, P.select_margin_px)
     if not mask.any():
         return empty
-    model = _mover_model(lab_r, mask)  # L grown as above
-    p_ref = _mover_probability(model, lab_r)
+    colours = _mover_model(lab_r, mask)  # L grown as above
+    p_ref = _mover_probability(colours, lab_r)
     # half of the sources that see the pixel (in their frame), at least min(2, S / 2):
     # near the image border, where some sources do not reach, the others decide
     need = np.maximum(min(2, max(1, int(np.ceil(0.5 * S - 1e-6)))),
@@ -659,7 +659,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     labs = np.stack([blurred_lab(c, 1.0) for c in cand_img])
 
     # 3. weighted consensus
-    p_mover = _mover_probability(model, labs)
+    p_mover = _mover_probability(colours, labs)
     weight = (1.0 - p_mover) * usable
     weight[0] = 1.0  # outside L the reference is a trusted witness
     weight[0][in_mask] = 1.0 - p_mover[0][in_mask]
