@@ -214,7 +214,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also run with other parameters (a preset name or field=value,...) "
                         "and log both side by side in the --record file")
     r.add_argument("--quiet", action="store_true",
-                   help="print nothing but errors (no progress bars, notes or summary line)")
+                   help="print nothing but errors (no progress bars, notes or summary line; "
+                        "the notes, warnings included, are in report.json)")
     add_input_flags(r)
     add_param_flags(r)
     r.set_defaults(fn=cmd_run)
@@ -366,7 +367,13 @@ def build_parser() -> argparse.ArgumentParser:
                                    "positives/negatives (run --gt) and the steps to jump "
                                    "to in the viewer.")
     i.add_argument("recording", help="a .rrd file")
-    i.add_argument("--pixel", type=parse_xy, metavar="X,Y", help="pixel to explain")
+    i.add_argument("--pixel", type=parse_xy, metavar="X,Y",
+                   help="pixel to explain, in the image the run analysed (as the viewer and "
+                        "--failures count)")
+    i.add_argument("--photo-pixel", type=parse_xy, metavar="X,Y",
+                   help="pixel to explain, in the photos as read (as clean.png at full size, "
+                        "--probe and --gt count); the same as --pixel when the run analysed "
+                        "the photos at their own size")
     i.add_argument("--failures", action="store_true", help="list the worst FP/FN regions")
     i.add_argument("--top", type=int, default=10, help="how many failures (default 10)")
     i.add_argument("--root", default="",

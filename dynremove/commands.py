@@ -571,10 +571,28 @@ def cmd_view(args: argparse.Namespace) -> int:
 def cmd_inspect(args: argparse.Namespace) -> int:
     ins, vd = args.viewer("inspect"), args.viewer("verdict")
     path = _recording(args.recording)
-    if args.pixel is None and not args.failures:
-        raise InputError("inspect: give --pixel X,Y or --failures")
-    if args.pixel is not None:
-        x, y = args.pixel
+    photo = getattr(args, "photo_pixel", None)
+    if args.pixel is None and photo is None and not args.failures:
+        raise InputError("inspect: give --pixel X,Y, --photo-pixel X,Y or --failures")
+    if args.pixel is not None and photo is not None:
+        raise InputError("inspect: give --pixel X,Y (the analysed image's) or --photo-pixel "
+                         "X,Y (the photos'), not both")
+    if args.pixel is not None or photo is not None:
+        info = ins.read_run_info(path, root=ins.resolve_root(path, args.root))
+        size = ins.photo_size(info)
+        if photo is not None:
+            px, py = photo
+            if size is not None and not (0 <= px < size[0] and 0 <= py < size[1]):
+                raise InputError(f"--photo-pixel {px},{py}: outside the {size[0]}x{size[1]} "
+                                 "photos")
+            x, y = ins.photo_to_analysis(info, px, py) or (px, py)
+        else:
+            x, y = args.pixel
+        if size is not None and 0 <= x < int(info["width"]) and 0 <= y < int(info["height"]):
+            # the run analysed smaller images: say which photo pixel this is
+            qx, qy = ins.analysis_to_photo(info, x, y)
+            print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis image "
+                  f"= photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos")
         print(vd.format_pixel_history(ins.pixel_history(path, x, y, root=args.root)))
     if args.failures:
         print(vd.format_failures(ins.failures(path, top=args.top, root=args.root)))

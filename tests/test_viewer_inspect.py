@@ -246,6 +246,22 @@ def test_a_photo_pixel_is_refused_with_the_analysis_pixel_it_means(downscaled, c
         "  (pixels of the 64x48 analysis image; the photos are 256x192, analysed at ×0.25)")
 
 
+def test_photo_pixel_explains_the_analysis_pixel_it_falls_in(downscaled, capsys):
+    """--photo-pixel counts as clean.png at full size, --probe and --gt do."""
+    rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "200,150")
+    assert rc == 0, err
+    rc2, out2, _ = _inspect(capsys, downscaled, "--pixel", "50,37")  # as --probe scales it
+    assert rc2 == 0 and out == out2
+    first = out.splitlines()[0]
+    assert first == ("pixel (50, 37) of the 64x48 analysis image = photo pixel (202, 150) "
+                     "of the 256x192 photos"), first
+    rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "256,10")
+    assert (rc, out) == (2, "") and err == [
+        "dynremove: error: --photo-pixel 256,10: outside the 256x192 photos"], err
+    rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "1,1", "--pixel", "1,1")
+    assert rc == 2 and "not both" in err[0], err
+
+
 def test_without_a_photo_size_the_message_is_unchanged(tmp_path, capsys):
     path = tmp_path / "run.rrd"
     fabricate_run([RerunSink(path, record_every_rows=8)], H=H, W=W, S=S, n_scans=1)

@@ -266,6 +266,11 @@ def outcome_line(h: dict[str, Any]) -> str:
     return "removed (in the final mask)"
 
 
+# the update cases of Sec. 3.2.3 (``events.CASE_*``)
+_CASE_WORDS = {1: "case 1: one of the source's two candidates in A_m",
+               2: "case 2: both in A_m, the better by the geometry",
+               3: "case 3: neither in A_m, the source occluded there: by the geometry"}
+
 LEGEND = ("(M: how alike the pixel and the winning cluster A_m of its candidate matches "
           "are, Sec. 3.2.1; at or under t_r it is called dynamic. b_m: A_m's weight, the "
           "sum of its candidates' confidences B_l. step: the visiting order, the viewer's "
@@ -342,8 +347,9 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     n_upd = len(h["updates"])
     if n_upd:
         u0 = h["updates"][0]
-        ev.append((u0["step"], f"  {n_upd} correspondence updates at this pixel (cases "
-                               + ", ".join(sorted({str(u['case']) for u in h['updates']}))
+        cases = sorted({int(u["case"]) for u in h["updates"]})
+        ev.append((u0["step"], f"  {n_upd} correspondence updates at this pixel (Sec. 3.2.3: "
+                               + "; ".join(_CASE_WORDS.get(c, f"case {c}") for c in cases)
                                + ")"))
     st = h.get("stages") or {}
     if st:

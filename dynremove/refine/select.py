@@ -98,9 +98,11 @@ class Selection:
     lingering: npt.NDArray[np.bool_] | None = None
 
 
-REASONS = {0: "not considered", 1: "chosen", 2: "combined (agrees with the chosen one)",
+REASONS = {0: "not considered", 1: "chosen",
+           2: "combined (agrees with the chosen one: averaged with it)",
            3: "its own mover", 4: "outside its frame or no content",
-           5: "disagrees with the consensus", 6: "agrees, not chosen",
+           5: "disagrees with the consensus",
+           6: "agrees with the consensus, not averaged in (not close to the chosen one)",
            7: "still shows the mover that lingered here"}
 
 
