@@ -118,6 +118,19 @@ def test_enough_matches_give_F_and_H(rng):
     assert geometry.sampson_sq(tv.F, pts, pts + (4, 3)).max() < 0.5
 
 
+def test_a_low_contrast_pair_is_matched_again_on_faint_keypoints(rng):
+    """A wall or a table analysed small: OpenCV's default SIFT contrast finds no
+    match, the retry on faint keypoints (geometry.LOW_CONTRAST) finds the motion."""
+    t = _texture(rng, 200, 260).astype(np.float32)
+    g = np.clip(128 + (t - 128) * 0.15 + 0.5, 0, 255).astype(np.uint8)
+    src = np.roll(g, (3, 4), axis=(0, 1))
+    first = geometry.match(geometry.detect(g)[1], geometry.detect(src)[1])
+    assert len(first) < geometry.MIN_MATCHES  # the default detection fails here
+    (tv,) = geometry.geometry_for_sources(g, [src])
+    assert tv.F is not None and tv.n_inliers_F >= 100
+    np.testing.assert_allclose(tv.H / tv.H[2, 2], [[1, 0, 4], [0, 1, 3], [0, 0, 1]], atol=0.05)
+
+
 def test_prepare_without_F_for_one_source(small_scene):
     """A blank source gets hasF False and the scan still has finite similarities."""
     from dynremove import preset
