@@ -22,7 +22,8 @@ from typing import Any, Sequence
 
 import cv2
 
-from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, Terminated, cmd_batch, cmd_bench,
+from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, Terminated, clear_stop,
+                                request_stop, cmd_batch, cmd_bench,
                                 cmd_composite, cmd_demo, cmd_eval, cmd_export, cmd_inspect,
                                 cmd_run, cmd_view, interruption)
 from dynremove.errors import InputError
@@ -409,7 +410,11 @@ def _one_line(e: BaseException) -> str:
 
 
 def _on_sigterm(signum: int, frame: Any) -> None:
-    raise Terminated()
+    request_stop(Terminated)
+
+
+def _on_sigint(signum: int, frame: Any) -> None:
+    request_stop(KeyboardInterrupt)
 
 
 def viewer_module(name: str):
@@ -449,7 +454,10 @@ def _main(argv: Sequence[str] | None) -> int:
     debug = bool(os.environ.get("DYNREMOVE_DEBUG"))
 
     _quiet_opencv()
+    clear_stop()
     old = signal.signal(signal.SIGTERM, _on_sigterm)
+    old_int = (signal.signal(signal.SIGINT, _on_sigint)
+               if signal.getsignal(signal.SIGINT) is signal.default_int_handler else None)
     try:
         rc = int(args.fn(args) or 0)
         sys.stdout.flush()  # here, so that a closed pipe is caught below, not at exit
@@ -484,7 +492,10 @@ def _main(argv: Sequence[str] | None) -> int:
               "(set DYNREMOVE_DEBUG=1 for a traceback)", file=sys.stderr)
         return EXIT_INTERNAL
     finally:
+        clear_stop()
         signal.signal(signal.SIGTERM, old)
+        if old_int is not None:
+            signal.signal(signal.SIGINT, old_int)
 
 
 if __name__ == "__main__":

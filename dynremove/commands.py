@@ -43,6 +43,30 @@ class Terminated(BaseException):
     """SIGTERM, raised in the main thread between chunks of work."""
 
 
+# The stop (KeyboardInterrupt or Terminated) a signal asked for, until it is seen
+# to propagate: an exception raised by a signal handler while a ``__del__`` runs
+# (llvmlite frees compiled objects so) is printed as "Exception ignored" and
+# dropped, and the run would go on to exit 0. The run checks it at each stage.
+_PENDING_STOP: list[type[BaseException]] = []
+
+
+def request_stop(kind: type[BaseException]) -> None:
+    """A signal handler's: remember the stop, then raise it."""
+    _PENDING_STOP[:] = [kind]
+    raise kind()
+
+
+def check_stop() -> None:
+    """Raise a stop that a signal asked for and that was lost on its way up."""
+    if _PENDING_STOP:
+        raise _PENDING_STOP.pop()()
+
+
+def clear_stop() -> None:
+    """The stop reached the command's handler (or a new command starts)."""
+    _PENDING_STOP.clear()
+
+
 def interruption(e: BaseException | None) -> BaseException | None:
     """The KeyboardInterrupt or Terminated behind ``e``: ``e`` itself, or one in its
     ``__cause__`` / ``__context__`` chain; None if there is none.
@@ -198,6 +222,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         bar("full-size output", 1.0)
     if gt_full is not None:
         gt = _resized_mask(gt_full, res.dynamic.shape)  # the output's size
+    check_stop()  # a Ctrl-C lost in the last stage: nothing is written
     bar("writing", 0.0)
     report = write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
                            record=args.record, reference=ref_info)
@@ -344,6 +369,7 @@ class _Where:
         self.stage = "while loading the images"
 
     def __call__(self, stage: str, frac: float) -> None:
+        check_stop()
         label = self.bar.label(stage)
         self.stage = f"during {label}" if frac < 1.0 else f"after {label}"
         self.bar(stage, frac)

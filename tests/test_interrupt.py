@@ -336,3 +336,40 @@ def test_interruption_walks_the_cause_chain():
     loop.__context__ = ValueError("b")
     loop.__context__.__context__ = loop  # a cycle ends the walk
     assert interruption(loop) is None
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_a_ctrl_c_lost_in_a_finaliser_stops_the_run_at_the_next_stage(tmp_path, capsys):
+    """Python drops an exception raised while a ``__del__`` runs ("Exception ignored
+    in ...": llvmlite frees compiled objects so, and a Ctrl-C landed there in a
+    trust test, whose run then ended with exit 0). The handler remembers the stop;
+    the run raises it at its next stage: exit 130, no outputs."""
+    from dynremove import commands
+    from dynremove.cli import main
+
+    class Finaliser:
+        fired = False
+
+        def __del__(self):
+            if not Finaliser.fired:
+                Finaliser.fired = True
+                commands.request_stop(KeyboardInterrupt)  # as the SIGINT handler does
+
+    real = commands.remove_dynamic
+
+    def run_with_a_lost_ctrl_c(*a, **k):
+        Finaliser()  # dropped at once: its KeyboardInterrupt is printed and ignored
+        return real(*a, **k)
+
+    images = _write_set(tmp_path / "set", (48, 64))
+    out = tmp_path / "out"
+    commands.remove_dynamic = run_with_a_lost_ctrl_c
+    try:
+        rc = main(["run", str(images), "--out", str(out), "--max-scans", "1"])
+    finally:
+        commands.remove_dynamic = real
+    err = capsys.readouterr().err
+    assert Finaliser.fired  # (pytest collects the ignored exception, not stderr)
+    assert rc == 130 and "dynremove: interrupted" in err, err
+    assert not (out / "clean.png").exists()
+    commands.check_stop()  # nothing left pending for the next command
