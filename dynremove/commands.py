@@ -214,7 +214,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         if rec is not None:
             rec.flush()
             rec.disconnect()
-    res.timings["load"] = t_load
+    res.timings = {"load": t_load, **res.timings}  # first, as on the terminal
     bar = _bar(args, params)  # the steps after the pipeline's, on the same bar
     if args.output_size == "full" and iset.scale < 1.0 and not iset.video:
         bar("full-size output", 0.0)
