@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from dynremove.events import CASE_BOTH_IN_CLUSTER, CASE_GEOMETRY, CASE_ONE_IN_CLUSTER
+
 def _label(v: bool | None) -> str:
     return "?" if v is None else ("dynamic" if v else "static")
 
@@ -267,9 +269,10 @@ def outcome_line(h: dict[str, Any]) -> str:
 
 
 # the update cases of Sec. 3.2.3 (``events.CASE_*``)
-_CASE_WORDS = {1: "case 1: one of the source's two candidates in A_m",
-               2: "case 2: both in A_m, the better by the geometry",
-               3: "case 3: neither in A_m, the source occluded there: by the geometry"}
+_CASE_WORDS = {
+    CASE_ONE_IN_CLUSTER: "case 1: one of the source's two candidates in A_m",
+    CASE_BOTH_IN_CLUSTER: "case 2: both in A_m, the better by the geometry",
+    CASE_GEOMETRY: "case 3: neither in A_m, the source occluded there: by the geometry"}
 
 LEGEND = ("(M: how alike the pixel and the winning cluster A_m of its candidate matches "
           "are, Sec. 3.2.1; at or under t_r it is called dynamic. b_m: A_m's weight, the "
