@@ -21,11 +21,10 @@ import numpy.typing as npt
 MIN_MATCHES = 15  # fewer matches than this: no reliable F for that source
 # a source with fewer matches than this is matched again with keypoints of low
 # contrast (SIFT's contrast threshold 0.01 instead of OpenCV's 0.04): a wall and a
-# table analysed at 360x480 gave 6-14 matches for 4 sources, 387-589 with the retry.
-# Retrying below 30 matches too was measured worse on DAVIS (8 weak sets' mean J
-# 0.522 -> 0.500: motocross-jump 0.475 -> 0.261)
+# table analysed at 360x480 gave 6-14 matches for 4 sources, 387-589 with the retry
 RETRY_BELOW = MIN_MATCHES
 LOW_CONTRAST = 0.01
+RETRY_MIN_INLIERS = 2 * MIN_MATCHES  # the F of a retry is kept from this many inliers
 
 
 @dataclass(frozen=True)
@@ -194,7 +193,7 @@ def geometry_for_sources(ref_gray: npt.NDArray[np.uint8], src_grays: list[npt.ND
     the result does not depend on ``workers``. A source with fewer than
     ``RETRY_BELOW`` matches is matched again on keypoints of low contrast
     (``LOW_CONTRAST``: walls, tables, sky; small analysis sizes); that geometry
-    is kept when its F has at least ``MIN_MATCHES`` inliers, more than before.
+    is kept when its F has at least ``RETRY_MIN_INLIERS`` inliers, more than before.
     """
     workers = workers or os.cpu_count() or 1
     with ThreadPoolExecutor(max_workers=workers) as pool:
@@ -216,9 +215,11 @@ def geometry_for_sources(ref_gray: npt.NDArray[np.uint8], src_grays: list[npt.ND
         if len(m) <= len(matches[k]):
             continue
         v = estimate_two_view(xy_r2[m[:, 0]], low_xy[k][m[:, 1]], seed=seed)
-        # kept only as a geometry the first match lacked: an F on enough inliers
-        # (a few low-contrast matches on a mover gave an F of 11 inliers of 37)
-        if v.F is not None and v.n_inliers_F >= MIN_MATCHES and v.n_inliers_F > (
+        # kept only as a geometry the first match lacked: an F on RETRY_MIN_INLIERS
+        # or more (faint matches on a mover gave an F of 11 inliers of 37; on
+        # motocross-jump, Fs of 15-18 inliers misaligned every source and the
+        # whole photo was refilled)
+        if v.F is not None and v.n_inliers_F >= RETRY_MIN_INLIERS and v.n_inliers_F > (
                 views[k].n_inliers_F if views[k].F is not None else 0):
             views[k] = v
     return views
