@@ -26,7 +26,8 @@ from dynremove.evaluation import composite, synth
 from dynremove.evaluation.evaluate import SCORE_KEYS, find_sets, format_table, run_eval
 from dynremove.evaluation.metrics import psnr_in_mask, ssim_in_mask
 from dynremove.evaluation.whole_photo import (damage_percent, delta_e76, leftover_percent,
-                                              leftover_split, psnr, ssim)
+                                              leftover_split, own_mover_fill_percent, psnr,
+                                              ssim)
 
 N = 200
 BG = (120, 130, 140)
@@ -308,6 +309,72 @@ def test_eval_on_synthetic_scenes_without_free(tmp_path):
     rep = run_eval(tmp_path, methods=["telea"], progress=False)
     (r,) = rep["sets"]
     assert r["damage"] == 0.0 and r["leftover"] is not None and r["unrecoverable"] is None
+
+
+def _own_case():
+    """Two sources over a 40x60 reference; the fill replaced rows 10..29, cols 10..49
+    (800 px). Source 0's field is the identity, source 1's is shifted 20 px right.
+    Source 0's own mover covers its cols 10..29; source 1's its cols 40..59, which
+    the shifted field reaches from the reference's cols 20..39."""
+    H, W = 40, 60
+    replaced = np.zeros((H, W), bool)
+    replaced[10:30, 10:50] = True
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    fields = np.stack([np.stack([gx, gy], -1), np.stack([gx + 20, gy], -1)])
+    m0 = np.zeros((H, W), bool)
+    m0[:, 10:30] = True
+    m1 = np.zeros((H, W), bool)
+    m1[:, 40:60] = True
+    return replaced, fields, [m0, m1]
+
+
+def test_own_mover_fill_counts_the_members_on_their_own_movers():
+    replaced, fields, masks = _own_case()
+    members = np.zeros((2,) + replaced.shape, bool)
+    members[0] = replaced  # source 0 alone: its mover under cols 10..29 = half of 40 cols
+    assert own_mover_fill_percent(replaced, members, fields, masks) == 50.0
+    members[1] = replaced  # both: ghosted where at least one of the two is on its mover
+    # cols 10..19: source 0 on its mover (1 of 2); 20..29: both; 30..39: source 1
+    # (x + 20 in 50..59); 40..49: source 1 lands outside its frame (not a mover)
+    assert own_mover_fill_percent(replaced, members, fields, masks) == 75.0
+    members[0] = False  # source 1 alone: cols 20..39 of the 40
+    assert own_mover_fill_percent(replaced, members, fields, masks) == 50.0
+
+
+def test_own_mover_fill_undefined_and_bad_inputs():
+    replaced, fields, masks = _own_case()
+    members = np.zeros((2,) + replaced.shape, bool)
+    assert own_mover_fill_percent(replaced, members, fields, masks) is None  # nothing filled
+    members[1] = replaced
+    assert own_mover_fill_percent(replaced, members, fields, [masks[0], None]) is None
+    # a source without a mask that is not a member does not matter
+    assert own_mover_fill_percent(replaced, members, fields, [None, masks[1]]) == 50.0
+    with pytest.raises(ValueError):
+        own_mover_fill_percent(replaced, members[:1], fields, masks)
+    with pytest.raises(ValueError):
+        own_mover_fill_percent(replaced, members, fields[..., :1], masks)
+
+
+def test_eval_reports_the_own_mover_fill_of_the_default_preset(tmp_path):
+    # a synthetic scene: every view has its true mask, so the fill's sources can be judged
+    from dynremove.evaluation.evaluate import load_set, own_mover_fill
+    from dynremove.pipeline import remove_dynamic
+
+    synth.write_scene(synth.make_scene(seed=2, n_views=5, size=(120, 160), n_objects=2),
+                      tmp_path / "syn")
+    rep = run_eval(tmp_path, methods=["dynremove", "median"], progress=False)
+    by = {r["method"]: r for r in rep["sets"]}
+    assert by["median"]["own_mover"] is None  # no fill by selection
+    (es,) = find_sets(tmp_path)
+    ls = load_set(es)
+    assert ls.masks is not None and all(m is not None for m in ls.masks)
+    res = remove_dynamic(ls.images, ref=ls.ref, names=ls.names)
+    sel = res.selection
+    direct = own_mover_fill_percent(sel.replaced, sel.members, np.stack(sel.fields),
+                                    [ls.masks[i] for i in res.source_indices])
+    assert own_mover_fill(ls, res) == direct == by["dynremove"]["own_mover"]
+    assert direct is not None and 0.0 <= direct <= 100.0
+    assert "mean own-mover fill %" in format_table(rep)
 
 
 DATA = Path(os.environ.get("DYNREMOVE_DATA", Path(__file__).resolve().parents[2] / "shared/data"))

@@ -90,15 +90,15 @@ from dynremove.errors import InputError
 from dynremove.evaluation import baselines
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask, ssim_in_mask
 from dynremove.evaluation.whole_photo import (damage_percent, leftover_percent, leftover_split,
-                                              psnr, ssim)
+                                              own_mover_fill_percent, psnr, ssim)
 from dynremove.params import Params, preset
-from dynremove.pipeline import remove_dynamic
+from dynremove.pipeline import Result, remove_dynamic
 
 METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
 #: Figures of a row (``null`` where they do not apply).
 SCORE_KEYS = ("jaccard", "psnr", "ssim", "psnr_whole", "ssim_whole", "damage", "leftover",
-              "leftover_kept", "leftover_refilled", "unrecoverable")
+              "leftover_kept", "leftover_refilled", "unrecoverable", "own_mover")
 
 # Variants of the base preset for ``--ablation`` (field -> value). A variant whose
 # fields are not all Params fields, or whose values Params rejects, is skipped with
@@ -205,6 +205,8 @@ class LoadedSet:
     scale: float
     notes: list[str]
     free: np.ndarray | None = None  # (H, W) bool: ref pixels some other view sees free
+    # (H, W) bool true mask of every image (None where an image has none)
+    masks: list[np.ndarray | None] | None = None
 
 
 def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None = None
@@ -218,8 +220,11 @@ def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None 
     else:
         r = io.resolve_ref(ref, iset.names)
     H, W = iset.images[0].shape[:2]
-    mp = es.mask_path(es.frames[r])
-    gt = io.read_mask(mp, (W, H)) if mp is not None else None
+    masks: list[np.ndarray | None] = []
+    for f in es.frames:
+        mp = es.mask_path(f)
+        masks.append(io.read_mask(mp, (W, H)) if mp is not None else None)
+    gt = masks[r]
     bg = None
     if es.background is not None:
         bg, _ = io.read_image(es.background)
@@ -230,7 +235,8 @@ def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None 
     if es.free is not None:
         free = io.read_mask(es.free, (W, H))
     return LoadedSet(name=es.name, images=iset.images, names=iset.names, ref=r, gt=gt,
-                     background=bg, scale=iset.scale, notes=list(iset.notes), free=free)
+                     background=bg, scale=iset.scale, notes=list(iset.notes), free=free,
+                     masks=masks)
 
 
 # --------------------------------------------------------------------------- methods
@@ -242,15 +248,19 @@ def _finite(x: float | None, cap: float = PSNR_CAP_DB) -> float | None:
     return float(min(x, cap))
 
 
-def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None
-          ) -> dict[str, float | None]:
+def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None,
+          result: Result | None = None) -> dict[str, float | None]:
     """Every figure of :data:`SCORE_KEYS` that applies (the others None).
 
     Jaccard if a detection and a true mask exist; PSNR/SSIM in the true mask;
     whole-image PSNR/SSIM with a background; damage / leftover / unrecoverable
-    with a background and a true mask (``free.png`` for the recoverable part).
+    with a background and a true mask (``free.png`` for the recoverable part);
+    own_mover (:func:`own_mover_fill`) for a run's ``result`` whose sources
+    have true masks.
     """
     out: dict[str, float | None] = dict.fromkeys(SCORE_KEYS)
+    if result is not None:
+        out["own_mover"] = own_mover_fill(ls, result)
     if dynamic is not None and ls.gt is not None:
         out["jaccard"] = float(jaccard(dynamic, ls.gt))
     if clean is None or ls.background is None:
@@ -269,9 +279,24 @@ def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None
     return out
 
 
-def run_method(method: str, ls: LoadedSet, params: Any | None = None
+def own_mover_fill(ls: LoadedSet, result: Result) -> float | None:
+    """Percent of the pixels the fill by selection replaced whose fill came mostly
+    from the sources' own true movers (``whole_photo.own_mover_fill_percent``);
+    None without a fill by selection, or where a source used has no true mask."""
+    sel = result.selection
+    if sel is None or not len(sel.fields) or sel.members is None or ls.masks is None:
+        return None
+    return own_mover_fill_percent(sel.replaced, sel.members, np.stack(sel.fields),
+                                  [ls.masks[i] for i in result.source_indices])
+
+
+def run_method(method: str, ls: LoadedSet, params: Any | None = None, *,
+               detail: dict | None = None
                ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
-    """Run one method on a loaded set: (clean, dynamic, notes); None = not applicable."""
+    """Run one method on a loaded set: (clean, dynamic, notes); None = not applicable.
+
+    With ``detail`` (a dict), the pipeline's :class:`Result` is stored under
+    ``"result"``."""
     notes: list[str] = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -289,6 +314,8 @@ def run_method(method: str, ls: LoadedSet, params: Any | None = None
                 raise ValueError(f"method {method!r} needs params")
             res = remove_dynamic(ls.images, ref=ls.ref, params=params, names=ls.names)
             clean, dyn = res.clean, res.dynamic
+            if detail is not None:
+                detail["result"] = res
     seen = set()
     for w in caught:
         msg = f"{method}: {w.message}"
@@ -338,15 +365,18 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
         row: dict[str, Any] = {"set": es.name, "method": method}
         try:
             if key in done:
-                clean, dyn, secs = done[key]
+                clean, dyn, secs, res = done[key]
             else:
                 t = time.perf_counter()
                 params = _make_params(pd) if pd is not None else None
-                clean, dyn, n = run_method(method if pd is None else "pipeline", ls, params)
+                detail: dict = {}
+                clean, dyn, n = run_method(method if pd is None else "pipeline", ls, params,
+                                           detail=detail)
                 secs = time.perf_counter() - t
                 notes.extend(n)
-                done[key] = (clean, dyn, secs)
-            row.update(score(ls, clean, dyn))
+                res = detail.get("result")
+                done[key] = (clean, dyn, secs, res)
+            row.update(score(ls, clean, dyn, res))
             row["seconds"] = round(secs, 3) if (clean is not None or dyn is not None) else None
         except Exception as e:  # noqa: BLE001 - recorded, the run goes on
             row.update(dict.fromkeys(SCORE_KEYS))
@@ -565,12 +595,19 @@ def format_table(report: dict) -> str:
     n_sets = len(set_names)
     table.append([f"mean J ({_count(n_sets, 'set')})"]
                  + [_fmt(summ[m]["jaccard"], ".3f") for m in methods])
+    if any(summ[m]["own_mover"] is not None for m in methods):
+        # (the fill by selection, on sets whose every frame has a true mask)
+        table.append(["mean own-mover fill %"]
+                     + [_fmt(summ[m]["own_mover"], ".1f") for m in methods])
     if any_bg:
         table.append(["mean PSNR dB (in mask)"] + [_fmt(summ[m]["psnr"], ".2f") for m in methods])
         table.append(["mean SSIM (in mask)"] + [_fmt(summ[m]["ssim"], ".3f") for m in methods])
     table.append(["mean seconds"] + [_fmt(summ[m]["seconds"], ".1f") for m in methods])
     head = "cells: Jaccard" + (" | sets with a background: Jaccard PSNR(dB) SSIM in the true "
                                "mask" if any_bg else "")
+    if any(summ[m]["own_mover"] is not None for m in methods):
+        head += ("\n  own-mover fill %: of the pixels the fill replaced, those taken mostly "
+                 "from the other photos' own true movers (ghosts)")
     out = [head] + _render(table, len(set_names))
     if any_bg:
         out += [""] + _format_whole(report, methods, by, info, set_names)

@@ -4,7 +4,8 @@ PSNR / SSIM of the whole image, :func:`delta_e76` (CIE76 colour difference),
 :func:`damage_percent` (good pixels the method broke) and
 :func:`leftover_percent` (mover pixels it could have removed but did not) and
 :func:`leftover_split` (of those, the ones left as the input showed them and
-the ones changed, but wrongly).
+the ones changed, but wrongly) and :func:`own_mover_fill_percent` (filled pixels
+taken from the other photos' own movers: the ghosts).
 Pure functions on plain arrays, like :mod:`dynremove.evaluation.metrics`
 (masks ``(H, W)`` indexed ``[y, x]``, images ``(H, W)`` or ``(H, W, C)``).
 """
@@ -26,6 +27,7 @@ __all__ = [
     "damage_percent",
     "leftover_percent",
     "leftover_split",
+    "own_mover_fill_percent",
     "DAMAGE_DILATE_PX",
     "DE_MAX",
     "DE_BLUR_SIGMA",
@@ -438,3 +440,69 @@ def leftover_split(
     kept = 100.0 * int(np.count_nonzero(wrong & as_input & count)) / n
     refilled = 100.0 * int(np.count_nonzero(wrong & ~as_input & count)) / n
     return kept, refilled
+
+
+def own_mover_fill_percent(
+    replaced: npt.ArrayLike,
+    members: npt.ArrayLike,
+    fields: npt.ArrayLike,
+    source_masks: list[npt.ArrayLike | None],
+) -> float | None:
+    """Percent of the filled pixels whose fill came mostly from the sources' own movers.
+
+    Issue 10: "a source's own mover must never enter the fill". A replaced
+    pixel is *ghosted* when at least half of the sources combined there
+    (``members``) sample it, through their field, inside their *own* true
+    mover mask (each source's annotated mask, in its own frame; nearest pixel).
+    A member sampled outside its frame counts as not on a mover.
+
+    Parameters
+    ----------
+    replaced : (H, W) bool-like ndarray
+        The pixels the fill replaced (reference frame).
+    members : (S, H, W) bool-like ndarray
+        The sources combined at each replaced pixel (``Selection.members``).
+    fields : (S, H, W, 2) float ndarray
+        Each source's match (x, y) in its own pixels (``Selection.fields``).
+    source_masks : list of S (H, W) bool-like ndarrays or None
+        Each source's true mover mask; ``None`` where a source has none.
+
+    Returns
+    -------
+    float or None
+        Percent in ``[0, 100]`` of the replaced pixels with at least one member;
+        ``None`` when there is no such pixel or some member source has no mask.
+
+    Raises
+    ------
+    ValueError
+        Shapes that do not agree.
+    """
+    rep = _as_mask(replaced, "replaced")
+    mem = np.asarray(members, bool)
+    f = np.asarray(fields)
+    S = len(source_masks)
+    if mem.shape != (S,) + rep.shape or f.shape[:3] != mem.shape or f.shape[3:] != (2,):
+        raise ValueError(f"members {mem.shape}, fields {f.shape} and {S} source masks do "
+                         f"not agree with replaced {rep.shape}")
+    ys, xs = np.nonzero(rep & mem.any(0))
+    if len(ys) == 0:
+        return None
+    n_mem = np.zeros(len(ys), np.int64)
+    n_own = np.zeros(len(ys), np.int64)
+    for k in range(S):
+        mk = mem[k, ys, xs]
+        if not mk.any():
+            continue
+        if source_masks[k] is None:
+            return None
+        sm = _as_mask(source_masks[k], "source mask")
+        h, w = sm.shape
+        u = np.rint(f[k, ys, xs, 0]).astype(np.int64)
+        v = np.rint(f[k, ys, xs, 1]).astype(np.int64)
+        inside = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        own = np.zeros(len(ys), bool)
+        own[inside] = sm[v[inside], u[inside]]
+        n_mem += mk
+        n_own += mk & own
+    return float(100.0 * np.count_nonzero(2 * n_own >= n_mem) / len(ys))
