@@ -353,8 +353,10 @@ def read_events(path: str | Path, kind: str, *, root: str = "") -> np.ndarray:
     """
     if kind not in _KINDS:
         raise ValueError(f"kind must be one of {sorted(_KINDS)}, got {kind!r}")
+    K = None
     if kind == "decisions":
-        dtype = decision_dtype(int(read_run_info(path, root=root).get("K", 0)))
+        K = read_run_info(path, root=root).get("K")
+        dtype = decision_dtype(0 if K is None else int(K))
     elif kind == "replacements":
         dtype = REPLACEMENT_DTYPE
     else:
@@ -365,6 +367,10 @@ def read_events(path: str | Path, kind: str, *, root: str = "") -> np.ndarray:
     if first is None:
         return np.zeros(0, dtype)
     n = len(first.flatten())
+    if kind == "decisions" and K is None and n:
+        # a recording cut short before the run info's K: the candidate slots per row
+        slots = _column(t, f"{entity}:cand_src")
+        dtype = decision_dtype(0 if slots is None else len(slots.flatten()) // n)
     out = np.zeros(n, dtype)
     for name in dtype.names:
         col = _column(t, f"{entity}:{name}")
@@ -530,7 +536,7 @@ def _decision_dict(d: np.void, t_r: float, names: list[str]) -> dict[str, Any]:
         s = int(d["cand_src"][k])
         if s < 0:
             continue
-        cands.append(dict(slot=k, src=s, src_name=names[s] if s < len(names) else str(s),
+        cands.append(dict(slot=k, src=s, src_name=names[s] if s < len(names) else f"source {s}",
                           x=int(d["cand_xy"][k, 0]), y=int(d["cand_xy"][k, 1]),
                           B=float(d["cand_B"][k]), cluster=int(d["cand_cluster"][k])))
     clusters: dict[int, dict[str, float]] = {}
@@ -607,7 +613,7 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     def rep_dict(r: np.void) -> dict[str, Any]:
         s = int(r["src"])
         return dict(scan=int(r["scan"]), step=int(r["step"]), x=int(r["x"]), y=int(r["y"]),
-                    src=s, src_name=names[s] if 0 <= s < len(names) else str(s),
+                    src=s, src_name=names[s] if 0 <= s < len(names) else f"source {s}",
                     src_x=int(r["src_x"]), src_y=int(r["src_y"]), score=float(r["score"]),
                     tie_break=bool(r["tie_break"]), n_patches=int(r["n_patches"]))
 

@@ -47,13 +47,23 @@ def cluster_words(sc: dict[str, Any] | None, d: dict[str, Any] | None,
         return (f"no cluster: {n} candidate{'s' if n != 1 else ''}, all DBSCAN noise"
                 if n else "no candidate (all outside the sources)")
     rest = _the_others(n, k, size, d)
+    # (0 sources known: a recording cut short before the run info's source names)
+    of = f" of {n_sources}" if n_sources else ""
     if short:
-        return (f"A_m {size} of {n} candidates from {len(srcs)} of {n_sources} sources"
+        return (f"A_m {size} of {n} candidates from {len(srcs)}{of} sources"
                 f"{', ' + rest if rest else ''}, b_m {b_m:.2f}, k {k}")
     return (f"winning cluster A_m{'' if cid is None else f' (cluster {cid})'}: {size} of "
-            f"{n} candidates from {len(srcs)} of {n_sources} sources ({', '.join(srcs)})"
+            f"{n} candidates from {len(srcs)}{of} sources ({', '.join(srcs)})"
             f"{'; ' + rest if rest else ''}; b_m = Σ B_l = {b_m:.2f}; "
             f"k = {k} cluster{'s' if k != 1 else ''}")
+
+
+def _against_t_r(M: float, t_r: float) -> str:
+    """"≤ t_r 0.30" or "> t_r 0.30"; t_r NaN (the recording stops before the run's
+    parameters): says so instead of comparing with it."""
+    if t_r != t_r:
+        return "(t_r unknown: the recording stops before the run's parameters)"
+    return f"{'≤' if M <= t_r else '>'} t_r {t_r:.2f}"
 
 
 def _the_others(n: int, k: int, size: int, d: dict[str, Any] | None) -> str:
@@ -187,7 +197,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         if M != M:
             why = "no cluster of candidates formed (undecided)"
         else:
-            why = f"M = {M:.2f} {'≤' if M <= t_r else '>'} t_r {t_r:.2f}"
+            why = f"M = {M:.2f} {_against_t_r(M, t_r)}"
         if dyn:
             head = f"dynamic in scan {key['scan']} (step {key['step']}): {why}"
             others = [sc["scan"] for sc in scans if sc is not key]
@@ -312,7 +322,7 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         if sc["scan"] in dec_scans:
             continue
         M = sc["M"]
-        mtxt = "no cluster" if M != M else f"M {M:.2f} {'≤' if M <= h['t_r'] else '>'} t_r"
+        mtxt = "no cluster" if M != M else f"M {M:.2f} {_against_t_r(M, h['t_r'])}"
         cw = cluster_words(sc, None, len(h["source_names"]), short=True)
         ev.append((sc["step"], f"  scan {sc['scan']} step {sc['step']}: {sc['verdict']} "
                                f"({mtxt}{'; ' + cw if cw and M == M else ''}; "
@@ -321,8 +331,7 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         if d["M"] != d["M"]:
             verdict = f"no cluster → {'DYNAMIC' if d['dynamic'] else 'undecided'}"
         else:
-            op = "≤" if d["M"] <= d["t_r"] else ">"
-            verdict = (f"M {d['M']:.2f} {op} t_r {d['t_r']:.2f} → "
+            verdict = (f"M {d['M']:.2f} {_against_t_r(d['M'], d['t_r'])} → "
                        f"{'DYNAMIC' if d['dynamic'] else 'static'}")
         cd = d["consensus_dist"]
         txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
