@@ -384,7 +384,8 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
     """
     ref = np.asarray(full_images[result.ref_index])
     srcs = [np.asarray(full_images[i]) for i in result.source_indices]
-    return full_resolution(ref, srcs, result.clean, result.dynamic, result.selection)
+    return full_resolution(ref, srcs, result.clean, result.dynamic, result.selection,
+                           tau=float(result.params.get("select_tau", 10.0)))
 
 
 def _keep_sources(st: ScanInputs, keep: np.ndarray) -> ScanInputs:

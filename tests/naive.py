@@ -149,7 +149,7 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
 
-def full_resolution(reference, sources, clean_working, dynamic, selection):
+def full_resolution(reference, sources, clean_working, dynamic, selection, tau=10.0):
     """``upsample.full_resolution`` on the whole bounding box of the replaced region."""
     Hf, Wf = reference.shape[:2]
     h, w = dynamic.shape
@@ -212,4 +212,10 @@ def full_resolution(reference, sources, clean_working, dynamic, selection):
         out = cv2.inpaint(np.ascontiguousarray(out), (no_src & rep_roi).astype(np.uint8),
                           int(5 * max(sx, sy)), cv2.INPAINT_TELEA)
     clean[roi][rep_roi] = out[rep_roi]
+    # every replaced pixel whose colour moved by tau or more is in the dynamic map
+    lab_o = cv2.cvtColor(clean.astype(np.float32) / 255, cv2.COLOR_BGR2Lab)
+    lab_r = cv2.cvtColor(reference.astype(np.float32) / 255, cv2.COLOR_BGR2Lab)
+    moved = np.zeros_like(dyn_full)
+    moved[roi] = rep_roi
+    dyn_full |= moved & (np.linalg.norm(lab_o - lab_r, axis=-1) >= tau)
     return clean, dyn_full

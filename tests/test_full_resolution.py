@@ -43,6 +43,12 @@ def test_full_resolution_output(tmp_path):
     # outside the replaced region (the mask and its blend ring) the input, byte for byte
     region = cv2.dilate(mask.astype(np.uint8), np.ones((15, 15), np.uint8)).astype(bool)
     np.testing.assert_array_equal(clean[~region], ref_in[~region])
+    # and the mask holds every pixel the fill changed visibly (a trial found the
+    # full-size fill's rim, one working pixel wide, changed outside it)
+    lab_c, lab_i = (cv2.cvtColor(x.astype(np.float32) / 255, cv2.COLOR_BGR2Lab)
+                    for x in (clean, ref_in))
+    changed = np.linalg.norm(lab_c - lab_i, axis=-1) >= 10
+    assert changed.any() and not (changed & ~mask).any()
     # the mover is gone: the fill is near the true background
     gt = sc.masks[sc.ref_index]
     err = np.abs(clean.astype(int) - sc.background).mean(-1)[gt].mean()

@@ -33,6 +33,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from dynremove.refine.colour import delta_e
 from dynremove.refine.fields import mask_boxes, remap_points
 from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, add_offset,
                                       component_offsets, ring_agrees, ring_offset)
@@ -82,8 +83,8 @@ def _lab(pixels: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
 
 def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[np.uint8]],
                     clean_working: npt.NDArray[np.uint8], dynamic: npt.NDArray[np.bool_],
-                    selection: Selection | None) -> tuple[npt.NDArray[np.uint8],
-                                                          npt.NDArray[np.bool_]]:
+                    selection: Selection | None, *, tau: float = 10.0
+                    ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.bool_]]:
     """The clean reference and dynamic map at the full size of ``reference``.
 
     Parameters
@@ -97,12 +98,18 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
         The run's outputs at the working size.
     selection : Selection or None
         ``Result.selection`` of the run.
+    tau : float
+        CIE76 ΔE from which a recomputed pixel counts as changed (``select_tau``).
 
     Returns
     -------
     clean : (H, W, 3) uint8 ndarray
         Equal to ``reference`` outside the replaced region.
     dynamic : (H, W) bool ndarray
+        ``dynamic`` upsampled, plus every recomputed pixel whose colour moved by
+        ``tau`` or more (the full-size fill reaches one working pixel further, and
+        its seams may run outside ``dynamic``): as at the working size, a pixel
+        outside it differs from the reference by less than ``tau``.
     """
     Hf, Wf = reference.shape[:2]
     h, w = dynamic.shape
@@ -178,6 +185,8 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     if no_src.any():
         _inpaint(out, reference[y0:y1, x0:x1], rep, no_src, int(5 * blur))
     clean[qy + y0, qx + x0] = out
+    moved = delta_e(_lab(out), _lab(reference[qy + y0, qx + x0])) >= tau
+    dyn_full[qy[moved] + y0, qx[moved] + x0] = True
     return clean, dyn_full
 
 
