@@ -228,9 +228,6 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                            record=args.record, reference=ref_info)
     bar("writing", 1.0)
     bar.close()
-    if not res.dynamic.any():
-        _note(args, "nothing was found moving in the reference: clean.png is the "
-              "reference unchanged")
     score = (f"J {report['jaccard_vs_gt']:.3f} against the given mask, "
              if "jaccard_vs_gt" in report else "")
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"

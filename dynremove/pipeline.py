@@ -266,6 +266,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
                         "reference: the result is unreliable (misaligned fill, missed or "
                         "false detections). Photos of more overlap, or a larger --max-side "
                         f"than the {W}x{H} analysed, give more matches")
+        few = _seen_by_fewer_than_two(views, H, W) if len(views) >= 2 else 0.0
+        if few >= 0.25:
+            msgs.append(f"{100 * few:.0f} % of the reference is seen by fewer than two other "
+                        "photos (the camera moved far between them): there the run cannot "
+                        "tell which photo shows a mover and keeps the reference; photos that "
+                        "overlap more, or more photos, cover it")
         if len(images) == 2:
             msgs.append("only 2 photos: where they disagree, either may show the mover; the "
                         "reference is kept there unless the colours of the detected region "
@@ -357,6 +363,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
                         "sources saw the background there and filled it (--select-minority 0 "
                         "keeps the majority's view)")
             warnings.warn(msgs[-1], stacklevel=2)
+    if not dyn.any():
+        flagged = int(sum(int(sm["n_dynamic"]) for sm in summaries))
+        msgs.append("nothing was found moving in the reference: the clean image is the "
+                    "reference unchanged" + (
+                        f" (the scans flagged {flagged} px, in specks that the clean-up of "
+                        "L removed: thinner than its opening, or under --min-region-px "
+                        f"{params.min_region_px} px)" if flagged and params.clean_mask else ""))
+        warnings.warn(msgs[-1], stacklevel=2)
     clock.stop()
     timings["total"] = time.perf_counter() - t_all
     result = Result(
@@ -395,6 +409,21 @@ def _keep_sources(st: ScanInputs, keep: np.ndarray) -> ScanInputs:
     return dataclasses.replace(st, **{
         k: np.ascontiguousarray(getattr(st, k)[keep]) for k in per_source
         if getattr(st, k) is not None})
+
+
+def _seen_by_fewer_than_two(views: list[geometry.TwoView], H: int, W: int,
+                            step: int = 8) -> float:
+    """Share of the reference (an (H, W) image, sampled every ``step`` px) that fewer
+    than two sources see, each source's frame mapped through its homography."""
+    ys, xs = np.mgrid[step // 2:H:step, step // 2:W:step].astype(np.float64)
+    pts = np.stack([xs.ravel(), ys.ravel(), np.ones(xs.size)])
+    seen = np.zeros(xs.size, np.int64)
+    for v in views:
+        q = v.H @ pts
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u, w = q[0] / q[2], q[1] / q[2]
+        seen += (q[2] > 0) & (u >= 0) & (u <= W - 1) & (w >= 0) & (w <= H - 1)
+    return float(np.mean(seen < 2))
 
 
 def _coverage(st: ScanInputs, params: Params) -> np.ndarray:

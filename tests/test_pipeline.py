@@ -279,3 +279,22 @@ def test_dropping_sources_drops_every_per_source_array():
         a, b = getattr(st, f.name), getattr(out, f.name)
         if isinstance(a, np.ndarray) and a.shape[:1] == (S,) and a.ndim > 1 or f.name == "hasF":
             np.testing.assert_array_equal(b, a[keep], err_msg=f.name)
+
+
+def test_share_of_the_reference_seen_by_fewer_than_two_sources():
+    """The note for sets shot while panning far (a trial's 3 tennis frames 20 apart:
+    53 % of the reference seen by one source only, and nothing removed, silently)."""
+    from dynremove.method.geometry import TwoView
+    from dynremove.pipeline import _seen_by_fewer_than_two
+
+    H, W = 80, 100
+
+    def shifted(dx):
+        Hm = np.eye(3)
+        Hm[0, 2] = dx  # reference x -> source x + dx
+        return TwoView(F=None, H=Hm, n_matches=0, n_inliers_F=0, n_inliers_H=0)
+
+    assert _seen_by_fewer_than_two([shifted(0), shifted(0)], H, W) == 0.0
+    # the second source sees the reference's x < 40 only (x + 60 <= 99)
+    assert _seen_by_fewer_than_two([shifted(0), shifted(60)], H, W) == pytest.approx(0.6, abs=0.05)
+    assert _seen_by_fewer_than_two([shifted(-200), shifted(200)], H, W) == 1.0
