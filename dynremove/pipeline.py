@@ -24,7 +24,8 @@ from dynremove.events import EventSink, NullSink, RunInfo
 from dynremove.method import correspondence, features, geometry
 from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
-from dynremove.params import DEFAULT, Params
+from dynremove.io import resolve_ref
+from dynremove.params import DEFAULT, Params, preset
 from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.duplicates import agreement_with_reference
 from dynremove.refine.fill import fuse_background
@@ -64,6 +65,51 @@ class Result:
     # the fill by selection (default preset): per-pixel source, mover maps, seams
     selection: Selection | None = None
     source_indices: list[int] = field(default_factory=list)  # images used as sources
+
+
+def api_params(params: Params | str | dict | None) -> Params:
+    """``remove_dynamic``'s ``params``: a Params, a preset name (``"default"``,
+    ``"paper"``), a dict of Params fields over the default preset, or None (the
+    default preset). Raises InputError for an unknown name, field or bad value,
+    TypeError for another type."""
+    if params is None:
+        return DEFAULT
+    if isinstance(params, Params):
+        return params
+    if isinstance(params, str):
+        try:
+            return preset(params)
+        except ValueError as e:
+            raise InputError(f"params: {e}") from None
+    if isinstance(params, dict):
+        unknown = sorted(set(params) - {f.name for f in dataclasses.fields(Params)})
+        if unknown:
+            raise InputError(f"params: unknown field(s) {', '.join(unknown)} (the fields "
+                             "of dynremove.Params)")
+        try:
+            return DEFAULT.replace(**params)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"params: {e}") from None
+    raise TypeError("params must be a dynremove.Params, a preset name, a dict of Params "
+                    f"fields or None, got {type(params).__name__}")
+
+
+def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
+            names: Sequence[str]) -> int:
+    """``remove_dynamic``'s ``ref`` as an index: None = the middle image; an int,
+    negative from the end as in Python; ``"auto"`` (``video.auto_reference``); a
+    name of ``names``. Raises InputError when it names nothing or is out of range."""
+    if isinstance(ref, str) and ref.strip().lower() == "auto":
+        from dynremove.video import auto_reference
+
+        r, note, _ = auto_reference(images, names)
+        warnings.warn(note, stacklevel=3)
+        return r
+    if isinstance(ref, (bool, float)):
+        raise InputError(f"reference {ref!r}: give an int index, a name or 'auto'")
+    if isinstance(ref, (np.integer, int)):
+        ref = int(ref)
+    return resolve_ref(ref, names)
 
 
 def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
@@ -191,8 +237,9 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
     return st, views
 
 
-def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
-                   params: Params = DEFAULT, sink: EventSink | None = None,
+def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None,
+                   params: Params | str | dict | None = DEFAULT,
+                   sink: EventSink | None = None,
                    probes: Sequence[tuple[int, int]] = (), sample_static: float = 0.0,
                    names: Sequence[str] | None = None, preset_name: str = "custom",
                    kernel: str = "numba", chunk_rows: int | None = None,
@@ -204,9 +251,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     ----------
     images : sequence of (H, W, 3) uint8 BGR ndarrays
         The set; all the same size.
-    ref : int, optional
-        Index of the reference (default: the middle image).
-    params : Params
+    ref : int or str, optional
+        The reference: an index (negative counts from the end, as in Python), a
+        name of ``names``, or ``"auto"`` (the sharpest image with the most keypoint
+        matches, as ``run --ref auto``; a warning names it). Default: the middle image.
+    params : Params, str, dict or None
+        The method's parameters: a Params, a preset name (``"default"``,
+        ``"paper"``), a dict of Params fields applied over the default preset, or
+        None (the default preset).
     sink : EventSink, optional
         Observer of the scans (default NullSink: nothing recorded).
     probes : sequence of (x, y)
@@ -223,15 +275,25 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | None = None,
     Returns
     -------
     Result
+
+    Raises
+    ------
+    InputError
+        Fewer than 2 images, images of different sizes or not (H, W, 3) uint8, a
+        ``ref`` that names nothing or is out of range, an unknown preset, Params
+        field or a bad value, a probe outside the image.
+    TypeError
+        ``params`` of another type.
     """
-    ref = len(images) // 2 if ref is None else int(ref)
-    validate_images(images, ref)
+    params = api_params(params)
+    validate_images(images, 0)
+    names = list(names) if names is not None else [f"image{i}" for i in range(len(images))]
+    ref = api_ref(ref, images, names)
     sink = NullSink() if sink is None else sink
     H, W = images[0].shape[:2]
     for (x, y) in probes:
         if not (0 <= x < W and 0 <= y < H):
             raise InputError(f"probe pixel ({x}, {y}) is outside the {W}x{H} image")
-    names = list(names) if names is not None else [f"image{i}" for i in range(len(images))]
     if sink.enabled and hasattr(type(sink), "begin"):  # optional hook (RerunSink): open
         sink.begin(names, (H, W), images=images, ref=ref)  # the recording before features
     timings: dict[str, float] = {}

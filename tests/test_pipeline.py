@@ -298,3 +298,35 @@ def test_share_of_the_reference_seen_by_fewer_than_two_sources():
     # the second source sees the reference's x < 40 only (x + 60 <= 99)
     assert _seen_by_fewer_than_two([shifted(0), shifted(60)], H, W) == pytest.approx(0.6, abs=0.05)
     assert _seen_by_fewer_than_two([shifted(-200), shifted(200)], H, W) == 1.0
+
+
+def test_the_api_takes_ref_and_params_as_the_cli_does():
+    """A trial called remove_dynamic(ref=-1), ref="auto", params=None and a dict and
+    got bare tracebacks (AttributeError, ValueError): the API now takes what the
+    CLI takes, and refuses the rest with InputError / TypeError."""
+    import warnings
+
+    from dynremove import InputError, Params, remove_dynamic
+    from dynremove.pipeline import api_params, api_ref
+
+    assert api_params(None) == Params() == api_params("default")
+    assert api_params("paper").max_scans == 4
+    assert api_params({"t_r": 0.25}) == Params(t_r=0.25)
+    for bad in ({"bogus": 1}, {"t_r": -1}, "nope"):
+        with pytest.raises(InputError, match="params"):
+            api_params(bad)
+    with pytest.raises(TypeError):
+        api_params(3)
+    names = ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]
+    assert [api_ref(r, [], names) for r in (-1, -4, 0, None, "b.jpg", "c")] == [3, 0, 0, 2, 1, 2]
+    for bad in (4, -5, "x", 1.5, True):
+        with pytest.raises(InputError):
+            api_ref(bad, [], names)
+    sc = synth.make_scene(seed=0, n_views=4, size=(96, 128))
+    res = remove_dynamic(sc.images, ref=-1, params={"t_r": 0.3})
+    assert res.ref_index == 3 and res.params["t_r"] == 0.3
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        res = remove_dynamic(sc.images, ref="auto", params=None)
+    assert any(str(m.message).startswith("--ref auto: ") for m in w)
+    assert 0 <= res.ref_index < 4
