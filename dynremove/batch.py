@@ -180,8 +180,14 @@ def _images_in(folder: Path) -> list[Path]:
     return [q for q in files if q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q)]
 
 
-def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = ()) -> list[BatchSet]:
-    """Every set below ``root`` (itself included), sorted by name; see the module doc."""
+def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
+              notes: list[str] | None = None) -> list[BatchSet]:
+    """Every set below ``root`` (itself included), sorted by name; see the module doc.
+
+    ``notes`` (a list) receives a line for what a user may expect to be run and is
+    not: the subfolders of a folder that is itself a set (never searched), and a
+    folder with a single photo (no set)."""
+    notes = [] if notes is None else notes
     root = Path(root)
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")
@@ -202,13 +208,21 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = ()) -> list[
                 found.append(BatchSet(name_of(d), tuple(imgs), gt if gt.is_dir() else None))
                 return
         imgs = _images_in(d)
-        if len(imgs) >= 2:
-            found.append(BatchSet(name_of(d), tuple(imgs)))
-            return
         try:
             entries = sorted(q for q in d.iterdir() if not q.name.startswith("."))
         except OSError:
+            entries = []
+        if len(imgs) >= 2:
+            found.append(BatchSet(name_of(d), tuple(imgs)))
+            subs = [q.name for q in entries if q.is_dir() and q.name.lower() not in SKIP_DIRS
+                    and q.resolve() not in skip]
+            if subs:
+                notes.append(f"{name_of(d)}: its {len(imgs)} photos are one set, so its "
+                             f"subfolders are not searched: {', '.join(subs)} (move the "
+                             "photos into a subfolder of their own)")
             return
+        if len(imgs) == 1:
+            notes.append(f"{name_of(d)}: one photo only ({imgs[0].name}): not a set")
         for q in entries:
             if q.is_dir() and q.name.lower() not in SKIP_DIRS:
                 walk(q)
@@ -334,15 +348,22 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
               preset_name: str, jobs: int = 1, max_side: int | None = None,
               ref: str | None = None, frames: int | None = None, span: str | None = None,
               pick: str = "sharpest", scheduler: str | None = None,
-              on_done: Callable[[int, int, dict], None] | None = None) -> dict:
+              on_done: Callable[[int, int, dict], None] | None = None,
+              on_note: Callable[[str], None] | None = None) -> dict:
     """Run every set below ``root`` into ``out``; write and return the summary.
 
     Returns ``{"root", "out", "sets": [row, ...], "n_ok", "n_skipped", "n_failed",
-    "wall_s", "jobs", "scheduler"}``; rows in set-name order (see SUMMARY_FIELDS).
+    "wall_s", "jobs", "scheduler", "notes"}``; rows in set-name order (see
+    SUMMARY_FIELDS); ``notes``: what the search of ``root`` did not run (each also
+    given to ``on_note`` before the sets run).
     """
     out = io.prepare_out_dir(out)
     prev = _previous_rows(out)
-    sets = find_sets(root, exclude=[out])
+    notes: list[str] = []
+    sets = find_sets(root, exclude=[out], notes=notes)
+    for n in notes:
+        if on_note is not None:
+            on_note(n)
     if not sets:
         raise InputError(f"{root}: no sets found (a set is a folder of at least 2 images, "
                          "a folder with frames/, or a video)")
@@ -357,7 +378,8 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
                "n_failed": sum(r["status"] == "error" for r in rows),
                "wall_s": round(time.perf_counter() - t0, 3),
                "jobs": None if scheduler else jobs, "scheduler": scheduler,
-               "workers": workers, "preset": preset_name, "options": options}
+               "workers": workers, "preset": preset_name, "options": options,
+               "notes": notes}
     io.write_json(out / "summary.json", summary)
     buf = _pyio.StringIO()
     w = csv.DictWriter(buf, fieldnames=SUMMARY_FIELDS, lineterminator="\n")

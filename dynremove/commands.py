@@ -542,8 +542,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
     s = run_batch(args.root, args.out, params=params, preset_name=args.preset,
                   jobs=args.jobs, max_side=args.max_side, ref=args.ref, frames=args.frames,
                   span=args.span, pick=args.pick, scheduler=args.scheduler,
-                  on_done=None if args.quiet else stderr_progress)
-    print(f"{len(s['sets'])} sets: {s['n_ok']} done, {s['n_skipped']} skipped (already "
+                  on_done=None if args.quiet else stderr_progress,
+                  on_note=lambda n: _note(args, n))
+    n_sets = len(s["sets"])
+    print(f"{n_sets} set{'s' if n_sets != 1 else ''}: {s['n_ok']} done, {s['n_skipped']} skipped (already "
           f"done), {s['n_failed']} failed; wall {s['wall_s']:.1f} s -> {args.out}/summary.csv")
     for r in s["sets"]:
         if r["status"] == "error":

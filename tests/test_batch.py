@@ -268,3 +268,28 @@ def test_dask_scheduler_without_workers_is_an_input_error(tmp_path, root, capsys
                    cluster.scheduler_address, "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2 and "no worker joined within 1 s" in err and "Traceback" not in err, err
+
+
+def test_what_the_search_does_not_run_is_said(tmp_path, capsys):
+    """A trial put two photos beside its set folders: batch ran those two as the only
+    set and skipped the folders without a word; a folder of one photo vanished too."""
+    s = synth.make_scene(seed=1, n_views=3, size=(64, 80), n_objects=1)
+    r = tmp_path / "root"
+    write_set(r, s.images[:2])  # stray photos at the top
+    write_set(r / "trip", s.images)
+    notes: list[str] = []
+    assert [x.name for x in batch.find_sets(r, notes=notes)] == ["root"]
+    assert notes == ["root: its 2 photos are one set, so its subfolders are not searched: "
+                     "trip (move the photos into a subfolder of their own)"]
+    r2 = tmp_path / "root2"
+    write_set(r2 / "trip", s.images)
+    write_set(r2 / "lonely", s.images[:1])
+    notes = []
+    assert [x.name for x in batch.find_sets(r2, notes=notes)] == ["trip"]
+    assert notes == ["lonely: one photo only (view0.png): not a set"]
+    out = tmp_path / "out"
+    assert main(["batch", str(r2), "--out", str(out), "--max-scans", "1"]) == 0
+    o, err = capsys.readouterr()
+    assert "dynremove: note: lonely: one photo only (view0.png): not a set" in err
+    assert o.startswith("1 set: 1 done")
+    assert json.loads((out / "summary.json").read_text())["notes"] == notes
