@@ -129,6 +129,21 @@ def _listing(names: list[str], n: int = 5) -> str:
 RUN_OUTPUTS = ("clean.png", "dynamic_mask.png", "coverage.png")
 
 
+def size_hint(shape: tuple[int, int], first: tuple[int, int]) -> str:
+    """What a size that differs from the first image's (both (H, W)) may mean, for the
+    error: turned by 90° without an EXIF orientation, another resolution of the same
+    frame, or a crop."""
+    (h, w), (H0, W0) = shape, first
+    if (h, w) == (W0, H0):
+        return (" (turned by 90°: rotate it like the others, or give it the EXIF "
+                "orientation they have)")
+    if abs(w - W0) <= max(8, 0.05 * W0) and abs(h - H0) <= max(8, 0.05 * H0):
+        return " (a few pixels off: cropped? crop the photos to one size)"
+    if abs(w * H0 - h * W0) <= 0.01 * w * H0:
+        return f" (the same frame at another resolution: resize it to {W0}x{H0})"
+    return " (cropped or from another camera: crop or resize the photos to one size)"
+
+
 def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str]]:
     """Expand folders and files; return image paths and notes.
 
@@ -369,7 +384,8 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
     for p, im in zip(paths, images):
         if im.shape[:2] != (H0, W0):
             raise InputError(f"{p}: is {im.shape[1]}x{im.shape[0]} but {paths[0].name} is "
-                             f"{W0}x{H0}; all images must have the same size")
+                             f"{W0}x{H0}; all images must have the same size"
+                             + size_hint(im.shape[:2], (H0, W0)))
     if valid_mask is not None:
         given = read_valid_masks(valid_mask, paths, [(W0, H0)] * len(paths))
         valids = [g if v is None else (v if g is None else v & g)

@@ -308,7 +308,7 @@ def test_ref_api(scene):
     with pytest.raises(InputError, match="out of range"):
         remove_dynamic(scene.images[:3], ref=3)
     with pytest.raises(InputError, match="out of range"):
-        remove_dynamic(scene.images[:3], ref=-1)
+        remove_dynamic(scene.images[:3], ref=-4)  # -1 is the last one, as with --ref
     assert io.resolve_ref("view1", ["view0.png", "view1.png"]) == 1
     assert io.resolve_ref("-1", ["a.png", "b.png", "c.png"]) == 2
 
@@ -322,8 +322,9 @@ def test_different_sizes(tmp_path, capsys, scene, other):
     cv2.imwrite(str(bad), odd)
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, *paths, bad, "--out", out)
+    hint = "a few pixels off" if other[0] == H else "turned by 90°"
     assert_input_error(rc, err, str(bad), f"{other[1]}x{other[0]}", f"{W}x{H}", "same size",
-                       out=out)
+                       hint, out=out)
     with pytest.raises(InputError, match="same size"):
         remove_dynamic(list(scene.images[:3]) + [odd], ref=0)
 
