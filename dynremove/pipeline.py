@@ -24,7 +24,7 @@ from dynremove.events import EventSink, NullSink, RunInfo
 from dynremove.method import correspondence, features, geometry
 from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
-from dynremove.io import resolve_ref
+from dynremove.io import resolve_ref, size_hint
 from dynremove.params import DEFAULT, Params, preset
 from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.duplicates import agreement_with_reference
@@ -123,7 +123,8 @@ def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
                              f"{getattr(im, 'shape', None)} {getattr(im, 'dtype', None)}")
         if im.shape != shape:
             raise InputError(f"image {i} is {im.shape[1]}x{im.shape[0]}, image 0 is "
-                             f"{shape[1]}x{shape[0]}: all images must have the same size")
+                             f"{shape[1]}x{shape[0]}: all images must have the same size"
+                             + size_hint(im.shape[:2], shape[:2]))
     if shape[0] < 16 or shape[1] < 16:
         raise InputError(f"images are too small ({shape[1]}x{shape[0]}); need at least 16x16")
     if not 0 <= ref < len(images):
