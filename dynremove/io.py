@@ -273,12 +273,17 @@ def read_image_valid(path: Path) -> tuple[np.ndarray, np.ndarray | None, list[st
         alpha = img[:, :, 1]
         img = cv2.cvtColor(np.ascontiguousarray(img[:, :, 0]), cv2.COLOR_GRAY2BGR)
     valid = content_mask(img, alpha)
+    partial = 0 if alpha is None else int(np.count_nonzero((alpha > 0) & (alpha < 255)))
     if alpha is not None and valid is None:
-        notes.append(f"{path.name}: alpha channel dropped (no transparent pixels)")
+        notes.append(f"{path.name}: alpha channel dropped (no transparent pixels)"
+                     if not partial else
+                     f"{path.name}: alpha channel dropped ({partial} semi-transparent px "
+                     "taken at their stored colours, as if opaque)")
     elif valid is not None:
         how = "transparent (alpha 0) or black border" if alpha is not None else "black border"
         notes.append(f"{path.name}: {100 * (1 - valid.mean()):.1f} % without content "
-                     f"({how}): never flagged, never used as fill")
+                     f"({how}): never flagged, never used as fill"
+                     + (f"; {partial} semi-transparent px taken as opaque" if partial else ""))
     return img, valid, notes
 
 
