@@ -214,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--compare", default=None, metavar="PARAMS",
                    help="also run with other parameters (a preset name or field=value,...) "
                         "and log both side by side in the --record file")
-    r.add_argument("--quiet", action="store_true",
+    r.add_argument("-q", "--quiet", action="store_true",
                    help="print nothing but errors (no progress bars, notes or summary line; "
                         "the notes, warnings included, are in report.json)")
     add_input_flags(r)
@@ -241,7 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
     bt.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
                     help="downscale to at most PX (0 or 'none' = full size; default: only "
                          "above 1280 px)")
-    bt.add_argument("--quiet", action="store_true", help="no per-set lines on stderr")
+    bt.add_argument("-q", "--quiet", action="store_true", help="no per-set lines on stderr")
     add_input_flags(bt, valid_mask=False)
     add_param_flags(bt)
     bt.set_defaults(fn=cmd_batch)
@@ -255,7 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--record-detail", choices=("default", "full"), default="default",
                    help="'full': candidates in the source views at every recorded "
                         "decision (see run --record-detail)")
-    d.add_argument("--quiet", action="store_true")
+    d.add_argument("-q", "--quiet", action="store_true")
     add_param_flags(d)
     d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002, compare=None)
 
@@ -280,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "--max-side 1280)")
     b.add_argument("--no-reference", action="store_true",
                    help="skip the numba/reference speed ratio")
-    b.add_argument("--quiet", action="store_true", help="only the table, no progress lines")
+    b.add_argument("-q", "--quiet", action="store_true", help="only the table, no progress lines")
     add_param_flags(b)
     b.set_defaults(fn=cmd_bench)
 
@@ -315,7 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "of it, see ABLATIONS); prints mean J / PSNR per variant")
     e.add_argument("--variants", default=None, metavar="LIST",
                    help=f"with --ablation: comma-separated subset of {','.join(ABLATIONS)}")
-    e.add_argument("--quiet", action="store_true", help="no per-set progress on stderr")
+    e.add_argument("-q", "--quiet", action="store_true", help="no per-set progress on stderr")
     add_param_flags(e)
     e.set_defaults(fn=cmd_eval)
 
