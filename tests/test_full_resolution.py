@@ -150,3 +150,41 @@ def test_the_full_size_fill_takes_one_working_pixel_more():
     assert set(np.unique(out[out >= 1])) == {2}
     assert (out[:, :1] == -1).all() and (out[label == 2] == 2).all()
     assert np.array_equal(grow_replaced(label, 0), label)
+
+
+def test_a_replaced_region_as_wide_as_the_photo_leaves_the_inputs_alone():
+    """When the replaced region's box spans the photo's whole width, its rows are one
+    contiguous block: the ring's colour differences then wrote every source's samples
+    into the caller's reference (np.ascontiguousarray returned it, not a copy), and the
+    offsets were measured against those (a trial saw white blocks in a sky). The
+    inputs stay as given, and the result is the one for a reference held as a
+    view into a wider array (never contiguous, so copied even before the fix)."""
+    import dataclasses
+
+    from dynremove.pipeline import remove_dynamic
+    from dynremove.refine.upsample import full_resolution
+
+    sc = synth.make_scene(seed=0, n_views=4, size=(360, 480))
+    work = [cv2.resize(im, (240, 180), interpolation=cv2.INTER_AREA) for im in sc.images]
+    res = remove_dynamic(work, ref=sc.ref_index)
+    sel = res.selection
+    label = sel.label.copy()
+    label[40:52, :] = 1  # a band from the left edge to the right edge, from source 0
+    no_source = np.zeros_like(sel.no_source)
+    no_source[44:48, :] = True  # and the inpainting, across the whole width too
+    ref = sc.images[res.ref_index].copy()
+    srcs = [sc.images[i].copy() for i in res.source_indices]
+    kept = [ref.copy()] + [s.copy() for s in srcs]
+    wider = np.zeros((ref.shape[0], ref.shape[1] + 7, 3), np.uint8)
+    wider[:, :ref.shape[1]] = ref
+    view = wider[:, :ref.shape[1]]
+    assert not view.flags.c_contiguous
+    for ns in (sel.no_source, no_source):
+        band = dataclasses.replace(sel, label=label, no_source=ns)
+        clean, dyn = full_resolution(ref, srcs, res.clean, res.dynamic, band)
+        for a, b in zip([ref] + srcs, kept):
+            np.testing.assert_array_equal(a, b)
+        clean_v, dyn_v = full_resolution(view, srcs, res.clean, res.dynamic, band)
+        np.testing.assert_array_equal(clean, clean_v)
+        np.testing.assert_array_equal(dyn, dyn_v)
+        assert (clean[80:104] != ref[80:104]).any()  # the band was filled

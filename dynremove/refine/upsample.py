@@ -241,7 +241,10 @@ def _ring_difference(reference: np.ndarray, cand: np.ndarray, points: tuple[np.n
     ``reference``: the box's reference; ``cand`` (S + 1, N, 3): the candidates at
     ``points`` (the box's pixels the blurred ring reads).
     """
-    img = np.ascontiguousarray(reference)
+    # a copy, always: the candidates are written into it (np.ascontiguousarray would
+    # return the caller's reference itself when the box spans its whole width, and
+    # the writes below then overwrote the input photo and the ring read after)
+    img = np.array(reference, order="C", copy=True)
     ry, rx = np.nonzero(ring)
     ring_index = np.zeros(ring.shape, np.int32)
     ring_index[ry, rx] = np.arange(len(ry), dtype=np.int32)
@@ -267,7 +270,7 @@ def _inpaint(out: np.ndarray, reference: np.ndarray, rep: np.ndarray, hole: np.n
     m = 2 * radius + 2
     y0, y1 = max(ys.min() - m, 0), min(ys.max() + m + 1, H)
     x0, x1 = max(xs.min() - m, 0), min(xs.max() + m + 1, W)
-    box = np.ascontiguousarray(reference[y0:y1, x0:x1])
+    box = np.array(reference[y0:y1, x0:x1], order="C", copy=True)  # written below
     qy, qx = np.nonzero(rep)
     inside = (qy >= y0) & (qy < y1) & (qx >= x0) & (qx < x1)
     box[qy[inside] - y0, qx[inside] - x0] = out[inside]
