@@ -372,3 +372,18 @@ def test_probe_pixel_has_a_scrubbable_story(fabricated):
     col = next(n for n in t.column_names if n.endswith("TextLog:text"))
     texts = [v[0] for v in t.column(col).to_pylist() if v]
     assert len(texts) == 3 and all(s.startswith("(10,7) scan") for s in texts)
+
+
+def test_export_captions_name_the_post_scan_steps(method_run):
+    """The GIF's last frames are the post-scan steps and the written image, not
+    "scan 0 step N" (a trial read the final frame as part of the scan)."""
+    from viewer import export
+
+    res, path = method_run["res"], method_run["path"]
+    captions: list[str] = []
+    frames = export.render_frames(path, max_side=200, captions=captions)
+    assert len(captions) == len(frames)
+    assert captions[-1] == f"final: the written clean image   |L| = {int(res.dynamic.sum())} px"
+    stage_caps = [c for c in captions if c.startswith("after the scans: ")]
+    assert [c.split(": ")[1].split()[0] for c in stage_caps] == list(res.stages)
+    assert captions[0].startswith("scan 0   step ")

@@ -25,8 +25,9 @@ from viewer._images import overlay
 
 # -- frames ------------------------------------------------------------------------
 def render_frames(path_rrd: str | Path, *, max_side: int = 480,
-                  root: str = "") -> list[np.ndarray]:
-    """Montage frames (BGR uint8), one per recorded snapshot step."""
+                  root: str = "", captions: list[str] | None = None) -> list[np.ndarray]:
+    """Montage frames (BGR uint8), one per recorded snapshot step; ``captions`` (a
+    list) receives each frame's caption text."""
     store = vi.load_store(path_rrd)
     root = vi.resolve_root(path_rrd, root)  # a --compare recording: which of its runs
     p = P.Paths(root)
@@ -50,6 +51,10 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
     t = vi._arrow(store, p(P.REFERENCE_IMAGE))
     if t is not None:
         scan_of = dict(zip(t.column("step").to_pylist(), t.column("scan").to_pylist()))
+    # a finished run logs L after each post-scan step (clean-up, votes, snap, fill)
+    # at the steps just before its last image, the written clean image
+    stage_names = list(vi.read_stages(path_rrd, root=root))
+    final_step = int(img_steps.max()) if stage_names else None
     frames = []
     cache: dict[int, np.ndarray] = {}
     for step in steps:
@@ -67,8 +72,15 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
         canvas[:, W + 8:] = cur
         scan = scan_of.get(images[i][0], "?")
         small = cv2.resize(canvas, (out_w, out_h), interpolation=cv2.INTER_AREA)
-        frames.append(np.concatenate([_caption(
-            out_w, f"scan {scan}   step {step}   |L| = {int(L.sum())} px"), small], 0))
+        where = f"scan {scan}   step {step}"
+        if final_step is not None and step == final_step:
+            where = "final: the written clean image"
+        elif final_step is not None and final_step - len(stage_names) <= step < final_step:
+            where = f"after the scans: {stage_names[step - final_step + len(stage_names)]}"
+        text = f"{where}   |L| = {int(L.sum())} px"
+        if captions is not None:
+            captions.append(text)
+        frames.append(np.concatenate([_caption(out_w, text), small], 0))
     return frames
 
 
