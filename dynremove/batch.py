@@ -298,6 +298,8 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
         row.update(_row_from_report(report), status="ok")
     except Exception as e:  # noqa: BLE001 - recorded in the summary, the batch goes on
         msg = " ".join(str(e).split()) or type(e).__name__
+        if (out / "report.json").is_file():  # left as they were: nothing is lost
+            msg += (f" ({out} still holds an earlier run's outputs, not of these inputs)")
         row.update(status="error", error=msg if isinstance(e, InputError)
                    else f"{type(e).__name__}: {msg}")
     row["seconds"] = round(time.perf_counter() - t0, 3)

@@ -293,3 +293,21 @@ def test_what_the_search_does_not_run_is_said(tmp_path, capsys):
     assert "dynremove: note: lonely: one photo only (view0.png): not a set" in err
     assert o.startswith("1 set: 1 done")
     assert json.loads((out / "summary.json").read_text())["notes"] == notes
+
+
+def test_a_set_that_fails_after_an_earlier_run_says_its_outputs_are_old(tmp_path, capsys):
+    """A trial broke a set that had run before: its error row sat next to the old
+    clean.png without a word. The old outputs stay (nothing is lost); the error says
+    they are not of these inputs."""
+    s = synth.make_scene(seed=1, n_views=3, size=(64, 80), n_objects=1)
+    r = tmp_path / "root"
+    paths = write_set(r / "trip", s.images)
+    out = tmp_path / "out"
+    assert main(["batch", str(r), "--out", str(out), *FAST]) == 0
+    old = (out / "trip" / "clean.png").read_bytes()
+    assert cv2.imwrite(str(paths[1]), cv2.resize(s.images[1], (40, 32)))
+    assert main(["batch", str(r), "--out", str(out), *FAST]) == 1
+    capsys.readouterr()
+    err = summary_rows(out)["trip"]["error"]
+    assert "same size" in err and "still holds an earlier run's outputs" in err, err
+    assert (out / "trip" / "clean.png").read_bytes() == old
