@@ -27,7 +27,7 @@ from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
 from dynremove.io import resolve_ref, size_hint
 from dynremove.params import DEFAULT, Params, preset
 from dynremove.refine.concurrency import for_each_source
-from dynremove.refine.duplicates import agreement_with_reference
+from dynremove.refine.duplicates import agreement_with_reference, duplicate_sources
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
@@ -320,6 +320,22 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                 keep.append(np.flatnonzero(~copy))
                 views = [views[k] for k in keep[0]]
                 srcs = [srcs[k] for k in keep[0]]
+        if params.near_copy_agree > 0 and len(srcs) > 2:
+            dups = duplicate_sources(np.stack([images[s] for s in srcs]),
+                                     [v.H for v in views], params.near_copy_agree)
+            if dups:
+                msgs.append("near-copies among the sources, each counted once (the same "
+                            "evidence twice would out-vote the others): " + ", ".join(
+                                f"{names[srcs[j]]} (of {names[srcs[k]]}, {100 * a:.1f} % "
+                                "alike)" for j, k, a in dups))
+                sub = np.setdiff1d(np.arange(len(srcs)), [j for j, _, _ in dups])
+                base = keep[0] if keep else np.arange(len(srcs))
+                if keep:
+                    keep[0] = base[sub]
+                else:
+                    keep.append(sub)
+                views = [views[k] for k in sub]
+                srcs = [srcs[k] for k in sub]
         weak = [k for k, v in enumerate(views) if v.F is None]
         if weak:
             msgs.append(_few_matches_note([(names[srcs[k]], views[k].n_matches)

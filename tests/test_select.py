@@ -549,3 +549,20 @@ def test_near_the_border_the_sources_that_see_a_pixel_decide():
     inner = np.zeros((H, W), bool)
     inner[34:76, 44:86] = True
     assert (_de(sel.clean, bg)[inner] < 5).mean() > 0.95
+
+
+def test_near_copies_among_the_sources_count_once():
+    """Two sources that are near-copies of each other (a burst that paused between two
+    shots) are the same evidence twice: the later one is dropped with a note, and the
+    run is the run without it (the mover is the one of the set without the copy)."""
+    from dynremove.evaluation import synth
+
+    sc = synth.make_scene(seed=3, n_views=5, size=(240, 320), n_objects=1)
+    ims = list(sc.images)
+    plain = remove_dynamic(ims, ref=2)
+    with pytest.warns(UserWarning, match=r"near-copies among the sources, each counted once"
+                                         r".*image5 \(of image1"):
+        dup = remove_dynamic(ims + [_jittered_copy(ims[1], 7)], ref=2)
+    assert dup.source_indices == plain.source_indices == [0, 1, 3, 4]
+    np.testing.assert_array_equal(dup.dynamic, plain.dynamic)
+    np.testing.assert_array_equal(dup.clean, plain.clean)

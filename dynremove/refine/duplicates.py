@@ -62,4 +62,38 @@ def agreement_with_reference(reference: npt.NDArray[np.uint8],
     return out
 
 
-__all__ = ["agreement_with_reference"]
+def duplicate_sources(sources: npt.NDArray[np.uint8],
+                      homographies: list[npt.NDArray[np.float64]], agree_min: float
+                      ) -> list[tuple[int, int, float]]:
+    """Sources that are near-copies of an earlier source: the same evidence twice.
+
+    Source j is a copy of source k < j when, aligned to k (``H_j H_k⁻¹``: source k
+    → reference → source j), at least ``agree_min`` of its pixels agree with k's
+    (``agreement_with_reference`` with k as the reference). A copy of a copy
+    counts against the first one kept.
+
+    Returns
+    -------
+    list of (j, k, agreement)
+        Each copy ``j``, the kept source ``k`` it copies, and their agreement.
+    """
+    S = len(sources)
+    dropped: list[tuple[int, int, float]] = []
+    gone: set[int] = set()
+    for k in range(S):
+        if k in gone:
+            continue
+        later = [j for j in range(k + 1, S) if j not in gone]
+        if not later:
+            break
+        inv_k = np.linalg.inv(homographies[k])
+        agree = agreement_with_reference(sources[k], sources[later],
+                                         [homographies[j] @ inv_k for j in later])
+        for j, a in zip(later, agree):
+            if a >= agree_min:
+                dropped.append((j, k, float(a)))
+                gone.add(j)
+    return dropped
+
+
+__all__ = ["agreement_with_reference", "duplicate_sources"]
