@@ -251,9 +251,12 @@ def read_image_valid(path: Path) -> tuple[np.ndarray, np.ndarray | None, list[st
     img = None if is_heif(head) else cv2.imdecode(
         data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if img is not None and img.ndim == 3 and img.shape[2] == 3 and _png_has_alpha(data):
-        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)  # ANYCOLOR dropped the alpha
+        oriented = img  # (ANYCOLOR applied the EXIF orientation and dropped the alpha)
+        img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)  # the alpha, stored orientation
         if img is not None and img.ndim == 2:  # grey + alpha comes back grey: no alpha
             img = cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        elif img is not None and img.ndim == 3 and img.shape[2] == 4:
+            img = _oriented_like(img, oriented)
     if img is None:
         img = _read_with_pillow(path, head)
     if img.dtype == np.uint16:
@@ -316,6 +319,23 @@ def _read_with_pillow(path: Path, head: bytes) -> np.ndarray:
         raise InputError(f"{path}: not a readable image (corrupt or unsupported format)"
                          ) from None
     return np.ascontiguousarray(arr)
+
+
+# the 8 EXIF orientations as array operations (on (H, W, ...) arrays)
+_DIHEDRAL = (lambda a: a, lambda a: a[:, ::-1], lambda a: a[::-1, ::-1], lambda a: a[::-1],
+             lambda a: a.swapaxes(0, 1), lambda a: a.swapaxes(0, 1)[:, ::-1],
+             lambda a: a.swapaxes(0, 1)[::-1, ::-1], lambda a: a.swapaxes(0, 1)[::-1])
+
+
+def _oriented_like(bgra: np.ndarray, oriented: np.ndarray) -> np.ndarray:
+    """``bgra`` (as stored: OpenCV's IMREAD_UNCHANGED ignores the EXIF orientation)
+    turned the way ``oriented`` (its colours as decoded upright) is: the one of the
+    8 orientations whose colours equal it, found by comparison; unchanged if none."""
+    for t in _DIHEDRAL:
+        bgr = t(bgra[..., :3])
+        if bgr.shape == oriented.shape and np.array_equal(bgr, oriented):
+            return np.ascontiguousarray(t(bgra))
+    return bgra
 
 
 def _png_has_alpha(data: np.ndarray) -> bool:

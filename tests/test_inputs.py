@@ -357,3 +357,29 @@ def test_truncated_recording_is_read_up_to_the_damage(tmp_path, capsys, recordin
     assert "Warning" not in err and "Traceback" not in err
     (note,) = [ln for ln in err.splitlines() if "cut.rrd" in ln]
     assert note.startswith("dynremove: note:") and "damaged or cut short" in note
+
+
+@pytest.mark.parametrize("orientation", [3, 6, 8])
+def test_rgba_png_with_an_exif_orientation_is_read_upright(tmp_path, orientation):
+    """OpenCV's IMREAD_UNCHANGED (needed for the alpha) ignores the EXIF orientation:
+    a trial's RGBA PNGs tagged 6 came out sideways while their RGB twins did not.
+    Colours and alpha are turned alike: the transparent band lands where the
+    upright RGB twin's black band is."""
+    from PIL import Image
+
+    from dynremove import io
+
+    rng = np.random.default_rng(orientation)
+    rgb = rng.integers(30, 220, (48, 64, 3), dtype=np.uint8)
+    alpha = np.full((48, 64), 255, np.uint8)
+    alpha[:, :10] = 0  # a transparent band on the stored left
+    rgb[:, :10] = 0
+    exif = Image.Exif()
+    exif[0x0112] = orientation
+    for name, arr, mode in (("a.png", np.dstack([rgb, alpha]), "RGBA"), ("b.png", rgb, "RGB")):
+        Image.fromarray(arr, mode).save(tmp_path / name, exif=exif.tobytes())
+    img, valid, _ = io.read_image_valid(tmp_path / "a.png")
+    twin, _ = io.read_image(tmp_path / "b.png")
+    assert img.shape == twin.shape == ((64, 48, 3) if orientation in (6, 8) else (48, 64, 3))
+    np.testing.assert_array_equal(img, twin)
+    assert valid is not None and np.array_equal(~valid, (twin == 0).all(-1))
