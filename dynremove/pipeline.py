@@ -473,10 +473,23 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
     ``full_images``: every image of the set at full resolution, in the order the
     run was given them (the run itself used smaller copies). Pixels outside the
     replaced region are the full-resolution reference's, byte for byte
-    (``refine.upsample.full_resolution``).
+    (``refine.upsample.full_resolution``). Raises InputError when they are not
+    (H, W, 3) uint8 images of one size with the analysed images' aspect, or too few.
     """
+    n = 1 + max([result.ref_index] + list(result.source_indices))
+    if len(full_images) < n:
+        raise InputError(f"full_images: {len(full_images)} images, the run had at least {n}")
     ref = np.asarray(full_images[result.ref_index])
     srcs = [np.asarray(full_images[i]) for i in result.source_indices]
+    h, w = result.clean.shape[:2]
+    for im in [ref] + srcs:
+        if im.dtype != np.uint8 or im.ndim != 3 or im.shape[2] != 3 or im.shape != ref.shape:
+            raise InputError(f"full_images: expected (H, W, 3) uint8 images of one size, got "
+                             f"{im.shape} {im.dtype}")
+    H, W = ref.shape[:2]
+    if H < h or W < w or abs(H * w - W * h) > max(H, W):  # the aspect, within a pixel
+        raise InputError(f"full_images are {W}x{H}: not the analysed {w}x{h} photos at "
+                         "full size (turned, or cropped?)")
     return full_resolution(ref, srcs, result.clean, result.dynamic, result.selection,
                            tau=float(result.params.get("select_tau", 10.0)))
 

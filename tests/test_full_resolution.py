@@ -188,3 +188,24 @@ def test_a_replaced_region_as_wide_as_the_photo_leaves_the_inputs_alone():
         np.testing.assert_array_equal(clean, clean_v)
         np.testing.assert_array_equal(dyn, dyn_v)
         assert (clean[80:104] != ref[80:104]).any()  # the band was filled
+
+
+def test_full_resolution_output_checks_its_images():
+    """A trial gave full_resolution_output turned, wrong-sized, too few, grey and float
+    images: silent wrong sizes or bare IndexError/ValueError. Now one InputError line."""
+    from dynremove import InputError
+    from dynremove.pipeline import full_resolution_output, remove_dynamic
+
+    sc = synth.make_scene(seed=0, n_views=4, size=(120, 160))
+    work = [cv2.resize(im, (80, 60), interpolation=cv2.INTER_AREA) for im in sc.images]
+    res = remove_dynamic(work, ref=1)
+    clean, dyn = full_resolution_output(res, sc.images)
+    assert clean.shape == (120, 160, 3) and dyn.shape == (120, 160)
+    bad = {"turned": [np.ascontiguousarray(im.swapaxes(0, 1)) for im in sc.images],
+           "cropped": [im[:, :150] for im in sc.images],
+           "too few": sc.images[:2],
+           "grey": [im[..., 0] for im in sc.images],
+           "float": [im.astype(np.float32) for im in sc.images]}
+    for what, ims in bad.items():
+        with pytest.raises(InputError, match="full_images"):
+            full_resolution_output(res, ims)
