@@ -618,7 +618,14 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             qx, qy = ins.analysis_to_photo(info, x, y)
             print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis image "
                   f"= photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos")
-        print(vd.format_pixel_history(ins.pixel_history(path, x, y, root=args.root)))
+        hist = ins.pixel_history(path, x, y, root=args.root)
+        print(vd.format_pixel_history(hist))
+        if size is not None and hist.get("final_dynamic") is False:
+            L = ins.read_final_dynamic(path, root=ins.resolve_root(path, args.root))
+            if L is not None and L[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].any():
+                print("  at full size the fill reaches one analysis pixel beyond L (and "
+                      "places its seams there): this photo pixel may have been recomputed; "
+                      "dynamic_mask.png holds it if it changed by ΔE 10 or more")
     if args.failures:
         print(vd.format_failures(ins.failures(path, top=args.top, root=args.root)))
     return EXIT_OK

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -478,3 +479,21 @@ def test_a_recording_cut_anywhere_is_read_without_an_internal_error(tmp_path, ca
         assert "t_r nan" not in out and "of 0 sources" not in out, (frac, out)
         answered += rc == 0
     assert answered > 0  # some cuts hold the scans' events
+
+
+def test_a_kept_pixel_next_to_L_says_the_full_size_fill_may_reach_it(downscaled, capsys):
+    """A trial asked about a photo pixel the full-size fill had changed (one analysis
+    pixel beyond L) and read "kept". Such pixels now get a line saying so; a kept
+    pixel away from L does not."""
+    L = vi.read_final_dynamic(downscaled)
+    assert L is not None and L.any() and not L.all()
+    near = cv2.dilate(L.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~L
+    far = ~cv2.dilate(L.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
+    line = "at full size the fill reaches one analysis pixel beyond L"
+    for where, want in ((near, True), (far, False)):
+        ys, xs = np.nonzero(where)
+        rc, out, err = _inspect(capsys, downscaled, "--pixel", f"{xs[0]},{ys[0]}")
+        assert rc == 0 and (line in out) == want, (where is near, out)
+    rc, out, _ = _inspect(capsys, downscaled, "--pixel", f"{np.nonzero(L)[1][0]},"
+                                                         f"{np.nonzero(L)[0][0]}")
+    assert rc == 0 and line not in out  # in L: removed, explained as such
