@@ -72,6 +72,19 @@ def at_output_size(res: Any, iset: Any, output_size: str = "full") -> Any:
     clean, dyn = full_resolution_output(res, full)
     Hf, Wf = clean.shape[:2]
     cov = cv2.resize(res.coverage, (Wf, Hf), interpolation=cv2.INTER_NEAREST)
+    sel = res.selection
+    if sel is not None and sel.members is not None:
+        # the pixels the full-size fill adds to the mask (its seams, and one working
+        # pixel beyond what it replaced) count the sources the fill took there, as
+        # L's pixels do: 0 only next to inpainted ones (not the outside's count)
+        used = np.where((sel.label >= 1) & ~sel.no_source,
+                        np.minimum(sel.members.sum(0), 255), 0).astype(res.coverage.dtype)
+        g = int(np.ceil(max(Wf / used.shape[1], Hf / used.shape[0]))) + 1  # the growth
+        near = cv2.dilate(cv2.resize(used, (Wf, Hf), interpolation=cv2.INTER_NEAREST),
+                          np.ones((2 * g + 1, 2 * g + 1), np.uint8))
+        added = dyn & ~cv2.resize(res.dynamic.view(np.uint8), (Wf, Hf),
+                                  interpolation=cv2.INTER_NEAREST).astype(bool)
+        cov[added] = near[added]
     timings = dict(res.timings, full_resolution=time.perf_counter() - t)
     return dataclasses.replace(res, clean=clean, dynamic=dyn, coverage=cov, timings=timings)
 
