@@ -329,11 +329,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                                 f"{names[srcs[j]]} (of {names[srcs[k]]}, {100 * a:.1f} % "
                                 "alike)" for j, k, a in dups))
                 sub = np.setdiff1d(np.arange(len(srcs)), [j for j, _, _ in dups])
-                base = keep[0] if keep else np.arange(len(srcs))
-                if keep:
-                    keep[0] = base[sub]
-                else:
-                    keep.append(sub)
+                # (keep: indices into the sources before any was dropped)
+                keep[:] = [(keep[0] if keep else np.arange(len(srcs)))[sub]]
                 views = [views[k] for k in sub]
                 srcs = [srcs[k] for k in sub]
         weak = [k for k, v in enumerate(views) if v.F is None]
