@@ -118,34 +118,6 @@ def test_enough_matches_give_F_and_H(rng):
     assert geometry.sampson_sq(tv.F, pts, pts + (4, 3)).max() < 0.5
 
 
-def _bf_ratio_matches(desc_a, desc_b, ratio=0.75):
-    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(desc_a, desc_b, k=2)
-    return np.array([(m[0].queryIdx, m[0].trainIdx) for m in knn
-                     if len(m) == 2 and m[0].distance < ratio * m[1].distance],
-                    np.int64).reshape(-1, 2)
-
-
-def test_match_equals_opencv_bruteforce(rng, small_scene):
-    """The BLAS nearest neighbours give OpenCV's BFMatcher pairs exactly: on real
-    SIFT of a textured pair (thousands of keypoints, a repeated texture making
-    near-ties), of the synthetic scene, and on float descriptors (the fallback)."""
-    g = _texture(rng, 300, 400)
-    g = np.tile(g[:, :200], (1, 2))  # repeated halves: many near-equal distances
-    src = np.roll(g, (5, 7), axis=(0, 1))
-    grays = [cv2.cvtColor(im, cv2.COLOR_BGR2GRAY) for im in small_scene.images]
-    pairs = [(g, src)] + [(grays[small_scene.ref_index], b) for b in grays]
-    n = 0
-    for a, b in pairs:
-        da, db = geometry.detect(a)[1], geometry.detect(b)[1]
-        got = geometry.match(da, db)
-        np.testing.assert_array_equal(got, _bf_ratio_matches(da, db))
-        n += len(got)
-    assert n > 500
-    fa = rng.normal(size=(300, 16)).astype(np.float32)
-    fb = np.concatenate([fa[:150] + 0.01, rng.normal(size=(200, 16)).astype(np.float32)])
-    np.testing.assert_array_equal(geometry.match(fa, fb), _bf_ratio_matches(fa, fb))
-
-
 def test_a_low_contrast_pair_is_matched_again_on_faint_keypoints(rng):
     """A wall or a table analysed small: OpenCV's default SIFT contrast finds no
     match, the retry on faint keypoints (geometry.LOW_CONTRAST) finds the motion."""
