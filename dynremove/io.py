@@ -226,14 +226,54 @@ def read_image(path: Path) -> tuple[np.ndarray, list[str]]:
     return img, notes
 
 
-def read_image_valid(path: Path) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
+def _depth_note(name: str, bits: int) -> str:
+    """The note of a 16-bit image read as ``bits``-bit data (``_depth_of`` reads it back)."""
+    if bits == 16:
+        return f"{name}: 16-bit image scaled to 8 bits"
+    return (f"{name}: 16-bit image holding {bits}-bit values (at most {2 ** bits - 1}): "
+            f"scaled to 8 bits by ÷{2 ** (bits - 8)}")
+
+
+def _depth_of(notes: list[str]) -> int:
+    """The bit depth a 16-bit image was read as, from its notes (``_depth_note``); 0
+    for an image that was not 16-bit."""
+    for n in notes:
+        m = re.search(r": 16-bit image (?:holding (\d+)-bit values|scaled to 8 bits)", n)
+        if m:
+            return int(m.group(1) or 16)
+    return 0
+
+
+def _to_8_bits(img: np.ndarray, bits: int | None = None) -> tuple[np.ndarray, int]:
+    """A uint16 image (H, W[, C]) as uint8, and the bit depth its colours use
+    (``bits``, when given: the depth of the set it belongs to).
+
+    Machine-vision and raw-converter PNGs often store 10-, 12- or 14-bit values
+    in 16 bits, unscaled: ``>> 8`` left a 12-bit photo at 0-15 (black, and
+    "nothing was found moving"). The depth is the smallest of 10, 12, 14 and
+    16 bits that holds the colour channels' maximum; an alpha channel (the 4th,
+    or the 2nd of grey + alpha) always scales from 16 bits.
+    """
+    colour = img if img.ndim == 2 else img[..., :3] if img.shape[2] >= 3 else img[..., :1]
+    top = int(colour.max()) if colour.size else 0
+    bits = bits or next(b for b in (10, 12, 14, 16) if top < 2 ** b)
+    out = (img >> (bits - 8)).astype(np.uint8) if bits < 16 else (img >> 8).astype(np.uint8)
+    if bits < 16 and img.ndim == 3 and img.shape[2] in (2, 4):
+        out[..., -1] = (img[..., -1] >> 8).astype(np.uint8)
+    return out, bits
+
+
+def read_image_valid(path: Path, *, depth16: int | None = None
+                     ) -> tuple[np.ndarray, np.ndarray | None, list[str]]:
     """Read one image as (H, W, 3) uint8 BGR and where it has content.
 
     Returns ``(image, valid, notes)``: ``valid`` is (H, W) bool, False where the
     alpha channel is 0 or where the frame is exactly black (0, 0, 0) in a region
     connected to its border (the empty border of a pre-aligned frame), None when
     the whole frame has content. Decoded by OpenCV, else Pillow (HEIC/HEIF
-    through pillow-heif, the ``heic`` extra).
+    through pillow-heif, the ``heic`` extra). A 16-bit image is read as data of
+    the smallest of 10, 12, 14 or 16 bits that holds its values (``_to_8_bits``),
+    or of ``depth16`` bits when given.
     """
     path = Path(path)
     notes: list[str] = []
@@ -260,8 +300,8 @@ def read_image_valid(path: Path) -> tuple[np.ndarray, np.ndarray | None, list[st
     if img is None:
         img = _read_with_pillow(path, head)
     if img.dtype == np.uint16:
-        img = (img >> 8).astype(np.uint8)
-        notes.append(f"{path.name}: 16-bit image scaled to 8 bits")
+        img, bits = _to_8_bits(img, depth16)
+        notes.append(_depth_note(path.name, bits))
     elif img.dtype != np.uint8:
         notes.append(f"{path.name}: {img.dtype} image rescaled to 8 bits")
         img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
@@ -403,8 +443,15 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             img, v, n = read_image_valid(p)
             images.append(img)
             valids.append(v)
-            per_file.extend(n)
-        notes.extend(_grouped_notes(per_file))
+            per_file.append(n)
+        depths = [_depth_of(n) for n in per_file]
+        deep = max(depths)
+        for i, p in enumerate(paths):
+            if 0 < depths[i] < deep:
+                # one camera's photos share a bit depth: a darker 12-bit photo (no
+                # value above 1023) is not 10-bit data
+                images[i], valids[i], per_file[i] = read_image_valid(p, depth16=deep)
+        notes.extend(_grouped_notes([n for ns in per_file for n in ns]))
     H0, W0 = images[0].shape[:2]
     for p, im in zip(paths, images):
         if im.shape[:2] != (H0, W0):

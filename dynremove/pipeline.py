@@ -307,6 +307,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     def geometry_notes(views: list[geometry.TwoView]) -> None:
         """The notes the geometry gives, warned as soon as it is known."""
         nonlocal srcs
+        strays = _strays(views)
+        if strays:
+            good = [v.n_inliers_H for v in views if geometry.aligned(v)]
+            msgs.append(_strays_note([(names[srcs[k]], views[k].n_matches) for k in strays],
+                                     min(good)))
+            keep.append(np.setdiff1d(np.arange(len(srcs)), strays))
+            views = [views[k] for k in keep[0]]
+            srcs = [srcs[k] for k in keep[0]]
         if params.near_copy_agree > 0 and len(srcs) > 1:
             agree = agreement_with_reference(
                 np.asarray(images[ref]), np.stack([images[s] for s in srcs]),
@@ -317,9 +325,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                             "out-vote the views that saw the background): " + ", ".join(
                                 f"{names[srcs[k]]} ({100 * agree[k]:.1f} % alike)"
                                 for k in np.flatnonzero(copy)))
-                keep.append(np.flatnonzero(~copy))
-                views = [views[k] for k in keep[0]]
-                srcs = [srcs[k] for k in keep[0]]
+                sub = np.flatnonzero(~copy)
+                # (keep: indices into the sources before any was dropped)
+                keep[:] = [(keep[0] if keep else np.arange(len(srcs)))[sub]]
+                views = [views[k] for k in sub]
+                srcs = [srcs[k] for k in sub]
         if params.near_copy_agree > 0 and len(srcs) > 2:
             dups = duplicate_sources(np.stack([images[s] for s in srcs]),
                                      [v.H for v in views], params.near_copy_agree)
@@ -333,10 +343,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                 keep[:] = [(keep[0] if keep else np.arange(len(srcs)))[sub]]
                 views = [views[k] for k in sub]
                 srcs = [srcs[k] for k in sub]
-        weak = [k for k, v in enumerate(views) if v.F is None]
+        weak = [k for k, v in enumerate(views) if not geometry.aligned(v)]
         if weak:
             msgs.append(_few_matches_note([(names[srcs[k]], views[k].n_matches)
-                                           for k in weak]))
+                                           for k in weak],
+                                          some_F=any(views[k].F is not None for k in weak)))
         if weak and 2 * len(weak) >= len(views):
             msgs.append(f"{len(weak)} of {len(views)} sources could not be aligned to the "
                         "reference: the result is unreliable (misaligned fill, missed or "
@@ -439,6 +450,13 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "sources saw the background there and filled it (--select-minority 0 "
                         "keeps the majority's view)")
             warnings.warn(msgs[-1], stacklevel=2)
+    if dyn.mean() > 0.5 and not any(geometry.aligned(v) for v in views):
+        # (a reference from another scene: 96.8 % of a breakdance frame came out as
+        # the camel photos' field, with only the "unreliable" note)
+        msgs.append(f"{100 * dyn.mean():.0f} % of the reference was replaced while no other "
+                    "photo could be aligned to it: they may not show its scene. Check the "
+                    "reference (--ref) and the photos")
+        warnings.warn(msgs[-1], stacklevel=2)
     if not dyn.any():
         flagged = int(sum(int(sm["n_dynamic"]) for sm in summaries))
         msgs.append("nothing was found moving in the reference: the clean image is the "
@@ -534,20 +552,49 @@ def _selection_coverage(cov: np.ndarray, dynamic: np.ndarray, selection: Selecti
     return np.where(dynamic, np.where(selection.no_source, 0, n), cov).astype(cov.dtype)
 
 
-def _few_matches_note(weak: list[tuple[str, int]]) -> str:
-    """One note for every source with too few keypoint matches (``(name, matches)``),
-    in the form of ``io``'s per-file notes: "a.jpg, b.jpg: what"."""
+def _strays(views: list[geometry.TwoView]) -> list[int]:
+    """Sources without a geometry (``geometry.aligned``) where at least half of the
+    sources have one, on a median of ``4 × MIN_MATCHES`` or more homography
+    inliers: a photo of another scene slipped into the set, or one too blurred to
+    match, among photos that match well. Used, it is aligned by the flow alone
+    and its content fills the reference (seen: a breakdance frame among camel
+    photos, 39 matches and an F on 10 of them, pasted its dancer's colours into
+    the fill). Where most sources lack a geometry (a fast pan, a sky), none is
+    a stray: the run keeps them all and says the result is unreliable."""
+    good = [v.n_inliers_H for v in views if geometry.aligned(v)]
+    if 2 * len(good) < len(views) or np.median(good) < 4 * geometry.MIN_MATCHES:
+        return []
+    return [k for k, v in enumerate(views) if not geometry.aligned(v)]
+
+
+def _strays_note(strays: list[tuple[str, int]], least: int) -> str:
+    """The note for the sources ``_strays`` leaves out (``(name, matches)``); ``least``:
+    the fewest homography inliers among the others."""
+    who = ", ".join(name for name, _ in strays)
+    n = ", ".join(str(m) for _, m in strays)
+    return (f"{who}: no consistent geometry with the reference ({n} keypoint "
+            f"match{'' if len(strays) == 1 and strays[0][1] == 1 else 'es'}, where every "
+            f"other photo has {least} or more on one homography): left out. A photo of "
+            "another scene, or one too blurred to match?")
+
+
+def _few_matches_note(weak: list[tuple[str, int]], *, some_F: bool = False) -> str:
+    """One note for every source not aligned (``geometry.aligned``; ``(name, matches)``),
+    in the form of ``io``'s per-file notes: "a.jpg, b.jpg: what". ``some_F``: some
+    of them still have an F."""
     names = [name for name, _ in weak]
     lo, hi = min(n for _, n in weak), max(n for _, n in weak)
     what = (f"only {lo}" if lo == hi else f"only {lo} to {hi}") + \
         f" keypoint match{'' if hi == 1 else 'es'}"
-    if len(weak) == 1:
-        return (f"{names[0]}: {what} with the reference; no epipolar term and no "
-                "homography pre-warp for it")
+    one = len(weak) == 1
+    tail = (f"no homography pre-warp for {'it' if one else 'them'} (an epipolar term from "
+            "an F on few matches at most)" if some_F
+            else f"no epipolar term and no homography pre-warp for {'it' if one else 'them'}")
+    if one:
+        return f"{names[0]}: {what} with the reference; {tail}"
     who = (", ".join(names) if len(names) <= 4
            else f"{len(names)} images ({names[0]}, ..., {names[-1]})")
-    return (f"{who}: {what} each with the reference; no epipolar term and no homography "
-            "pre-warp for them")
+    return f"{who}: {what} each with the reference; {tail}"
 
 
 def _dist_version(name: str) -> str:

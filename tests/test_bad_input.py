@@ -541,6 +541,29 @@ def test_converted_formats_run_with_a_note(tmp_path, capsys, scene, kind):
         assert any(note in n for n in report["notes"])
 
 
+def test_16_bit_pngs_of_12_bit_data_are_scaled_by_their_depth(tmp_path, scene):
+    """Machine-vision and raw-converter PNGs store 12-bit values in 16 bits unscaled:
+    a trial's set came out black (values 0-15) with "nothing was found moving". They
+    are read as 12-bit data, with a note; a darker photo of the set (no value above
+    1023) takes the set's depth, not 10 bits; an alpha channel scales from 16 bits."""
+    d = tmp_path / "s"
+    d.mkdir()
+    ims = scene.images[:3]
+    dark = ims[2] // 8  # every value under 32: x 16 stays under 1024
+    for i, im in enumerate([ims[0], ims[1], dark]):
+        cv2.imwrite(str(d / f"view{i}.png"), im.astype(np.uint16) * 16)
+    iset = io.load_image_set([d])
+    np.testing.assert_array_equal(iset.images[0], ims[0])
+    np.testing.assert_array_equal(iset.images[2], dark)  # not x 4 brighter
+    assert any("view0.png, view1.png, view2.png: 16-bit image holding 12-bit values" in n
+               for n in iset.notes), iset.notes
+    alpha = np.dstack([ims[0].astype(np.uint16) * 16, np.full((H, W), 65535, np.uint16)])
+    cv2.imwrite(str(tmp_path / "a.png"), alpha)
+    img, valid, notes = io.read_image_valid(tmp_path / "a.png")
+    np.testing.assert_array_equal(img, ims[0])
+    assert valid is None and "12-bit" in notes[0]
+
+
 def test_exif_rotated_jpegs(tmp_path, capsys, scene):
     """Orientation 6 (rotate 90° clockwise to display) is applied on load, and a set
     mixing tagged landscape files with an untagged portrait file loads consistently."""
