@@ -261,6 +261,23 @@ def _coarse_fill(values: np.ndarray, valid: np.ndarray, scale: int = 8) -> np.nd
     return cv2.resize(coarse, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, -1)
 
 
+def min_witnesses(n_sources: int) -> int:
+    """How many sources must witness a lingering mover (``_minority_witnesses``):
+    ``max(2, ⌈S / 3⌉)``, 2 up to 6 sources.
+
+    With many photos, two of them are a small minority, and across a wide
+    baseline two far views often agree against the reference where static
+    3-D structure occludes what it shows (a fountain's basin over the ground
+    beside it): with 10 views, two witnesses took static ground for a lingering
+    mover and refilled it. Measured on 6 composites of 10 views (the choice) and
+    6 others of 9 views with another seed (the check; ``dynremove composite
+    --n-views 9 --seed 1``): damage 2.03 → 1.23 % and 1.74 → 1.20 %, leftover
+    22.4 → 22.5 % and 29.2 → 29.9 %, whole-image PSNR +0.68 and +0.56 dB. Up to
+    6 sources (7 photos) nothing changes.
+    """
+    return max(2, -(-int(n_sources) // 3))
+
+
 def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray,
                         flow_agree: np.ndarray, mask: np.ndarray, ratio: float, *,
                         found=None, min_frac: float = 5e-4, tau: float = 10.0,
@@ -275,7 +292,8 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     the sources (at least 2) is filled from them when they agree with each other
     and with the surroundings"; here it is (not in the paper):
 
-    1. **Witnesses.** Pixels where at least two sources agree with each other
+    1. **Witnesses.** Pixels where at least two sources (``min_witnesses``: more
+       from 7 sources up) agree with each other
        (CIE76 ΔE < ``tau``) and not with the reference, sampled through a match
        the geometry allows (the flow where it is valid, else the homography plus
        the parallax of the valid matches around). A source whose flow found the
@@ -292,8 +310,8 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     3. **Regions.** Hysteresis (seeds above ``ratio``, grown through witnessed
        pixels above 1.5), holes filled, components under ``min_frac`` of the
        image dropped.
-    4. **Surroundings, geometry.** At least two of a region's witnesses must see
-       its surroundings (a ring 3–10 px out) as the reference does on
+    4. **Surroundings, geometry.** At least two (``min_witnesses``) of a region's
+       witnesses must see its surroundings (a ring 3–10 px out) as the reference does on
        ``_RING_OK`` of it: across a wide baseline a whole neighbourhood differs,
        and such sources witness nothing about what the reference hides.
 
@@ -325,6 +343,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
         surroundings): the only ones that may fill it.
     """
     S, H, W = geo_ok.shape
+    n_wit = min_witnesses(S)
     out = np.zeros((H, W), bool)
     none = (out, out, np.zeros((S, H, W), bool))
     if S < 2:
@@ -342,7 +361,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
         count = agree.sum(1)  # (S, n): witnesses agreeing with source k, itself included
         best = np.argmax(count, 0) if len(ys) else np.zeros(0, np.intp)
         cand = np.zeros((H, W), np.uint8)
-        cand[ys, xs] = count[best, np.arange(len(ys))] >= 2
+        cand[ys, xs] = count[best, np.arange(len(ys))] >= n_wit
         raw[:] = cand > 0
         cand = cv2.morphologyEx(cv2.morphologyEx(cand, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)),
                                 cv2.MORPH_CLOSE, np.ones((7, 7), np.uint8))
@@ -397,7 +416,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
         is_wit = dis[:, ya:yb, xa:xb][:, R].mean(1) >= 0.5
         ring_ok = agree_r[:, ya:yb, xa:xb][:, ring].mean(1)
         good = is_wit & (ring_ok >= _RING_OK)
-        keep[c] = good.sum() >= 2
+        keep[c] = good.sum() >= n_wit
         if keep[c]:
             wit_map[:, ya:yb, xa:xb] |= good[:, None, None] & R[None]
     region = keep[comp]
@@ -759,4 +778,5 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      lingering=lingering)
 
 
-__all__ = ["REASONS", "Selection", "median_parallax_px", "member_median", "select_fill"]
+__all__ = ["REASONS", "Selection", "median_parallax_px", "member_median", "min_witnesses",
+           "select_fill"]
