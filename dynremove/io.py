@@ -445,12 +445,16 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             valids.append(v)
             per_file.append(n)
         depths = [_depth_of(n) for n in per_file]
-        deep = max(depths)
+        deep = [d for d in depths if d]
+        # one camera's photos share a bit depth: a darker 12-bit photo (no value
+        # above 1023) is not 10-bit data. The set's depth is its most common one
+        # (of a tie, the larger);
+        # a photo with values above it keeps its own (one full 16-bit photo among
+        # 12-bit ones made them all black when the largest depth was the set's)
+        common = max(set(deep), key=lambda d: (deep.count(d), d)) if deep else 0
         for i, p in enumerate(paths):
-            if 0 < depths[i] < deep:
-                # one camera's photos share a bit depth: a darker 12-bit photo (no
-                # value above 1023) is not 10-bit data
-                images[i], valids[i], per_file[i] = read_image_valid(p, depth16=deep)
+            if 0 < depths[i] < common:
+                images[i], valids[i], per_file[i] = read_image_valid(p, depth16=common)
         notes.extend(_grouped_notes([n for ns in per_file for n in ns]))
     H0, W0 = images[0].shape[:2]
     for p, im in zip(paths, images):

@@ -545,7 +545,9 @@ def test_16_bit_pngs_of_12_bit_data_are_scaled_by_their_depth(tmp_path, scene):
     """Machine-vision and raw-converter PNGs store 12-bit values in 16 bits unscaled:
     a trial's set came out black (values 0-15) with "nothing was found moving". They
     are read as 12-bit data, with a note; a darker photo of the set (no value above
-    1023) takes the set's depth, not 10 bits; an alpha channel scales from 16 bits."""
+    1023) takes the set's depth, not 10 bits; a full 16-bit photo among them keeps
+    its own (a trial's set went black when it set the depth); an alpha channel
+    scales from 16 bits."""
     d = tmp_path / "s"
     d.mkdir()
     ims = scene.images[:3]
@@ -557,6 +559,12 @@ def test_16_bit_pngs_of_12_bit_data_are_scaled_by_their_depth(tmp_path, scene):
     np.testing.assert_array_equal(iset.images[2], dark)  # not x 4 brighter
     assert any("view0.png, view1.png, view2.png: 16-bit image holding 12-bit values" in n
                for n in iset.notes), iset.notes
+    # one full 16-bit photo among 12-bit ones keeps its own depth, and they theirs
+    cv2.imwrite(str(d / "view1.png"), ims[1].astype(np.uint16) * 257)
+    cv2.imwrite(str(d / "view3.png"), scene.images[3].astype(np.uint16) * 16)
+    iset = io.load_image_set([d])
+    for got, want in zip(iset.images, [ims[0], ims[1], dark, scene.images[3]]):
+        np.testing.assert_array_equal(got, want)
     alpha = np.dstack([ims[0].astype(np.uint16) * 16, np.full((H, W), 65535, np.uint16)])
     cv2.imwrite(str(tmp_path / "a.png"), alpha)
     img, valid, notes = io.read_image_valid(tmp_path / "a.png")
