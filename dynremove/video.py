@@ -39,8 +39,12 @@ def parse_span(span: str | None, n_total: int) -> tuple[int, int]:
     return start, end
 
 
-def sharpness(img: np.ndarray, valid: np.ndarray | None = None) -> float:
-    """Variance of the Laplacian of the grey image (at most 640 px), over ``valid``."""
+def sharpness(img: np.ndarray, valid: np.ndarray | None = None, *,
+              relative: bool = False) -> float:
+    """Variance of the Laplacian of the grey image (at most 640 px), over ``valid``;
+    with ``relative``, divided by the grey image's own variance there (the same for
+    a darker or lower-contrast exposure of the same frame: a reference at 35 %
+    exposure was called "much blurrier" by the plain figure)."""
     g = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
     f = min(1.0, 640.0 / max(g.shape))
     if f < 1.0:
@@ -49,9 +53,13 @@ def sharpness(img: np.ndarray, valid: np.ndarray | None = None) -> float:
         if valid is not None:
             valid = cv2.resize(valid.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
     lap = cv2.Laplacian(g, cv2.CV_32F, ksize=3)
+    gf = g.astype(np.float32)
     if valid is not None:
         inner = cv2.erode(valid.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
-        lap = lap[inner] if inner.any() else lap
+        if inner.any():
+            lap, gf = lap[inner], gf[inner]
+    if relative:
+        return float(lap.var() / max(float(gf.var()), 1e-6))
     return float(lap.var())
 
 
@@ -178,12 +186,14 @@ def blurry_reference_note(images: Sequence[np.ndarray], ref: int, names: Sequenc
                           valid: Sequence[np.ndarray | None] | None = None,
                           *, ratio: float = 0.5) -> str | None:
     """A note suggesting ``--ref auto`` when the reference is much blurrier than the
-    others (variance of the Laplacian below ``ratio`` x the others' median)."""
+    others (variance of the Laplacian relative to the image's own variance, below
+    ``ratio`` x the others' median)."""
     valid = list(valid) if valid else [None] * len(images)
-    sharp = [sharpness(im, v) for im, v in zip(images, valid)]
+    sharp = [sharpness(im, v, relative=True) for im, v in zip(images, valid)]
     others = [s for i, s in enumerate(sharp) if i != ref]
     med = float(np.median(others)) if others else 0.0
     if med <= 0 or sharp[ref] >= ratio * med:
         return None
     return (f"the reference {names[ref]} is much blurrier than the others (variance of "
-            f"the Laplacian {sharp[ref]:.0f} vs a median of {med:.0f}): try --ref auto")
+            f"the Laplacian over the image's, {sharp[ref]:.3f} vs a median of {med:.3f}): "
+            "try --ref auto")

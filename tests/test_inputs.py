@@ -290,6 +290,13 @@ def test_blurry_middle_reference_note_and_ref_auto(tmp_path, capsys, scene):
     rc, _, err = run_cli(capsys, "run", *write_set(tmp_path / "ok", scene.images),
                          "--out", tmp_path / "o3", "--max-scans", "1")
     assert rc == 0 and "blurrier" not in err
+    # a sharp but darker one (35 % exposure: a trial's note called it blurrier)
+    from dynremove.video import blurry_reference_note
+
+    dark = [im.copy() for im in scene.images]
+    dark[2] = (dark[2].astype(np.float32) * 0.35 + 0.5).astype(np.uint8)
+    assert blurry_reference_note(dark, 2, [f"v{i}" for i in range(len(dark))]) is None
+    assert blurry_reference_note(imgs, 2, [f"v{i}" for i in range(len(imgs))]) is not None
 
 
 
