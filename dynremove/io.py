@@ -227,21 +227,11 @@ def read_image(path: Path) -> tuple[np.ndarray, list[str]]:
 
 
 def _depth_note(name: str, bits: int) -> str:
-    """The note of a 16-bit image read as ``bits``-bit data (``_depth_of`` reads it back)."""
+    """The note of a 16-bit image read as ``bits``-bit data."""
     if bits == 16:
         return f"{name}: 16-bit image scaled to 8 bits"
     return (f"{name}: 16-bit image holding {bits}-bit values (at most {2 ** bits - 1}): "
             f"scaled to 8 bits by ÷{2 ** (bits - 8)}")
-
-
-def _depth_of(notes: list[str]) -> int:
-    """The bit depth a 16-bit image was read as, from its notes (``_depth_note``); 0
-    for an image that was not 16-bit."""
-    for n in notes:
-        m = re.search(r": 16-bit image (?:holding (\d+)-bit values|scaled to 8 bits)", n)
-        if m:
-            return int(m.group(1) or 16)
-    return 0
 
 
 def _to_8_bits(img: np.ndarray, bits: int | None = None) -> tuple[np.ndarray, int]:
@@ -275,7 +265,16 @@ def read_image_valid(path: Path, *, depth16: int | None = None
     the smallest of 10, 12, 14 or 16 bits that holds its values (``_to_8_bits``),
     or of ``depth16`` bits when given.
     """
+    img, valid, notes, _ = _read_image_depth(path, depth16)
+    return img, valid, notes
+
+
+def _read_image_depth(path: Path, depth16: int | None = None
+                      ) -> tuple[np.ndarray, np.ndarray | None, list[str], int]:
+    """``read_image_valid``, and the bit depth a 16-bit image was read as (0 for
+    any other image)."""
     path = Path(path)
+    bits = 0
     notes: list[str] = []
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not an image")
@@ -327,7 +326,7 @@ def read_image_valid(path: Path, *, depth16: int | None = None
         notes.append(f"{path.name}: {100 * (1 - valid.mean()):.1f} % without content "
                      f"({how}): never flagged, never used as fill"
                      + (f"; {partial} semi-transparent px taken as opaque" if partial else ""))
-    return img, valid, notes
+    return img, valid, notes, bits
 
 
 def _read_with_pillow(path: Path, head: bytes) -> np.ndarray:
@@ -438,13 +437,13 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             raise InputError("--frames and --span take frames from a video; the inputs are "
                              "images")
         paths, notes = list_inputs(args)
-        images, valids, per_file = [], [], []
+        images, valids, per_file, depths = [], [], [], []
         for p in paths:
-            img, v, n = read_image_valid(p)
+            img, v, n, d = _read_image_depth(p)
             images.append(img)
             valids.append(v)
             per_file.append(n)
-        depths = [_depth_of(n) for n in per_file]
+            depths.append(d)
         deep = [d for d in depths if d]
         # one camera's photos share a bit depth: a darker 12-bit photo (no value
         # above 1023) is not 10-bit data. The set's depth is its most common one

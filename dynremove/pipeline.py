@@ -307,14 +307,22 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     def geometry_notes(views: list[geometry.TwoView]) -> None:
         """The notes the geometry gives, warned as soon as it is known."""
         nonlocal srcs
+
+        def drop(gone) -> None:
+            """Leave out the sources ``gone`` (indices into the current ones); ``keep``
+            holds the kept ones' indices into the sources before any was dropped."""
+            nonlocal views, srcs
+            sub = np.setdiff1d(np.arange(len(srcs)), gone)
+            keep[:] = [(keep[0] if keep else np.arange(len(srcs)))[sub]]
+            views = [views[k] for k in sub]
+            srcs = [srcs[k] for k in sub]
+
         strays = _strays(views)
         if strays:
             good = [v.n_inliers_H for v in views if geometry.aligned(v)]
             msgs.append(_strays_note([(names[srcs[k]], views[k].n_matches,
                                        views[k].n_inliers_F) for k in strays], min(good)))
-            keep.append(np.setdiff1d(np.arange(len(srcs)), strays))
-            views = [views[k] for k in keep[0]]
-            srcs = [srcs[k] for k in keep[0]]
+            drop(strays)
         if params.near_copy_agree > 0 and len(srcs) > 1:
             agree = agreement_with_reference(
                 np.asarray(images[ref]), np.stack([images[s] for s in srcs]),
@@ -325,11 +333,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                             "out-vote the views that saw the background): " + ", ".join(
                                 f"{names[srcs[k]]} ({100 * agree[k]:.1f} % alike)"
                                 for k in np.flatnonzero(copy)))
-                sub = np.flatnonzero(~copy)
-                # (keep: indices into the sources before any was dropped)
-                keep[:] = [(keep[0] if keep else np.arange(len(srcs)))[sub]]
-                views = [views[k] for k in sub]
-                srcs = [srcs[k] for k in sub]
+                drop(np.flatnonzero(copy))
         if params.near_copy_agree > 0 and len(srcs) > 2:
             dups = duplicate_sources(np.stack([images[s] for s in srcs]),
                                      [v.H for v in views], params.near_copy_agree)
@@ -338,11 +342,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                             "evidence twice would out-vote the others): " + ", ".join(
                                 f"{names[srcs[j]]} (of {names[srcs[k]]}, {100 * a:.1f} % "
                                 "alike)" for j, k, a in dups))
-                sub = np.setdiff1d(np.arange(len(srcs)), [j for j, _, _ in dups])
-                # (keep: indices into the sources before any was dropped)
-                keep[:] = [(keep[0] if keep else np.arange(len(srcs)))[sub]]
-                views = [views[k] for k in sub]
-                srcs = [srcs[k] for k in sub]
+                drop([j for j, _, _ in dups])
         weak = [k for k, v in enumerate(views) if not geometry.aligned(v)]
         if weak:
             msgs.append(_few_matches_note([(names[srcs[k]], views[k].n_matches)

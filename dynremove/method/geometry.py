@@ -110,10 +110,8 @@ def _inliers(Hm: npt.NDArray[np.float64], xy_r: npt.NDArray[np.float32],
              xy_s: npt.NDArray[np.float32], threshold_px: float = 3.0) -> npt.NDArray[np.float32]:
     """The points of ``xy_r`` that ``Hm`` maps within ``threshold_px`` of their match
     (``fit_homography``'s threshold); (K, 2) float32."""
-    q = np.c_[xy_r.astype(np.float64), np.ones(len(xy_r))] @ Hm.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        err = np.hypot(*(q[:, :2] / q[:, 2:] - xy_s).T)
-    return xy_r[np.isfinite(err) & (err <= threshold_px)]
+    xo, yo, _ = project_homography(Hm, xy_r[:, 0].astype(np.float64), xy_r[:, 1].astype(np.float64))
+    return xy_r[np.hypot(xo - xy_s[:, 0], yo - xy_s[:, 1]) <= threshold_px]
 
 
 def plausible_homography(Hm: npt.NDArray[np.float64], xy: npt.NDArray[np.float32], *,
