@@ -372,6 +372,9 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     SUMMARY_FIELDS); ``notes``: what the search of ``root`` did not run (each also
     given to ``on_note`` before the sets run).
     """
+    if Path(out).resolve() == Path(root).resolve():
+        raise InputError(f"--out {out}: is ROOT itself (the search would meet the outputs "
+                         "and skip them); choose a folder beside it, or one below it")
     out = io.prepare_out_dir(out)
     prev = _previous_rows(out)
     notes: list[str] = []

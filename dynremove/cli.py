@@ -12,9 +12,9 @@ is an internal error like any other, never a missing sub-command.
 from __future__ import annotations
 
 import argparse
-import re
 import dataclasses
 import os
+import re
 import signal
 import sys
 from pathlib import Path
@@ -64,6 +64,28 @@ def parse_xy(s: str) -> tuple[int, int]:
         raise argparse.ArgumentTypeError(f"expected x,y (two integers), got {s!r}") from None
     return x, y
 
+
+
+def parse_positive(s: str) -> int:
+    """An integer of at least 1 (rows, counts)."""
+    try:
+        v = int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def parse_fraction(s: str) -> float:
+    """A fraction in [0, 1]."""
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a fraction in [0, 1], got {s}")
+    return v
 
 
 def parse_max_side(s: str) -> int | None:
@@ -149,9 +171,18 @@ class _Parser(argparse.ArgumentParser):
     not the whole usage block (the sub-commands have ~50 flags)."""
 
     def error(self, message: str):  # type: ignore[override]
+        m = re.fullmatch(r"argument (--[\w-]+)(?:/[\w-]+)*: expected one argument", message)
+        argv = _Parser.parsing
+        after = [argv[i + 1] for i, a in enumerate(argv[:-1]) if m and a == m[1]]
+        if after and after[0].startswith("-"):
+            # argparse took a value that starts with '-' (a file -5.jpg) for a flag
+            message += (f" ({after[0]} is read as a flag: write {m[1]}={after[0]})")
         self.exit(EXIT_INPUT, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
+    parsing: list[str] = []  # the arguments being parsed (read by the sub-commands' error)
+
     def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        _Parser.parsing = [str(a) for a in (sys.argv[1:] if args is None else args)]
         # an unknown flag is the sub-command's error, so the hint names its help
         ns, extra = self.parse_known_args(args, namespace)
         if extra:
@@ -195,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "replaced pixels are recomputed) or at the analysis size")
     r.add_argument("--record", default=None, metavar="FILE.rrd",
                    help="write a Rerun recording of the scans")
-    r.add_argument("--record-every-rows", type=int, default=None, metavar="N",
+    r.add_argument("--record-every-rows", type=parse_positive, default=None, metavar="N",
                    help="snapshot the reference every N rows (default: ~50 per scan)")
     r.add_argument("--record-detail", choices=("default", "full"), default="default",
                    help="candidates and q* box in the source views at probes, sampled "
@@ -204,7 +235,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probe", type=parse_xy, action="append", metavar="X,Y",
                    help="record every decision at this pixel of the photo (repeatable; "
                         "scaled to the analysis image when the photos are downscaled)")
-    r.add_argument("--sample-static", type=float, default=0.002, metavar="F",
+    r.add_argument("--sample-static", type=parse_fraction, default=0.002, metavar="F",
                    help="fraction of static decisions recorded (default 0.002)")
     r.add_argument("--gt", default=None, metavar="MASK",
                    help="true mask of the reference (0/255, white = moving) at the "
@@ -376,7 +407,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "--probe and --gt count); the same as --pixel when the run analysed "
                         "the photos at their own size")
     i.add_argument("--failures", action="store_true", help="list the worst FP/FN regions")
-    i.add_argument("--top", type=int, default=10, help="how many failures (default 10)")
+    i.add_argument("--top", type=parse_positive, default=10, help="how many failures (default 10)")
     i.add_argument("--root", default="",
                    help="which run of a --compare recording: runs/main or runs/compare (or "
                         "main / compare); a plain recording has none")

@@ -122,6 +122,16 @@ def flag_message(msg: str) -> str:
 # --- commands -----------------------------------------------------------------------------
 def cmd_run(args: argparse.Namespace) -> int:
     params = params_from_args(args)
+    if args.probe and not args.record:
+        raise InputError("--probe needs --record FILE.rrd (a probe's decisions are recorded "
+                         "there, for the viewer and `dynremove inspect --pixel`)")
+    # nothing a run writes may replace what it reads, or another of its outputs
+    writes = [(f"--out {args.out} (its {n})", Path(args.out) / n)
+              for n in (*io.RUN_OUTPUTS, "report.json")]
+    if args.record:
+        writes.insert(0, (f"--record {args.record}", Path(args.record)))
+    io.check_writes(writes, io.run_reads(args.images, gt=args.gt,
+                                         valid_mask=getattr(args, "valid_mask", None)))
     created = not Path(args.out).exists()
     try:
         out = io.prepare_out_dir(args.out, args.images)

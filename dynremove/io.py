@@ -144,8 +144,34 @@ def size_hint(shape: tuple[int, int], first: tuple[int, int]) -> str:
     return " (cropped or from another camera: crop or resize the photos to one size)"
 
 
-def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str]]:
-    """Expand folders and files; return image paths and notes.
+def _subfolder_hint(args: Sequence[str | os.PathLike]) -> str:
+    """For a folder given without images of its own: the subfolders that hold
+    some (a set's ``frames/``), as a hint to give them instead; else ""."""
+    found = []
+    for a in args:
+        p = Path(a)
+        if not p.is_dir():
+            continue
+        try:
+            subs = sorted((q for q in p.iterdir() if q.is_dir()
+                           and q.name.lower() not in ("masks", "mask", "gt", "annotations")),
+                          key=natural_key)
+        except OSError:
+            continue
+        for q in subs:
+            try:
+                n = sum(1 for f in q.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_EXTS)
+            except OSError:
+                continue
+            if n >= 2:
+                found.append(f"{q} ({n} images)")
+    return f"; give a folder of images, such as {_listing(found, 3)}" if found else ""
+
+
+def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
+                ) -> tuple[list[Path], list[str]]:
+    """Expand folders and files; return image paths and notes (InputError with fewer
+    than ``at_least``: a video is one path, checked by the caller).
 
     In a folder, a file is an image when its suffix is a common image suffix
     (``IMAGE_EXTS``; it must then decode) or when OpenCV or Pillow recognise its
@@ -208,10 +234,10 @@ def list_inputs(args: Sequence[str | os.PathLike]) -> tuple[list[Path], list[str
             seen[key] = q
             unique.append(q)
     paths = unique
-    if len(paths) < 2:
+    if len(paths) < at_least:
         raise InputError(f"need at least 2 images, found {len(paths)}"
                          + (f" in {', '.join(str(a) for a in args)}" if args else "")
-                         + (f" ({'; '.join(notes)})" if notes else ""))
+                         + (f" ({'; '.join(notes)})" if notes else "") + _subfolder_hint(args))
     return paths, notes
 
 
@@ -477,6 +503,13 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
     if target and side > target:
         scale = target / side
         size = (max(8, round(W0 * scale)), max(8, round(H0 * scale)))
+        if min(size) < 16:  # (the pipeline needs 16x16)
+            need = -(-16 * side // min(H0, W0))
+            how = (f"--max-side {max_side}" if max_side else
+                   f"the default downscale to {AUTO_MAX_SIDE} px")
+            raise InputError(f"{how}: makes the {W0}x{H0} photos "
+                             f"{size[0]}x{size[1]}, under the 16x16 the method needs "
+                             f"(give at least --max-side {need})")
         images = [cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in images]
         # a pixel has content when all it was averaged from had content
         valids = [None if v is None else
@@ -585,6 +618,64 @@ def prepare_out_dir(out: str | os.PathLike, inputs: Sequence[str | os.PathLike] 
     if not os.access(p, os.W_OK):
         raise InputError(f"--out {p}: not writable")
     return p
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file (symbolic and hard links included)."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def run_reads(images: Sequence[str | os.PathLike], **extra: str | os.PathLike | None
+              ) -> list[tuple[str, Path]]:
+    """Every file a run reads, as (what, path): the photos (``list_inputs``:
+    folders expanded; what = "") and the ``extra`` files by flag (``gt=``,
+    ``valid_mask=``: what = "--gt", "--valid-mask"; a folder counts with every
+    file in it; None skipped). Raises InputError as ``list_inputs`` does."""
+    paths, _ = list_inputs(images, at_least=0)  # (counted when the set is read)
+    reads = [("", p) for p in paths]
+    for flag, e in extra.items():
+        if e is None:
+            continue
+        q = Path(e)
+        what = "--" + flag.replace("_", "-")
+        if q.is_dir():
+            reads.extend((what, f) for f in sorted(q.iterdir()) if f.is_file())
+        elif q.exists():
+            reads.append((what, q))
+    return reads
+
+
+def check_writes(writes: Sequence[tuple[str, str | os.PathLike]],
+                 reads: Sequence[tuple[str, str | os.PathLike]]) -> None:
+    """Refuse a run whose outputs would replace what it reads, or one another.
+
+    ``writes``: (what, path) of every file the run writes, ``what`` in the
+    user's terms (``"--record run.rrd"``, ``"--out o4 (its clean.png)"``);
+    ``reads``: (what, path) of every file it reads (``run_reads``). Raises
+    InputError, before anything is written, when a written file is a read one
+    (a mistyped ``--record photo.jpg``; an ``--out`` folder that holds the
+    ``--gt`` mask as ``dynamic_mask.png``) or when two outputs are one file
+    (``--record o4/clean.png --out o4``: the clean photo would replace the
+    recording). Links count: one file under two names is one file.
+    """
+    done: list[tuple[str, Path]] = []
+    for what, w in writes:
+        wp = Path(w)
+        for role, r in reads:
+            if _same_file(wp, Path(r)):
+                raise InputError(f"{what}: would overwrite the input {r}"
+                                 + (f" (the {role} file)" if role else "")
+                                 + "; choose another name")
+        for other, op in done:
+            if _same_file(wp, op):
+                raise InputError(f"{what}: {other} is written there too (one would "
+                                 "replace the other); choose another name")
+        done.append((what, wp))
 
 
 def photo_to_analysis(x: int, y: int, photo: tuple[int, int],

@@ -186,6 +186,38 @@ def test_out_in_the_input_folder_or_over_an_input_is_refused(tmp_path, capsys, s
     assert clean.read_bytes() == paths[0].read_bytes()
 
 
+def test_no_output_replaces_an_input_or_another_output(tmp_path, capsys, scene):
+    """Fresh-user trial: a mistyped --record replaced a photo with a recording, an
+    --out folder holding the --gt mask as dynamic_mask.png replaced the mask with
+    the run's own, and --record OUT/clean.png lost the recording under the clean
+    photo. Each is refused before anything is written; symbolic links count."""
+    d = tmp_path / "set"
+    paths = write_set(d, scene.images[:3])
+    gt_dir = tmp_path / "gt"
+    gt_dir.mkdir()
+    gt = gt_dir / "dynamic_mask.png"
+    assert cv2.imwrite(str(gt), scene.masks[scene.ref_index].astype(np.uint8) * 255)
+    link = tmp_path / "link.jpg"
+    link.symlink_to(paths[1])
+    files = {p: p.read_bytes() for p in [*paths, gt]}
+    out = tmp_path / "out"
+    cases = [
+        (["--record", paths[2]], "--record", "would overwrite the input"),
+        (["--record", link], "--record", "would overwrite the input"),
+        (["--record", gt, "--gt", gt], "--record", "(the --gt file)"),
+        (["--gt", gt], f"--out {gt_dir} (its dynamic_mask.png)", "(the --gt file)"),
+        (["--record", out / "clean.png"], f"--out {out} (its clean.png)",
+         "is written there too"),
+        (["--record", out / "report.json"], "report.json", "is written there too"),
+    ]
+    for extra, *words in cases:
+        o = gt_dir if extra == ["--gt", gt] else out
+        rc, _, err = run_cli(capsys, d, "--out", o, *extra, *FAST)
+        assert_input_error(rc, err, *map(str, words))
+        assert {p: p.read_bytes() for p in files} == files, extra
+        assert not out.exists(), extra  # refused before the folder was made
+
+
 def test_an_earlier_runs_outputs_are_not_read_as_photos(tmp_path, capsys, scene):
     """A folder that holds an earlier run's outputs beside its report.json (copied
     there with the photos): they are skipped with a note, not read as photos."""

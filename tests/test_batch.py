@@ -214,6 +214,10 @@ def test_out_inside_root_is_not_a_set(tmp_path, root, capsys):
     assert main(["batch", str(r), "--out", str(r / "results"), *FAST]) == 0
     capsys.readouterr()
     assert list(summary_rows(r / "results")) == ["x"]
+    # --out ROOT itself: said so (it used to find "no sets": the search skips --out)
+    rc = main(["batch", str(r), "--out", str(r), *FAST])
+    err = capsys.readouterr().err
+    assert rc == 2 and "is ROOT itself" in err and "no sets found" not in err
 
 
 def test_dask_scheduler_without_the_extra_or_cluster(tmp_path, root, capsys, monkeypatch):

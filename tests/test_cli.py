@@ -179,12 +179,45 @@ def test_per_file_notes_are_grouped(tmp_path, capsys, scene):
 
 def test_probe_is_a_photo_pixel_scaled_to_the_analysis_image(tmp_path, capsys, folder):
     out = tmp_path / "out"
+    rec = tmp_path / "run.rrd"
     rc, _, err = run_cli(capsys, folder, "--out", out, "--max-side", "32", "--max-scans",
-                         "1", "--probe", "40,30")
+                         "1", "--probe", "40,30", "--record", rec)
     assert rc == 0, err
     assert "--probe 40,30: pixel (20, 15) of the 32x24 analysis image" in err
-    rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "64,10", *FAST)
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "64,10", "--record", rec,
+                         *FAST)
     assert rc == 2 and "--probe 64,10: outside the 64x48 photo" in err
+    # without a recording a probe does nothing: refused, as --compare is
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "40,30", *FAST)
+    assert rc == 2 and "--probe needs --record" in err
+
+
+def test_flag_values_out_of_range_are_usage_errors(tmp_path, capsys, folder):
+    """Fresh-user trial: --record-every-rows 0 was an internal error (exit 1) and
+    --sample-static 2 was accepted; a file name that starts with '-' gets a hint."""
+    out = tmp_path / "out"
+    for flag, value, words in [("--record-every-rows", "0", "must be at least 1"),
+                               ("--sample-static", "2", "fraction in [0, 1]"),
+                               ("--sample-static", "-1", "fraction in [0, 1]"),
+                               ("--ref", "-5.jpg", "write --ref=-5.jpg")]:
+        with pytest.raises(SystemExit) as e:
+            run_cli(capsys, folder, "--out", out, flag, value, *FAST)
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and words in err and "Traceback" not in err, (flag, err)
+    with pytest.raises(SystemExit) as e:
+        main(["inspect", str(tmp_path / "x.rrd"), "--failures", "--top", "-3"])
+    assert e.value.code == 2 and "must be at least 1" in capsys.readouterr().err
+    # the smallest --max-side these 64x48 photos allow is named
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--max-side", "16")
+    assert rc == 2 and "give at least --max-side 22" in err, err
+
+
+def test_a_set_folder_names_its_image_subfolder(tmp_path, capsys, folder):
+    """`run davis/dance-twirl` (a set folder, photos in frames/) said only 'found 0'."""
+    (tmp_path / "set").mkdir()
+    folder.rename(tmp_path / "set" / "frames")
+    rc, _, err = run_cli(capsys, tmp_path / "set", "--out", tmp_path / "out", *FAST)
+    assert rc == 2 and f"such as {tmp_path / 'set' / 'frames'} (4 images)" in err, err
 
 
 def test_a_run_that_finds_nothing_says_so(tmp_path, capsys, scene):
