@@ -707,3 +707,20 @@ def test_a_collapsed_homography_is_not_an_alignment():
     for bad in (collapsed, np.diag([-1.0, 1, 1]), np.diag([1e-3, 1, 1]), np.diag([30.0, 30, 1]),
                 np.array([[1, 0, 0], [0, 1, 0], [-2e-3, 0, 1]]), np.full((3, 3), np.nan)):
         assert not plausible_homography(bad, xy)
+
+
+def test_a_mover_in_the_band_no_source_sees_leaves_no_stump(davis):
+    """Fresh-user trial: dance-twirl with the last frame as the reference (the camera
+    panned away, so no other frame reaches the bottom rows) kept the dancer's legs
+    there, under the fill. The band no source sees, next to the replaced mover, is
+    inpainted with it and counted as seen by no source."""
+    frames = sorted((davis / "dance-twirl" / "frames").iterdir())
+    gt = cv2.imread(str(sorted((davis / "dance-twirl" / "masks").iterdir())[-1]), 0) > 127
+    res = remove_dynamic([cv2.imread(str(f)) for f in frames], ref=len(frames) - 1)
+    band = np.zeros_like(gt)
+    band[-12:] = True  # no source reaches these rows
+    legs = gt & band
+    assert legs.sum() > 500
+    assert (res.dynamic & legs).sum() >= 0.7 * legs.sum()  # was 5 %
+    assert (res.selection.no_source & legs).sum() >= 0.5 * legs.sum()
+    assert not (res.dynamic & band & ~dilate_disc(gt, 20)).any()  # the band elsewhere: kept

@@ -68,6 +68,7 @@ from dynremove.refine.montage import expansion_labels, offset_blend, pairwise_di
 from dynremove.refine.morphology import dilate_disc, fill_holes
 
 _FORBIDDEN = 1e6  # data cost of a label that may not be used
+_UNSEEN_PX = 12  # pixels no source sees, this near a replaced mover, are inpainted with it
 _DE_CAP = 40.0  # colour distances are capped here in the data cost
 # A pixel of L that this many sources explain (a geometrically valid flow match of
 # its colour) is static, however many photos there are: with 8-10 wide-baseline
@@ -738,6 +739,17 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     movers[:, y0:y1, x0:x1] = mv & reg[None]
     free = usable[1:] & ~mv
     no_src = rep & in_core & ~free.any(0)
+    # the band of the photo that no source's frame reaches (a reference at the end of
+    # a pan), next to a mover the sources replaced: inpainted with it, so the mover
+    # leaves no stump there (the last rows of a dancer's legs, which the scans could
+    # not flag with nothing to compare); a mover out of every other frame, far from
+    # any replaced pixel, stays as the reference shows it
+    unseen = reg & ~usable[1:].any(0) & ~rep
+    if unseen.any() and (rep & in_core).any():
+        unseen &= dilate_disc(rep & in_core, _UNSEEN_PX)
+        no_src |= unseen
+    else:
+        unseen[:] = False
     clean = reference.copy()
     members = np.zeros((S, H, W), bool)
     if rep.any():
@@ -778,7 +790,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # reference differed from what replaced it (not mere seam placement)
     d_chosen = np.take_along_axis(delta_e(labs, labs[0]), lab[None], 0)[0]
     replaced = np.zeros((H, W), bool)
-    replaced[roi] = rep & (in_mask | (d_chosen >= tau))
+    replaced[roi] = rep & (in_mask | (d_chosen >= tau)) | unseen
     nos = np.zeros((H, W), bool)
     nos[roi] = no_src
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
