@@ -745,25 +745,34 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # not flag with nothing to compare); a mover out of every other frame, far from
     # any replaced pixel, stays as the reference shows it
     unseen = reg & ~usable[1:].any(0) & ~rep
+    lab_b, rep_b = lab, rep  # what the sources fill and blend (then the inpainting)
     if unseen.any() and (rep & in_core).any():
         unseen &= dilate_disc(rep & in_core, _UNSEEN_PX)
+        # each takes the label of the replaced pixels next to it, so that the fill
+        # at full size (``upsample.full_resolution``) replaces and inpaints it too
+        near = np.where(rep, lab, 0).astype(np.int16)
+        for _ in range(_UNSEEN_PX):
+            near = np.where(near > 0, near, cv2.dilate(near, np.ones((3, 3), np.uint8)))
+        unseen &= near > 0
+        lab = np.where(unseen, near, lab)
+        rep = lab != 0
         no_src |= unseen
     else:
         unseen[:] = False
     clean = reference.copy()
     members = np.zeros((S, H, W), bool)
-    if rep.any():
+    if rep_b.any():
         if P.select_cluster_median:
             # where the scan is trusted, every free source is a witness of the
             # hidden background, not only those agreeing with the chosen one
             cand_img, mem = _cluster_median(
-                cand_img, labs, lab, rep, free,
+                cand_img, labs, lab_b, rep_b, free,
                 np.where(in_core, np.inf, tau) if mode == "scan" else tau)
             members[:, y0:y1, x0:x1] = mem
         else:
-            ly, lx = np.nonzero(rep)
-            members[lab[ly, lx] - 1, ly + y0, lx + x0] = True
-        clean[roi] = offset_blend(reference[roi], cand_img, lab, rep, usable, labs)
+            ly, lx = np.nonzero(rep_b)
+            members[lab_b[ly, lx] - 1, ly + y0, lx + x0] = True
+        clean[roi] = offset_blend(reference[roi], cand_img, lab_b, rep_b, usable, labs)
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
