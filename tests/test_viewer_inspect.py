@@ -497,3 +497,14 @@ def test_a_kept_pixel_next_to_L_says_the_full_size_fill_may_reach_it(downscaled,
     rc, out, _ = _inspect(capsys, downscaled, "--pixel", f"{np.nonzero(L)[1][0]},"
                                                          f"{np.nonzero(L)[0][0]}")
     assert rc == 0 and line not in out  # in L: removed, explained as such
+
+
+def test_an_inpainted_pixel_is_not_called_filled_from_a_source():
+    """The fill inpaints where no source is free (and the band no source reaches);
+    the label map keeps a neighbouring source's label there for the full-size
+    output, so the verdict must read the inpainted map, not the label."""
+    h = {"final_dynamic": True, "source_names": ["a.png", "b.png"],
+         "selection": {"source": 2, "inpainted": 1}}
+    assert "inpainted" in vd.outcome_line(h) and "b.png" not in vd.outcome_line(h)
+    h["selection"]["inpainted"] = 0
+    assert vd.outcome_line(h) == "removed (in the final mask), filled from b.png"

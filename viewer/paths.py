@@ -118,6 +118,7 @@ RESULT_MOVERS = "result/selection/movers"  # per source: where it shows a mover 
 RESULT_REASONS = "result/selection/reasons"  # per source: why it did or did not fill
 RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure
 RESULT_LINGERING = "result/selection/lingering"  # a mover most photos show, seen free by 2+
+RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV inpainting
 EVENTS_DECISIONS = "events/decisions"
 EVENTS_REPLACEMENTS = "events/replacements"
 EVENTS_UPDATES = "events/updates"

@@ -422,6 +422,9 @@ class RerunSink(StepColumns):
             if getattr(sel, "lingering", None) is not None:
                 self.rec.log(self.p(P.RESULT_LINGERING), rr.SegmentationImage(
                     np.asarray(sel.lingering, np.uint8)), static=True)
+            self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
+                (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
+                 ).astype(np.uint8)), static=True)
             for k, mv in enumerate(np.asarray(sel.movers, bool)):
                 name = src_names[k] if k < len(src_names) else f"source{k}"
                 self.rec.log(self.p(f"{P.RESULT_MOVERS}/{name}"),

@@ -240,7 +240,10 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         k = sel["source"]
         others = "; ".join(f"{n}: {why}" for n, why in (sel.get("reasons") or {}).items()
                            if why != "chosen")
-        if k > 0:
+        if sel.get("inpainted") and h.get("final_dynamic"):
+            lines.append("fill: inpainted (OpenCV Telea): no source shows the background "
+                         "here" + (f" ({others})" if others else ""))
+        elif k > 0:
             why = (" — a mover that lingered: the reference and most sources show it, "
                    "the sources that saw the background filled it" if sel.get("lingering") else "")
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
@@ -271,6 +274,8 @@ def outcome_line(h: dict[str, Any]) -> str:
     if not h.get("final_dynamic"):
         return "kept (not in the final mask)"
     k = sel.get("source", 0)
+    if sel.get("inpainted"):
+        return "removed (in the final mask), inpainted: no source shows the background there"
     if k > 0:
         return f"removed (in the final mask), filled from {_src_name(h, k - 1)}"
     if "source" in sel:

@@ -781,7 +781,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     why[mv] = 3
     why[copies] = 7
     why[~usable[1:]] = 4
-    why[lab[None] == np.arange(1, S + 1)[:, None, None]] = 1
+    # (an inpainted pixel has no chosen source)
+    why[(lab_b[None] == np.arange(1, S + 1)[:, None, None]) & ~no_src[None]] = 1
     reasons = np.zeros((S, H, W), np.uint8)
     reasons[:, y0:y1, x0:x1] = np.where(reg[None], why, 0)
     # a lingering mover: witnessed against the reference where the reference and
