@@ -68,6 +68,10 @@ def at_output_size(res: Any, iset: Any, output_size: str = "full") -> Any:
     if output_size != "full" or iset.scale >= 1.0 or getattr(iset, "video", None):
         return res
     full = [io.read_image(p)[0] for p in iset.paths]
+    W0, H0 = iset.original_size
+    for i, op in enumerate(getattr(iset, "conformed", None) or []):
+        if op is not None:  # brought to the set's size when read: the same here
+            full[i], _ = io.conform(full[i], None, op, (H0, W0))
     t = time.perf_counter()
     clean, dyn = full_resolution_output(res, full)
     Hf, Wf = clean.shape[:2]

@@ -48,6 +48,8 @@ class ImageSet:
     # black border, --valid-mask); None = content everywhere
     valid: list[np.ndarray | None] = field(default_factory=list)
     video: dict | None = None  # {"path", "frames": chosen frame numbers, ...} for a clip
+    # per image: how it was brought to the set's size (``conform``), None = as read
+    conformed: list[dict | None] = field(default_factory=list)
 
     @property
     def valid_masks(self) -> list[np.ndarray] | None:
@@ -127,6 +129,67 @@ def _listing(names: list[str], n: int = 5) -> str:
 
 # what ``dynremove run`` writes beside its report.json (``batch.write_outputs``)
 RUN_OUTPUTS = ("clean.png", "dynamic_mask.png", "coverage.png")
+
+
+def conform_op(shape: tuple[int, int], target: tuple[int, int]) -> dict | None:
+    """How an image of ``shape`` (H, W) is brought to the set's ``target`` (H, W), or
+    None when it cannot be without guessing: ``{"kind": "centre", "dy", "dx"}`` for
+    a few pixels off (at most max(8 px, 5 %) per side: a phone's crop), the image
+    centred on the target (``dy``, ``dx`` its top-left corner there; negative =
+    cropped), or ``{"kind": "resize"}`` for the same frame at another resolution
+    (aspect within 1 %). A turned photo or another framing gives None (the caller
+    refuses it with ``size_hint``)."""
+    (h, w), (H0, W0) = shape, target
+    if (h, w) == (H0, W0):
+        return {"kind": "same"}
+    if (h, w) == (W0, H0):
+        return None  # turned by 90°: which way is not known
+    if abs(w - W0) <= max(8, 0.05 * W0) and abs(h - H0) <= max(8, 0.05 * H0):
+        return {"kind": "centre", "dy": (H0 - h) // 2, "dx": (W0 - w) // 2}
+    if abs(w * H0 - h * W0) <= 0.01 * w * H0:
+        return {"kind": "resize"}
+    return None
+
+
+def conform(img: np.ndarray, valid: np.ndarray | None, op: dict,
+            target: tuple[int, int]) -> tuple[np.ndarray, np.ndarray | None]:
+    """``img`` (h, w, 3) and its content mask ``valid`` ((h, w) bool or None) brought to
+    ``target`` (H, W) by ``op`` (``conform_op``). A border added by centring has no
+    content (``valid`` False there), as a transparent border of a pre-aligned frame;
+    a resize scales ``valid`` (a pixel has content where all it came from had)."""
+    H0, W0 = target
+    h, w = img.shape[:2]
+    if op["kind"] == "same":
+        return img, valid
+    if op["kind"] == "resize":
+        interp = cv2.INTER_AREA if w > W0 else cv2.INTER_CUBIC
+        out = cv2.resize(img, (W0, H0), interpolation=interp)
+        if valid is not None:
+            valid = cv2.resize(valid.astype(np.float32), (W0, H0),
+                               interpolation=cv2.INTER_AREA) > 0.999
+        return out, valid
+    dy, dx = op["dy"], op["dx"]
+    out = np.zeros((H0, W0) + img.shape[2:], img.dtype)
+    v = np.zeros((H0, W0), bool)
+    src = valid if valid is not None else np.ones((h, w), bool)
+    ty0, tx0 = max(dy, 0), max(dx, 0)
+    sy0, sx0 = max(-dy, 0), max(-dx, 0)
+    n_y, n_x = min(H0 - ty0, h - sy0), min(W0 - tx0, w - sx0)
+    out[ty0:ty0 + n_y, tx0:tx0 + n_x] = img[sy0:sy0 + n_y, sx0:sx0 + n_x]
+    v[ty0:ty0 + n_y, tx0:tx0 + n_x] = src[sy0:sy0 + n_y, sx0:sx0 + n_x]
+    return out, (None if v.all() else v)
+
+
+def _conform_note(name: str, shape: tuple[int, int], target: tuple[int, int],
+                  op: dict) -> str:
+    (h, w), (H0, W0) = shape, target
+    if op["kind"] == "resize":
+        return (f"{name}: is {w}x{h}, the set {W0}x{H0} (the same frame at another "
+                f"resolution): resized to {W0}x{H0}")
+    return (f"{name}: is {w}x{h}, the set {W0}x{H0} (a few pixels off: cropped?): "
+            "centred on the set's frame" + (", the added border counted as no content"
+                                            if h < H0 or w < W0 else "")
+            + (", its own border cropped" if h > H0 or w > W0 else ""))
 
 
 def size_hint(shape: tuple[int, int], first: tuple[int, int]) -> str:
@@ -481,12 +544,23 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             if 0 < depths[i] < common:
                 images[i], valids[i], per_file[i] = read_image_valid(p, depth16=common)
         notes.extend(_grouped_notes([n for ns in per_file for n in ns]))
-    H0, W0 = images[0].shape[:2]
-    for p, im in zip(paths, images):
-        if im.shape[:2] != (H0, W0):
-            raise InputError(f"{p}: is {im.shape[1]}x{im.shape[0]} but {paths[0].name} is "
+    # the set's size: the most common one (of a tie, the first photo's); a photo a
+    # few pixels off (a phone's crop) or at another resolution is brought to it
+    shapes = [im.shape[:2] for im in images]
+    H0, W0 = max(shapes, key=lambda sh: (shapes.count(sh), -shapes.index(sh)))
+    conformed: list[dict | None] = [None] * len(images)
+    first = paths[shapes.index((H0, W0))]
+    for i, (p, im) in enumerate(zip(paths, images)):
+        if im.shape[:2] == (H0, W0):
+            continue
+        op = conform_op(im.shape[:2], (H0, W0))
+        if op is None:
+            raise InputError(f"{p}: is {im.shape[1]}x{im.shape[0]} but {first.name} is "
                              f"{W0}x{H0}; all images must have the same size"
                              + size_hint(im.shape[:2], (H0, W0)))
+        notes.append(_conform_note(p.name, im.shape[:2], (H0, W0), op))
+        images[i], valids[i] = conform(im, valids[i], op, (H0, W0))
+        conformed[i] = op
     if valid_mask is not None:
         given = read_valid_masks(valid_mask, paths, [(W0, H0)] * len(paths))
         valids = [g if v is None else (v if g is None else v & g)
@@ -520,7 +594,7 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             raise InputError(f"{paths[i]}: has content in only {100 * v.mean():.1f} % of "
                              "the frame (alpha 0, black border or --valid-mask)")
     return ImageSet(paths=paths, images=images, original_size=(W0, H0), scale=scale,
-                    notes=notes, valid=valids, video=video)
+                    notes=notes, valid=valids, video=video, conformed=conformed)
 
 
 def is_path_ref(ref: object) -> bool:

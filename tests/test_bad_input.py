@@ -346,7 +346,7 @@ def test_ref_api(scene):
 
 
 # --- sizes ----------------------------------------------------------------------------
-@pytest.mark.parametrize("other", [(H, W - 4), (W, H)], ids=["size", "aspect"])
+@pytest.mark.parametrize("other", [(W, H), (H, W // 2)], ids=["turned", "framing"])
 def test_different_sizes(tmp_path, capsys, scene, other):
     paths = write_set(tmp_path / "s", scene.images[:3])
     odd = cv2.resize(scene.images[3], (other[1], other[0]), interpolation=cv2.INTER_AREA)
@@ -354,11 +354,59 @@ def test_different_sizes(tmp_path, capsys, scene, other):
     cv2.imwrite(str(bad), odd)
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, *paths, bad, "--out", out)
-    hint = "a few pixels off" if other[0] == H else "turned by 90°"
+    hint = "turned by 90°" if other == (W, H) else "another camera"
     assert_input_error(rc, err, str(bad), f"{other[1]}x{other[0]}", f"{W}x{H}", "same size",
                        hint, out=out)
     with pytest.raises(InputError, match="same size"):
         remove_dynamic(list(scene.images[:3]) + [odd], ref=0)
+
+
+@pytest.mark.parametrize("cut", [(0, 4), (3, 0), (-2, -2)], ids=["narrower", "shorter", "larger"])
+def test_a_photo_a_few_pixels_off_is_centred_on_the_set(tmp_path, capsys, cut):
+    """Fresh-user trial: a phone's crop (716x960 among 720x960) was refused. A photo a
+    few pixels off is centred on the set's frame (what it lacks counts as no
+    content) with a note; the clean photo keeps the set's size."""
+    sc = synth.make_scene(seed=2, n_views=5, size=(96, 128), n_objects=1)
+    d = tmp_path / "s"
+    paths = write_set(d, sc.images)
+    dy, dx = cut
+    im = sc.images[1]
+    odd = (im[dy // 2: im.shape[0] - (dy - dy // 2), dx // 2: im.shape[1] - (dx - dx // 2)]
+           if dy >= 0 and dx >= 0 else cv2.copyMakeBorder(im, 1, 1, 1, 1, cv2.BORDER_REFLECT))
+    assert cv2.imwrite(str(paths[1]), odd)
+    iset = io.load_image_set([d])
+    assert all(x.shape == (96, 128, 3) for x in iset.images)
+    (note,) = [n for n in iset.notes if "view1.png" in n]
+    assert f"is {odd.shape[1]}x{odd.shape[0]}, the set 128x96" in note
+    if dy > 0 or dx > 0:  # the border it lacks has no content
+        assert iset.valid[1] is not None and not iset.valid[1].all()
+        assert iset.valid[1][48, 64]
+    # content where it has some: its pixels, where they fall on the set's frame
+    if dy >= 0 and dx >= 0:
+        y, x = dy // 2, dx // 2
+        assert np.array_equal(iset.images[1][y:y + odd.shape[0], x:x + odd.shape[1]], odd)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out, "--max-scans", "2")
+    report = assert_ok_run(rc, err, out)
+    assert cv2.imread(str(out / "clean.png")).shape == (96, 128, 3)
+    assert any("view1.png" in n for n in report["notes"])
+
+
+def test_a_photo_at_another_resolution_is_resized_to_the_set(tmp_path, capsys):
+    """The same frame at twice the resolution (another phone mode) is resized, and at
+    full output size it is read and resized the same way again."""
+    sc = synth.make_scene(seed=2, n_views=5, size=(96, 128), n_objects=1)
+    d = tmp_path / "s"
+    paths = write_set(d, sc.images)
+    assert cv2.imwrite(str(paths[3]), cv2.resize(sc.images[3], (256, 192),
+                                                 interpolation=cv2.INTER_CUBIC))
+    iset = io.load_image_set([d])
+    assert iset.images[3].shape == (96, 128, 3) and iset.conformed[3] == {"kind": "resize"}
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--out", out, "--max-side", "64", "--max-scans", "2")
+    assert_ok_run(rc, err, out)
+    assert "resized to 128x96" in err
+    assert cv2.imread(str(out / "clean.png")).shape == (96, 128, 3)
 
 
 def test_tiny_images_api():

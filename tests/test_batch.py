@@ -39,7 +39,7 @@ def root(tmp_path_factory):
     m.mkdir()
     for i, mk in enumerate(s2.masks):
         cv2.imwrite(str(m / f"view{i}.png"), mk.astype(np.uint8) * 255)
-    write_set(r / "bad", [s1.images[0], cv2.resize(s1.images[1], (40, 32))])
+    write_set(r / "bad", [s1.images[0], cv2.resize(s1.images[1], (40, 64))])
     (r / "README.txt").write_text("not a set")
     return r
 
@@ -309,7 +309,7 @@ def test_a_set_that_fails_after_an_earlier_run_says_its_outputs_are_old(tmp_path
     out = tmp_path / "out"
     assert main(["batch", str(r), "--out", str(out), *FAST]) == 0
     old = (out / "trip" / "clean.png").read_bytes()
-    assert cv2.imwrite(str(paths[1]), cv2.resize(s.images[1], (40, 32)))
+    assert cv2.imwrite(str(paths[1]), cv2.resize(s.images[1], (40, 64)))
     assert main(["batch", str(r), "--out", str(out), *FAST]) == 1
     capsys.readouterr()
     err = summary_rows(out)["trip"]["error"]
