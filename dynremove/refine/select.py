@@ -801,6 +801,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     d_chosen = np.take_along_axis(delta_e(labs, labs[0]), lab[None], 0)[0]
     replaced = np.zeros((H, W), bool)
     replaced[roi] = rep & (in_mask | (d_chosen >= tau)) | unseen
+    # ... and any pixel the fill wrote ΔE tau or more from the reference, unblurred
+    # (the blend's offset, not the chosen source alone, decides what is written: a
+    # fresh-user trial found 30 px outside the mask of tim6 changed by ΔE 10-19.6)
+    lab_out = cv2.cvtColor(clean[roi].astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
+    lab_in = cv2.cvtColor(reference[roi].astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
+    replaced[roi] |= rep & (delta_e(lab_out, lab_in) >= tau)
     nos = np.zeros((H, W), bool)
     nos[roi] = no_src
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
