@@ -162,6 +162,26 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
     return report
 
 
+def load_for_reference(inputs: Sequence[str | os.PathLike], ref: str | int | None, *,
+                       on_loaded: Callable[[io.ImageSet], None] | None = None, **load
+                       ) -> tuple[io.ImageSet, int, dict, list[str]]:
+    """``io.load_image_set(inputs, **load)`` and ``choose_reference(ref, ...)``; when the
+    reference is a photo that was brought to the set's size (a phone's crop), the set
+    is read again at the reference's own size, so that its clean photo has that size
+    and no border it lacks. ``on_loaded(iset)`` is called after each read (the CLI
+    keeps the set for an interruption). Returns (iset, ref, ref_info, ref_notes)."""
+    iset = io.load_image_set(list(inputs), **load)
+    if on_loaded is not None:
+        on_loaded(iset)
+    i, info, notes = choose_reference(ref, iset)
+    if iset.conformed and iset.conformed[i] is not None:
+        iset = io.load_image_set(list(inputs), size_of=i, **load)
+        if on_loaded is not None:
+            on_loaded(iset)
+        i, info, notes = choose_reference(ref, iset)
+    return iset, i, info, notes
+
+
 def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dict, list[str]]:
     """The reference index, how it was chosen (for the report) and notes.
 
@@ -292,22 +312,22 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
                        seconds=_earlier_seconds(done))
             return row
         params = Params(**options["params"])
-        iset = io.load_image_set(list(bs.inputs), max_side=options.get("max_side"),
-                                 frames=options.get("frames"), span=options.get("span"),
-                                 pick=options.get("pick") or "sharpest")
-        ref, ref_info, notes = choose_reference(options.get("ref"), iset)
+        iset, ref, ref_info, notes = load_for_reference(
+            bs.inputs, options.get("ref"), max_side=options.get("max_side"),
+            frames=options.get("frames"), span=options.get("span"),
+            pick=options.get("pick") or "sharpest")
         iset.notes.extend(notes)
-        gt = None
-        if bs.gt is not None:
-            mp = bs.gt / (Path(iset.names[ref]).stem + ".png")
-            if mp.is_file():
-                H, W = iset.images[0].shape[:2]
-                gt = io.read_mask(mp, (W, H))
         with warnings.catch_warnings():  # the run's warnings are in res.warnings
             warnings.simplefilter("ignore")
             res = remove_dynamic(iset.images, ref=ref, params=params, names=iset.names,
                                  preset_name=options["preset"], valid_masks=iset.valid_masks)
             res = at_output_size(res, iset, options.get("output_size", "full"))
+        gt = None
+        if bs.gt is not None:
+            mp = bs.gt / (Path(iset.names[ref]).stem + ".png")
+            if mp.is_file():  # scored at the size written, as `run --gt` scores
+                H, W = res.dynamic.shape
+                gt = io.read_mask(mp, (W, H))
         out.mkdir(parents=True, exist_ok=True)
         extra = {"batch_key": key, "batch_seconds": round(time.perf_counter() - t0, 3)}
         report = write_outputs(out, res, iset=iset, ref=ref, preset_name=options["preset"],

@@ -26,7 +26,7 @@ import numpy as np
 
 from dynremove import io
 from dynremove.method.scan import _kernels
-from dynremove.batch import at_output_size, choose_reference, write_outputs
+from dynremove.batch import at_output_size, load_for_reference, write_outputs
 from dynremove.errors import InputError
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.bench import run_bench
@@ -156,12 +156,16 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     rec = sink = sink_b = None
     try:
         where.bar("load", 0.0)
-        iset = io.load_image_set(args.images, max_side=args.max_side,
-                                 valid_mask=args.valid_mask, frames=args.frames,
-                                 span=args.span, pick=args.pick)
-        _check_memory(args, iset)
-        where.stage = "while choosing the reference"
-        ref, ref_info, ref_notes = choose_reference(args.ref, iset)
+
+        def loaded(s: io.ImageSet) -> None:
+            nonlocal iset
+            iset = s  # (named in the recording of an interruption)
+            _check_memory(args, s)
+            where.stage = "while choosing the reference"
+
+        iset, ref, ref_info, ref_notes = load_for_reference(
+            args.images, args.ref, on_loaded=loaded, max_side=args.max_side,
+            valid_mask=args.valid_mask, frames=args.frames, span=args.span, pick=args.pick)
         t_load = time.perf_counter() - t0
         where.bar("load", 1.0)
         for n in [*iset.notes, reference_note(args.ref, ref, ref_info, iset.names),

@@ -502,8 +502,12 @@ def natural_key(path: Path) -> tuple:
 def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = None,
                    valid_mask: str | os.PathLike | None = None,
                    frames: int | None = None, span: str | None = None,
-                   pick: str = "sharpest") -> ImageSet:
+                   pick: str = "sharpest", size_of: int | None = None) -> ImageSet:
     """Read and validate a set: same size for all, downscaled to ``max_side``.
+
+    Photos a few pixels off the set's size, or at another resolution, are brought
+    to it (``conform``): the set's size is the most common one, or photo
+    ``size_of``'s (the reference: its clean photo keeps its own size).
 
     ``max_side=None`` downscales only images larger than AUTO_MAX_SIDE (with a note);
     ``max_side=0`` never downscales. One video file instead of images: ``frames``
@@ -547,7 +551,8 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
     # the set's size: the most common one (of a tie, the first photo's); a photo a
     # few pixels off (a phone's crop) or at another resolution is brought to it
     shapes = [im.shape[:2] for im in images]
-    H0, W0 = max(shapes, key=lambda sh: (shapes.count(sh), -shapes.index(sh)))
+    H0, W0 = (shapes[size_of] if size_of is not None and 0 <= size_of < len(shapes) else
+              max(shapes, key=lambda sh: (shapes.count(sh), -shapes.index(sh))))
     conformed: list[dict | None] = [None] * len(images)
     first = paths[shapes.index((H0, W0))]
     for i, (p, im) in enumerate(zip(paths, images)):

@@ -392,6 +392,32 @@ def test_a_photo_a_few_pixels_off_is_centred_on_the_set(tmp_path, capsys, cut):
     assert any("view1.png" in n for n in report["notes"])
 
 
+def test_a_cropped_reference_keeps_its_own_size(tmp_path, capsys):
+    """Fresh-user trial: with the cropped photo as the reference, clean.png came out
+    at the others' size with black bars where the reference had no pixels, and its
+    own 715x955 --gt mask was refused. The set is brought to the reference's size."""
+    sc = synth.make_scene(seed=2, n_views=5, size=(96, 128), n_objects=1)
+    d = tmp_path / "s"
+    paths = write_set(d, sc.images)
+    odd = sc.images[2][2:-1, 1:-2]  # 125x93
+    assert cv2.imwrite(str(paths[2]), odd)
+    gt = tmp_path / "gt.png"
+    assert cv2.imwrite(str(gt), sc.masks[2][2:-1, 1:-2].astype(np.uint8) * 255)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, d, "--ref", "view2.png", "--gt", gt, "--out", out,
+                         "--max-scans", "2")
+    report = assert_ok_run(rc, err, out)
+    clean = cv2.imread(str(out / "clean.png"))
+    assert clean.shape == odd.shape
+    mask = cv2.imread(str(out / "dynamic_mask.png"), 0) > 127
+    black = (clean.max(-1) == 0) & (odd.max(-1) > 0)
+    assert not black.any()  # no bar where the others' frame had no pixels
+    changed = np.abs(clean.astype(int) - odd).max(-1) > 0
+    assert changed[~mask].mean() < 0.02  # outside the mask: the fill's margin only
+    assert "jaccard_vs_gt" in report
+    assert "the set 125x93" in err
+
+
 def test_a_photo_at_another_resolution_is_resized_to_the_set(tmp_path, capsys):
     """The same frame at twice the resolution (another phone mode) is resized, and at
     full output size it is read and resized the same way again."""

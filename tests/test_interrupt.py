@@ -258,12 +258,12 @@ def test_interrupted_before_the_sink_exists(tmp_path, monkeypatch, capsys, where
                                             sig, code):
     """In process: a Ctrl-C / SIGTERM while loading or choosing the reference writes a
     recording that says so (with the names and size once the images are read)."""
-    from dynremove import commands
+    from dynremove import batch, commands
     from dynremove.cli import main
 
     exc = commands.Terminated if sig == "Terminated" else sig
     images = _write_set(tmp_path / "set", (48, 64))
-    target = commands.io if where == "load_image_set" else commands
+    target = commands.io if where == "load_image_set" else batch
 
     def cut(*a, **k):
         raise exc()
