@@ -211,7 +211,8 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                        sample_static=args.sample_static, names=iset.names,
                                        preset_name="compare", progress=where,
                                        valid_masks=iset.valid_masks)
-                _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic "
+                _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic at the "
+                     "analysis size "
                      f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
     except BaseException as e:
         stop = interruption(e)
@@ -636,9 +637,10 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         print(vd.format_pixel_history(hist))
         if size is not None and hist.get("final_dynamic") is False:
             L = ins.read_final_dynamic(path, root=ins.resolve_root(path, args.root))
-            if L is not None and L[max(y - 1, 0):y + 2, max(x - 1, 0):x + 2].any():
-                print("  at full size the fill reaches one analysis pixel beyond L (and "
-                      "places its seams there): this photo pixel may have been recomputed; "
+            if L is not None and L[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].any():
+                print("  NOTE: this is the analysis image's verdict. At full size the fill "
+                      "reaches about one analysis pixel beyond L (and places its seams "
+                      "there), so this photo pixel may have been recomputed: "
                       "dynamic_mask.png holds it if it changed by ΔE 10 or more")
     if args.failures:
         print(vd.format_failures(ins.failures(path, top=args.top, root=args.root)))

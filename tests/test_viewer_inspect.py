@@ -489,7 +489,7 @@ def test_a_kept_pixel_next_to_L_says_the_full_size_fill_may_reach_it(downscaled,
     assert L is not None and L.any() and not L.all()
     near = cv2.dilate(L.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~L
     far = ~cv2.dilate(L.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
-    line = "at full size the fill reaches one analysis pixel beyond L"
+    line = "At full size the fill reaches about one analysis pixel beyond L"
     for where, want in ((near, True), (far, False)):
         ys, xs = np.nonzero(where)
         rc, out, err = _inspect(capsys, downscaled, "--pixel", f"{xs[0]},{ys[0]}")

@@ -205,11 +205,11 @@ def _print_table(out: dict) -> None:
     print(f"\n{'scan':<6}{'seconds':>9}{'Mpx/s':>9}{'dynamic px':>12}")
     for s in out["scans"]:
         print(f"{s['scan']:<6}{s['seconds']:>9.2f}{s['px_per_s'] / 1e6:>9.2f}{s['dynamic_px']:>12}")
-    print(f"\npeak RSS {out['peak_rss_mb']:.0f} MB; JIT warm-up {out['warmup_s']:.1f} s; "
+    print(f"\npeak RSS {out['peak_rss_mb']:.0f} MiB; JIT warm-up {out['warmup_s']:.1f} s; "
           f"with MemorySink {out['memory_sink_end_to_end_s']:.2f} s")
     if "peak_rss_mb_by_part" in out:
         print("peak RSS by part: " + ", ".join(
-            f"{k} {v:.0f} MB" for k, v in out["peak_rss_mb_by_part"].items()))
+            f"{k} {v:.0f} MiB" for k, v in out["peak_rss_mb_by_part"].items()))
     if "rerun_end_to_end_s" in out:
         print(f"with a Rerun recording {out['rerun_end_to_end_s']:.2f} s "
               f"(x{out['rerun_end_to_end_s'] / out['end_to_end_s']:.2f}), "
