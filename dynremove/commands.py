@@ -528,6 +528,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
           + (f" -> {args.json}" if args.json else ""))
     if args.json:
         io.write_json(args.json, report)
+    failed = sorted({i["set"] for i in report.get("set_info", []) if "error" in i})
+    if failed:  # the others are in the table; the exit code says not all ran
+        print(f"dynremove: error: {len(failed)} set{'' if len(failed) == 1 else 's'} could "
+              f"not be run: {', '.join(failed)} (see the lines above)", file=sys.stderr)
+        return 1
     return EXIT_OK
 
 

@@ -81,6 +81,28 @@ def _whole_report(n_sets: int) -> dict:
     return {"methods": ["dynremove", "median"], "sets": rows, "set_info": info}
 
 
+def test_a_set_that_cannot_be_read_does_not_lose_the_others(data, tmp_path, capsys):
+    """Fresh-user trial: one truncated frame, or a --ref one set lacks, ended a
+    19-set eval with exit 2 and no table or JSON. The set is an error row, the
+    others are scored, the JSON is written and the exit code is 1."""
+    import shutil
+
+    root = tmp_path / "d"
+    shutil.copytree(data / "syn1", root / "syn1")
+    shutil.copytree(data / "syn2", root / "syn2")
+    frame = sorted((root / "syn2" / "frames").iterdir())[0]
+    frame.write_bytes(frame.read_bytes()[:200])  # truncated
+    out = tmp_path / "e.json"
+    code = main(["eval", str(root), "--methods", "median", "--json", str(out)])
+    cap = capsys.readouterr()
+    assert code == 1 and "Traceback" not in cap.err
+    assert "syn2: not run:" in cap.err and "1 set could not be run: syn2" in cap.err
+    rep = json.loads(out.read_text())
+    by = {r["set"]: r for r in rep["sets"]}
+    assert by["syn1"]["jaccard"] is not None and "error" in by["syn2"]
+    assert "mean J (1 set) " in cap.out
+
+
 def test_whole_photo_table_labels_the_mean_unrecoverable_and_counts_sets():
     from dynremove.evaluation.evaluate import format_table
 

@@ -356,7 +356,18 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
     if single_thread:
         cv2.setNumThreads(1)  # in a worker: parallelism comes from joblib
     t_set = time.perf_counter()
-    ls = load_set(es, max_side=max_side, ref=ref)
+    try:
+        ls = load_set(es, max_side=max_side, ref=ref)
+    except Exception as e:  # noqa: BLE001 - a set that cannot be read: recorded, as
+        # a failing method is, and the others go on (a trial lost a 19-set run to one
+        # truncated frame)
+        msg = " ".join(str(e).split()) if isinstance(e, InputError) else \
+            f"{type(e).__name__}: {e}"
+        rows = [{"set": es.name, "method": m, **dict.fromkeys(SCORE_KEYS), "seconds": None,
+                 "error": msg} for m, _ in variants]
+        return {"set": es.name, "rows": rows,
+                "info": {"set": es.name, "error": msg, "notes": [msg]},
+                "seconds": time.perf_counter() - t_set}
     rows, notes = [], list(ls.notes)
     done: dict[Any, tuple] = {}  # identical params run once
     for method, pd in variants:
@@ -415,6 +426,9 @@ def _stderr_progress(k: int, n: int, res: dict) -> None:
           if r.get("jaccard") is not None][:2]
     err = sum(1 for r in res["rows"] if "error" in r)
     info = res.get("info", {})
+    if "error" in info:
+        print(f"[{k}/{n}] {res['set']}: not run: {info['error']}", file=sys.stderr, flush=True)
+        return
     unscored = not (info.get("has_mask", True) or info.get("has_background", True))
     print(f"[{k}/{n}] {res['set']}: {res['seconds']:.1f} s"
           + (f"  (J {', '.join(js)})" if js else "")
@@ -592,7 +606,7 @@ def format_table(report: dict) -> str:
         bg = bool(info.get(s, {}).get("has_background"))
         table.append([s] + [cell(by.get((s, m)), bg) for m in methods])
     summ = report.get("summary") or summarize(rows, methods)
-    n_sets = len(set_names)
+    n_sets = max((summ[m].get("n_jaccard", 0) for m in methods), default=0)  # scored
     table.append([f"mean J ({_count(n_sets, 'set')})"]
                  + [_fmt(summ[m]["jaccard"], ".3f") for m in methods])
     if any(summ[m]["own_mover"] is not None for m in methods):
