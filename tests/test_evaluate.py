@@ -61,6 +61,11 @@ def test_eval_cli_writes_json(data, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "median" in text
     assert "mean J (1 set) " in text and "mean PSNR dB (1 set) " in text  # not "1 sets"
+    assert "analysis size" not in text  # scored at the photos' own size
+    # with --max-side the table says where it scores (run and batch: at the size written)
+    assert main(["eval", str(data), "--sets", "syn1", "--methods", "median", "--max-side",
+                 "64", "--quiet"]) == 0
+    assert "scored at the analysis size (--max-side 64)" in capsys.readouterr().out
     assert main(["eval", str(tmp_path / "nowhere")]) == 2
 
 

@@ -619,6 +619,9 @@ def format_table(report: dict) -> str:
     table.append(["mean seconds"] + [_fmt(summ[m]["seconds"], ".1f") for m in methods])
     head = "cells: Jaccard" + (" | sets with a background: Jaccard PSNR(dB) SSIM in the true "
                                "mask" if any_bg else "")
+    if report.get("max_side"):  # (run and batch score at the size they write)
+        head += (f"\n  scored at the analysis size (--max-side {report['max_side']}): the true "
+                 "masks are resized to it")
     if any(summ[m]["own_mover"] is not None for m in methods):
         head += ("\n  own-mover fill %: of the pixels the fill replaced, those taken mostly "
                  "from the other photos' own true movers (ghosts)")
