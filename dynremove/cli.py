@@ -65,13 +65,16 @@ def parse_xy(s: str) -> tuple[int, int]:
     return x, y
 
 
+def _integer(s: str) -> int:
+    try:
+        return int(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+
 
 def parse_positive(s: str) -> int:
     """An integer of at least 1 (rows, counts)."""
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+    v = _integer(s)
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
     return v
@@ -129,20 +132,14 @@ def parse_set_ref(s: str) -> str:
 
 
 def parse_jobs(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+    v = _integer(s)
     if v == 0:
         raise argparse.ArgumentTypeError("--jobs must not be 0 (use -1 for all cores)")
     return v
 
 
 def parse_frames(s: str) -> int:
-    try:
-        v = int(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {s!r}") from None
+    v = _integer(s)
     if v < 2:
         raise argparse.ArgumentTypeError(f"--frames must be at least 2, got {v}")
     return v

@@ -65,7 +65,7 @@ from dynremove.refine.fields import (background_field, blurred_lab, interpolate_
 from dynremove.refine.fill import median_fill, realign_fields
 from dynremove.refine.parallax import epipolar_search, fit_parallax, sweep_fields
 from dynremove.refine.montage import expansion_labels, offset_blend, pairwise_distance
-from dynremove.refine.morphology import dilate_disc, fill_holes
+from dynremove.refine.morphology import dilate_disc, fill_holes, grow_replaced
 
 _FORBIDDEN = 1e6  # data cost of a label that may not be used
 _UNSEEN_PX = 12  # pixels no source sees, this near a replaced mover, are inpainted with it
@@ -750,9 +750,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         unseen &= dilate_disc(rep & in_core, _UNSEEN_PX)
         # each takes the label of the replaced pixels next to it, so that the fill
         # at full size (``upsample.full_resolution``) replaces and inpaints it too
-        near = np.where(rep, lab, 0).astype(np.int16)
-        for _ in range(_UNSEEN_PX):
-            near = np.where(near > 0, near, cv2.dilate(near, np.ones((3, 3), np.uint8)))
+        near = grow_replaced(np.where(rep, lab, 0).astype(np.int16), _UNSEEN_PX)
         unseen &= near > 0
         lab = np.where(unseen, near, lab)
         rep = lab != 0

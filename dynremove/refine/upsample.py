@@ -37,7 +37,7 @@ from dynremove.refine.colour import delta_e
 from dynremove.refine.fields import mask_boxes, remap_points
 from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, add_offset,
                                       component_offsets, ring_agrees, ring_offset)
-from dynremove.refine.morphology import dilate_disc
+from dynremove.refine.morphology import dilate_disc, grow_replaced
 from dynremove.refine.select import Selection, member_median
 
 # offset_blend's max_de: ring pixels departing farther (CIE76) from the ring's
@@ -52,27 +52,6 @@ def _resize_nearest(a: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 def upsample_mask(mask: npt.NDArray[np.bool_], size: tuple[int, int]) -> npt.NDArray[np.bool_]:
     """(h, w) bool → (H, W) bool at ``size`` = (W, H), smooth edges (linear, ≥ 0.5)."""
     return cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_LINEAR) >= 0.5
-
-
-def grow_replaced(label: npt.NDArray[np.int16], px: int) -> npt.NDArray[np.int16]:
-    """The replaced region (label >= 1) grown by ``px`` pixels into the kept reference
-    (label 0), each new pixel taking a neighbouring source's label (3×3 grey dilation,
-    ``px`` times); label −1 (outside the fill region) never changes.
-
-    A kept working pixel next to a replaced one is, at the working size, a blend of
-    both: an edge's highlight or rim one working pixel wide. At full size it shows as a
-    thin line along the fill (seen on a bottle's rim in 12 MP phone photos), so the
-    full-size fill takes one working pixel more. (H, W) int16 in and out.
-    """
-    out = label.copy()
-    kernel = np.ones((3, 3), np.uint8)
-    for _ in range(px):
-        grown = cv2.dilate(out, kernel)
-        take = (out == 0) & (grown >= 1)
-        if not take.any():
-            break
-        out[take] = grown[take]
-    return out
 
 
 def _lab(pixels: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
