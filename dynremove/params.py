@@ -81,6 +81,7 @@ class Params:
     # --- engineered steps (dynremove.refine; all off in the paper preset) ---
     clean_mask: bool = True  # morphological clean-up of L (open/close, holes)
     min_region_px: int = 64  # drop dynamic components smaller than this (paper preset 0)
+    clean_majority: bool = True  # where the set is flat (median parallax ≤ --select-parallax-px), the clean-up starts with a majority filter (binary median, the opening's window): a slow mover's holed scan map is kept
     refine_tau: float = 16.0  # pixel votes at L's border (refine.mask.refine_mask): a source agrees with the reference under this CIE76 ΔE; 0 = off
     refine_shrink_frac: float = 0.8  # drop a rim pixel when this share of sources agree
     refine_rim_px: int = 3  # width of the inner rim that may be dropped
@@ -195,7 +196,7 @@ DEFAULT = Params()
 # The method as written: the paper's ungated flow and four alternating scans, p 9,
 # t_r 0.4, and none of the engineered steps of dynremove.refine.
 PAPER = Params(patch_size=9, t_r=0.4, correspondence="homography+flow", max_scans=4,
-               clean_mask=False, min_region_px=0, refine_tau=0.0, snap=False,
+               clean_mask=False, clean_majority=False, min_region_px=0, refine_tau=0.0, snap=False,
                fuse=False, fuse_realign=0, candidate_set=True, near_copy_agree=0.0)
 
 PRESETS: dict[str, Params] = {"default": DEFAULT, "paper": PAPER}

@@ -406,10 +406,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     ref_img = np.asarray(images[ref])
     if params.clean_mask or params.refine_tau > 0 or params.snap:
         clock.start("refine")
+    # a flat set's scan map is cleaned with a majority filter first (a slow
+    # mover's holed map kept); with parallax a mesh is more often 3-D structure
+    majority = params.clean_majority and median_parallax_px(views) <= params.select_parallax_px
     if params.clean_mask:
-        dyn = stages["clean"] = clean_mask(L, params)
+        dyn = stages["clean"] = clean_mask(L, params, majority=majority)
     if params.refine_tau > 0:
-        dyn = stages["votes"] = refine_mask(ref_img, st.src_img, st.Nf, dyn, params)
+        dyn = stages["votes"] = refine_mask(ref_img, st.src_img, st.Nf, dyn, params,
+                                            majority=majority)
         clock.tick(0.5)
     if params.snap:
         snapped = snap_to_edges(ref_img, dyn, params)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from dynremove.params import DEFAULT
-from dynremove.refine.morphology import clean_mask
+from dynremove.refine.morphology import clean_mask, dilate_disc
 
 
 def _square():
@@ -51,3 +51,23 @@ def test_clean_mask_closes_a_thin_gap():
     out = clean_mask(L, DEFAULT)  # the closing joins the halves again
     assert out[25:55, 40].all()
     assert not (out & ~_square()).any()
+
+
+def test_majority_keeps_a_holed_mesh_that_the_opening_erases():
+    """A slow mover's scan map is dense but holed (its patches matched the mover
+    itself where the sources still show it). The opening alone erased it; the
+    majority filter first keeps it, and still drops scattered specks."""
+    rng = np.random.default_rng(0)
+    L = _square() & (rng.random((80, 80)) < 0.7)  # the object, 30 % holes
+    specks = ~dilate_disc(_square(), 8) & (rng.random((80, 80)) < 0.15)
+    L |= specks
+    plain = clean_mask(L, DEFAULT)
+    kept = clean_mask(L, DEFAULT, majority=True)
+    assert (plain & _square()).sum() < 0.1 * _square().sum()  # the mesh erased
+    assert kept[24:56, 24:56].all()  # all but a rim of the window's radius
+    assert (kept & _square()).sum() >= 0.8 * _square().sum()
+    assert not (kept & ~dilate_disc(_square(), 2)).any()  # no speck, no growth
+    # a solid object loses only its corners (the median rounds them a little more)
+    solid = clean_mask(_square(), DEFAULT, majority=True)
+    assert not (solid & ~_square()).any()
+    assert solid[24:56, 20:60].all() and solid[20:60, 24:56].all()

@@ -195,7 +195,8 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     else:
         M = key["M"]
         if M != M:
-            why = "no cluster of candidates formed (undecided)"
+            why = ("no cluster of candidates formed (undecided: no M to compare with "
+                   "t_r, so the scan does not call it dynamic)")
         else:
             why = f"M = {M:.2f} {_against_t_r(M, t_r)}"
         if dyn:

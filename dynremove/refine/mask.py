@@ -32,7 +32,8 @@ def _votes(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
 
 
 def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
-                mask: npt.NDArray[np.bool_], params: Params) -> npt.NDArray[np.bool_]:
+                mask: npt.NDArray[np.bool_], params: Params, *, majority: bool = False
+                ) -> npt.NDArray[np.bool_]:
     """Pixel-level correction of the borders of a dynamic map (default preset).
 
     The scan decides on p×p patches, so L overshoots every object by up to
@@ -45,7 +46,8 @@ def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
     (``refine_ring_px`` wide) is added when *no* source agrees with it. Deep
     inside the map nothing changes: a slow object still covers its own
     background in some sources, and a pixel vote there would erase it.
-    Repeated ``refine_iters`` times (the ring moves with the map).
+    Repeated ``refine_iters`` times (the ring moves with the map), each pass
+    followed by ``morphology.clean_mask`` (with ``majority`` as given).
     """
     m = mask.copy()
     for _ in range(params.refine_iters):
@@ -58,7 +60,7 @@ def refine_mask(reference: np.ndarray, sources: np.ndarray, Nf: np.ndarray,
         new[rim & (agree >= need)] = False
         new[ring & (agree == 0) & (valid > 0)] = True
         if params.clean_mask:
-            new = clean_mask(new, params)
+            new = clean_mask(new, params, majority=majority)
         if np.array_equal(new, m):
             break
         m = new

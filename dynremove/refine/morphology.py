@@ -28,10 +28,23 @@ def dilate_disc(m: np.ndarray, r: int) -> npt.NDArray[np.bool_]:
     return cv2.dilate(np.asarray(m, np.uint8), disc(r)).astype(bool)
 
 
-def clean_mask(L: npt.NDArray[np.bool_], params: Params) -> npt.NDArray[np.bool_]:
-    """Open, close, drop small components and fill holes of a (H, W) bool map."""
+def clean_mask(L: npt.NDArray[np.bool_], params: Params, *, majority: bool = False
+               ) -> npt.NDArray[np.bool_]:
+    """Open, close, drop small components and fill holes of a (H, W) bool map.
+
+    With ``majority``, a binary median filter comes first: a pixel is kept or
+    added when more than half of the (2r+1)² window around it is set, r =
+    ``patch_size // 4`` (the opening's radius). A slow mover's scan map is
+    dense but holed (its patches matched the mover itself where the sources
+    still show it): the opening alone erased such meshes (a dog's flank, a
+    cow's back), the median keeps them and still drops scattered specks.
+    The pipeline asks for it where the set is flat (``Params.clean_majority``).
+    """
     m = L.astype(np.uint8)
-    k = disc(max(1, params.patch_size // 4))
+    r = max(1, params.patch_size // 4)
+    k = disc(r)
+    if majority:
+        m = cv2.medianBlur(m * np.uint8(255), 2 * r + 1) // np.uint8(255)
     m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
     m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, k)
     if params.min_region_px > 0:

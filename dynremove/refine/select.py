@@ -771,6 +771,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             ly, lx = np.nonzero(rep_b)
             members[lab_b[ly, lx] - 1, ly + y0, lx + x0] = True
         clean[roi] = offset_blend(reference[roi], cand_img, lab_b, rep_b, usable, labs)
+        members[:, y0:y1, x0:x1] &= ~no_src[None]  # inpainted: no source's value
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
