@@ -105,6 +105,20 @@ def _throughput(res: Any, iset: Any) -> dict:
             "working_mpx": round(h * w / 1e6, 3), "peak_rss_mb": round(rss, 1)}
 
 
+def _scene_entry(res) -> dict:
+    """report.json's ``scene``: whether the run treated the set as flat or 3-D (the
+    sources' median measured parallax against ``select_parallax_px``), which decides
+    the clean-up of L, GrabCut's veto, the epipolar search and the fill's consensus;
+    nothing without the fill by selection (the paper preset)."""
+    sel = res.selection
+    if sel is None:
+        return {}
+    limit = float(res.params.get("select_parallax_px", float("nan")))
+    return {"scene": {"median_parallax_px": round(float(sel.parallax_px), 2),
+                      "parallax_threshold_px": limit,
+                      "treated_as": "3-D" if sel.consensus_mode == "parallax" else "flat"}}
+
+
 def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
                   gt: np.ndarray | None = None, record: str | None = None,
                   reference: dict | None = None, extra: dict | None = None) -> dict:
@@ -139,6 +153,7 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
         # coverage.png holds count × 255 / sources (uint8, truncated)
         "coverage_png": {"sources": n_src, "value_per_source": round(255.0 / n_src, 4)},
         "geometry": res.geometry,
+        **_scene_entry(res),
         "seconds": {k: round(float(v), 4) for k, v in res.timings.items()},
         "throughput": _throughput(res, iset),
         "notes": list(iset.notes) + list(res.warnings),

@@ -443,3 +443,26 @@ def test_inspect_a_folder_says_it_is_a_folder(tmp_path, capsys):
         assert err == f"dynremove: error: {d}: is a folder, not a recording\n", err
     assert main(["inspect", str(tmp_path / "none.rrd"), "--pixel", "1,1"]) == 2
     assert "none.rrd: no such recording" in capsys.readouterr().err
+
+
+def test_the_report_says_whether_the_set_was_treated_as_flat_or_3d(tmp_path, capsys, folder):
+    """Several default steps switch on the set's median parallax (the clean-up's
+    majority filter, GrabCut's veto, the epipolar search, the fill's consensus):
+    report.json says which way the run went; the paper preset has none of them."""
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, folder, "--out", out, *FAST)
+    assert rc == 0, err
+    sc = json.loads((out / "report.json").read_text())["scene"]
+    assert sc["parallax_threshold_px"] == Params().select_parallax_px
+    flat = sc["median_parallax_px"] <= sc["parallax_threshold_px"]
+    assert sc["treated_as"] == ("flat" if flat else "3-D")
+    rc, _, err = run_cli(capsys, folder, "--out", tmp_path / "p", *FAST,
+                         "--select-parallax-px", "0")
+    assert rc == 0, err
+    sc0 = json.loads((tmp_path / "p" / "report.json").read_text())["scene"]
+    assert sc0["parallax_threshold_px"] == 0.0
+    assert sc0["treated_as"] == ("3-D" if sc0["median_parallax_px"] > 0 else "flat")
+    rc, _, err = run_cli(capsys, folder, "--out", tmp_path / "paper", *FAST,
+                         "--preset", "paper")
+    assert rc == 0, err
+    assert "scene" not in json.loads((tmp_path / "paper" / "report.json").read_text())
