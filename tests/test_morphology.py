@@ -53,20 +53,28 @@ def test_clean_mask_closes_a_thin_gap():
     assert not (out & ~_square()).any()
 
 
-def test_majority_keeps_a_holed_mesh_that_the_opening_erases():
+def test_majority_keeps_a_holed_mesh_that_hangs_on_a_solid_part():
     """A slow mover's scan map is dense but holed (its patches matched the mover
-    itself where the sources still show it). The opening alone erased it; the
-    majority filter first keeps it, and still drops scattered specks."""
+    itself where the sources still show it). The opening alone erased the
+    holed part; the majority filter keeps it where it holds a solid part of
+    the mover, and drops a holed region with none (hysteresis) and specks."""
     rng = np.random.default_rng(0)
-    L = _square() & (rng.random((80, 80)) < 0.7)  # the object, 30 % holes
-    specks = ~dilate_disc(_square(), 8) & (rng.random((80, 80)) < 0.15)
+    mover = _square()
+    L = mover & (rng.random((80, 80)) < 0.7)  # 30 % holes ...
+    L[20:60, 20:32] = True  # ... but for a solid part
+    lone = np.zeros_like(L)
+    lone[64:78, 2:40] = True
+    L |= lone & (rng.random((80, 80)) < 0.7)  # a holed region with no solid part
+    specks = ~dilate_disc(mover | lone, 8) & (rng.random((80, 80)) < 0.15)
     L |= specks
     plain = clean_mask(L, DEFAULT)
     kept = clean_mask(L, DEFAULT, majority=True)
-    assert (plain & _square()).sum() < 0.1 * _square().sum()  # the mesh erased
+    assert (plain & mover).sum() < 0.5 * mover.sum()  # the holed part erased
     assert kept[24:56, 24:56].all()  # all but a rim of the window's radius
-    assert (kept & _square()).sum() >= 0.8 * _square().sum()
-    assert not (kept & ~dilate_disc(_square(), 2)).any()  # no speck, no growth
+    assert (kept & mover).sum() >= 0.8 * mover.sum()
+    assert not (kept & ~dilate_disc(mover, 2)).any()  # no lone mesh, no speck, no growth
+    # a lone holed region alone: nothing
+    assert not clean_mask(lone & (rng.random((80, 80)) < 0.7), DEFAULT, majority=True).any()
     # a solid object loses only its corners (the median rounds them a little more)
     solid = clean_mask(_square(), DEFAULT, majority=True)
     assert not (solid & ~_square()).any()

@@ -32,23 +32,44 @@ def clean_mask(L: npt.NDArray[np.bool_], params: Params, *, majority: bool = Fal
                ) -> npt.NDArray[np.bool_]:
     """Open, close, drop small components and fill holes of a (H, W) bool map.
 
-    With ``majority``, a binary median filter comes first: a pixel is kept or
-    added when more than half of the (2r+1)² window around it is set, r =
-    ``patch_size // 4`` (the opening's radius). A slow mover's scan map is
-    dense but holed (its patches matched the mover itself where the sources
-    still show it): the opening alone erased such meshes (a dog's flank, a
-    cow's back), the median keeps them and still drops scattered specks.
-    The pipeline asks for it where the set is flat (``Params.clean_majority``).
+    With ``majority``, a binary median filter (a pixel is set when more than
+    half of the (2r+1)² window around it is, r = ``patch_size // 4``, the
+    opening's radius) before the same steps gives the *weak* map, the steps
+    alone the *strong* one; the result is the strong map plus every weak
+    region that holds some of it (hysteresis, as Canny's edges). A slow
+    mover's scan map is dense but holed (its patches matched the mover itself
+    where the sources still show it): the opening alone erased such meshes (a
+    dog's flank, a cow's back), the median keeps them as long as they hang on
+    a solid part of the mover. A mesh with no solid part anywhere (motion
+    blur, a misaligned patch, where another photo's mover stood) goes as
+    before: kept, the fill replaced it with that photo's mover (measured, the
+    README's "majority clean-up"). The pipeline asks for it where the set is
+    flat (``Params.clean_majority``).
     """
     m = L.astype(np.uint8)
     r = max(1, params.patch_size // 4)
     k = disc(r)
+
+    def opened(m):
+        m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
+        m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, k)
+        if params.min_region_px > 0:
+            m = drop_small(m, params.min_region_px)
+        return m
+
     if majority:
-        m = cv2.medianBlur(m * np.uint8(255), 2 * r + 1) // np.uint8(255)
-    m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
-    m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, k)
-    if params.min_region_px > 0:
-        m = drop_small(m, params.min_region_px)
+        # hysteresis: the majority's regions are kept where they hold what the
+        # opening alone keeps (a mover's solid part); a mesh with no solid part
+        # anywhere (a blurred or misaligned patch of background) goes as before
+        strong = opened(m)
+        weak = opened(cv2.medianBlur(m * np.uint8(255), 2 * r + 1) // np.uint8(255))
+        n, lab = cv2.connectedComponents(weak, connectivity=8)
+        keep = np.zeros(n, bool)
+        keep[np.unique(lab[(strong > 0) & (weak > 0)])] = True
+        keep[0] = False
+        m = (keep[lab] | (strong > 0)).astype(np.uint8)
+    else:
+        m = opened(m)
     m = fill_holes(m)
     return m.astype(bool)
 
