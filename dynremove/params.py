@@ -81,7 +81,7 @@ class Params:
     # --- engineered steps (dynremove.refine; all off in the paper preset) ---
     clean_mask: bool = True  # morphological clean-up of L (open/close, holes)
     min_region_px: int = 64  # drop dynamic components smaller than this (paper preset 0)
-    clean_majority: bool = True  # where the set is flat (median parallax ≤ --select-parallax-px), the clean-up starts with a majority filter (binary median, the opening's window): a slow mover's holed scan map is kept
+    clean_majority: bool = True  # where the set is flat (median parallax ≤ --select-parallax-px), the clean-up also keeps the regions of a majority filter of L (binary median, the opening's window) that hold part of what the opening alone keeps: a slow mover's holed scan map is kept
     refine_tau: float = 16.0  # pixel votes at L's border (refine.mask.refine_mask): a source agrees with the reference under this CIE76 ΔE; 0 = off
     refine_shrink_frac: float = 0.8  # drop a rim pixel when this share of sources agree
     refine_rim_px: int = 3  # width of the inner rim that may be dropped
