@@ -406,9 +406,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     ref_img = np.asarray(images[ref])
     if params.clean_mask or params.refine_tau > 0 or params.snap:
         clock.start("refine")
-    # a flat set's scan map is cleaned with a majority filter first (a slow
-    # mover's holed map kept); with parallax a mesh is more often 3-D structure
-    majority = params.clean_majority and median_parallax_px(views) <= params.select_parallax_px
+    # a flat set (the fill's "scan" consensus mode): the clean-up keeps a slow mover's
+    # holed map (majority filter); with parallax a mesh is more often 3-D structure,
+    # and GrabCut's growth may be vetoed
+    flat = median_parallax_px(views) <= params.select_parallax_px
+    majority = params.clean_majority and flat
     if params.clean_mask:
         dyn = stages["clean"] = clean_mask(L, params, majority=majority)
     if params.refine_tau > 0:
@@ -417,8 +419,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         clock.tick(0.5)
     if params.snap:
         snapped = snap_to_edges(ref_img, dyn, params)
-        if params.snap_veto and params.refine_tau > 0 and \
-                median_parallax_px(views) > params.select_parallax_px:
+        if params.snap_veto and params.refine_tau > 0 and not flat:
             snapped = veto_agreed(ref_img, st.src_img, st.Nf, dyn, snapped, params)
         dyn = stages["snap"] = snapped
     clock.stop()

@@ -65,8 +65,7 @@ def clean_mask(L: npt.NDArray[np.bool_], params: Params, *, majority: bool = Fal
         weak = opened(cv2.medianBlur(m * np.uint8(255), 2 * r + 1) // np.uint8(255))
         n, lab = cv2.connectedComponents(weak, connectivity=8)
         keep = np.zeros(n, bool)
-        keep[np.unique(lab[(strong > 0) & (weak > 0)])] = True
-        keep[0] = False
+        keep[np.unique(lab[(strong > 0) & (weak > 0)])] = True  # (never label 0)
         m = (keep[lab] | (strong > 0)).astype(np.uint8)
     else:
         m = opened(m)
