@@ -26,6 +26,7 @@ import numpy as np
 
 from dynremove import io
 from dynremove.method.scan import _kernels
+from dynremove.method.scan.driver import compiled_scan
 from dynremove.batch import at_output_size, load_for_reference, write_outputs
 from dynremove.errors import InputError
 from dynremove.evaluation import composite, synth
@@ -778,14 +779,15 @@ def _note(args: argparse.Namespace, msg: str, bar: ProgressBar | None = None) ->
         print(f"dynremove: note: {msg}", file=sys.stderr)
 
 
-def kernels_cached() -> bool:
-    """Whether numba's on-disk cache holds the scan kernel for this source.
+def kernels_cached(record: bool = False) -> bool:
+    """Whether numba's on-disk cache holds the scan kernel that a run (recorded or
+    not: ``driver.compiled_scan``) calls, for this source.
 
     Asks numba's own index (its source stamp is a hash of the file's content, so a
     checkout that only touches the file's time keeps the cache); on a numba whose
     internals differ, falls back to comparing the cache's and the source's times."""
     try:
-        return bool(_kernels._scan_rows._cache._cache_file._load_index())
+        return bool(compiled_scan(record)._cache._cache_file._load_index())
     except Exception:  # noqa: BLE001 - numba internals: the fallback below
         pass
     src = Path(_kernels.__file__)
@@ -795,7 +797,7 @@ def kernels_cached() -> bool:
 
 def _note_compile(args: argparse.Namespace) -> None:
     """Say so when this run will compile the kernels (a fresh install: ~35 s, once)."""
-    if not kernels_cached():
+    if not kernels_cached(bool(getattr(args, "record", None))):
         _note(args, "compiling the scan kernels (once per install, about 30-60 s; later "
                     "runs reuse numba's cache)")
 

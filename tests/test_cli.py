@@ -277,21 +277,25 @@ def test_a_closed_pipe_is_not_an_error(tmp_path):
     assert p.wait() == 141 and err == "", err
 
 
-def test_the_compile_note_follows_numbas_own_cache(tmp_path):
-    """kernels_cached asks numba's index (a hash of the source's content): a copy of
-    the package with its cache is cached; an edited kernel file, or no cache, is not."""
+@pytest.mark.parametrize("record", [False, True])
+def test_the_compile_note_follows_numbas_own_cache(tmp_path, record):
+    """kernels_cached asks numba's index (a hash of the source's content) for the
+    kernel that the run calls (recorded or not): a copy of the package with its
+    cache is cached; an edited kernel file, or no cache, is not."""
     import shutil
     import subprocess
     import sys
 
     import dynremove
+    from dynremove.method.scan.driver import compiled_scan
 
     pkg = Path(dynremove.__file__).parent
-    if not list((pkg / "method" / "scan" / "__pycache__").glob("_kernels._scan_rows-*.nbi")):
-        pytest.skip("the scan kernels have not been compiled in this tree yet")
+    name = compiled_scan(record).__name__
+    if not list((pkg / "method" / "scan" / "__pycache__").glob(f"_kernels.{name}-*.nbi")):
+        pytest.skip(f"the scan kernel {name} has not been compiled in this tree yet")
     shutil.copytree(pkg, tmp_path / "dynremove")
     probe = [sys.executable, "-c", "from dynremove.commands import kernels_cached as k; "
-             "print(k())"]
+             f"print(k({record}))"]
 
     def cached() -> str:
         return subprocess.run(probe, cwd=tmp_path, capture_output=True, text=True,

@@ -155,3 +155,42 @@ def test_steps_are_unique_and_ordered(small_scene):
     assert len(steps) > 0
     assert len(np.unique(steps)) == len(steps)
     assert np.all(np.diff(steps) > 0)
+
+
+@pytest.mark.parametrize("name,variant", [
+    ("default", {}),
+    ("paper", {"max_scans": 2}),
+    ("paper", {"write": "pixel", "max_scans": 2}),
+    ("default", {"update": False, "candidate_set": False}),
+])
+def test_the_wavefront_scan_equals_the_sequential_scan(name, variant):
+    """Unrecorded, the scan visits row segments in waves on all cores
+    (``_kernels._scan_wavefront``); the state it leaves is the sequential scan's
+    (the recorded one) byte for byte: L, the reference's pixels and features, N,
+    C, the M maps and the counts."""
+    import numba
+
+    from dynremove.evaluation import synth
+    from dynremove.events import NullSink
+
+    if numba.get_num_threads() < 2:
+        pytest.skip("one thread: the scan runs sequentially anyway")
+    scene = synth.make_scene(seed=1, n_views=5, size=(120, 200))
+    params = preset(name).replace(**variant)
+    st0, _ = prepare(scene.images, scene.ref_index, params)
+    runs = {}
+    for sink in (NullSink(), MemorySink()):  # the waves; one pixel at a time
+        st = st0.copy()
+        L, Ms, summ = run_scans(st, params, sink=sink)
+        runs[type(sink).__name__] = (st, L, Ms, summ)
+    (a, La, Ma, sa), (b, Lb, Mb, sb) = runs["NullSink"], runs["MemorySink"]
+    assert sb[0]["n_dynamic"] > 200, "the scene must exercise the removal path"
+    np.testing.assert_array_equal(La, Lb)
+    for f in ("img", "lab", "gray", "fc_r", "fg_r", "N", "C"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+    assert len(Ma) == len(Mb)
+    for ma, mb in zip(Ma, Mb):
+        np.testing.assert_array_equal(ma, mb)
+    for x, y in zip(sa, sb):
+        for f in ("n_dynamic", "n_replaced", "n_undecided"):
+            assert x[f] == y[f], f

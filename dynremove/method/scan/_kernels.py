@@ -20,6 +20,7 @@ kernel                          reference
 ``_write_patch``                ``write_patch``
 ``_update_correspondences``     ``update_correspondences`` (Sec. 3.2.3)
 ``_scan_rows``                  ``scan_rows`` (Algorithm 1)
+``_scan_wavefront``             ``scan_rows`` (the same visits on all cores)
 ==============================  =====================================
 
 Shapes: reference (H, W); S sources of the same size; K = 2·S candidate slots.
@@ -1023,148 +1024,244 @@ def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     [dynamic, replaced, undecided].
     """
     H, W = gray.shape
+    scratch = _scan_scratch(pi, N.shape[0], fg_r.shape[2])
+    g_in, g_out = _edge_bounds(pf)
+    for vi in range(r0, r1):
+        _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
+                   N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
+                   use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan, direction,
+                   vi, 0, W, rec, dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
+                   rep_i, rep_f, upd_i, upd_f, counts, stats, scratch)
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan_scratch(pi, S, G):
+    """The work arrays of one visiting thread: those of ``_work_arrays`` (K = 2·S
+    candidate slots, G = the SIFT length), the patch scores (K,), g_c and g_h of
+    two overlaps (3,), (nb,) ×2, and ``_write_patch``'s change box."""
+    K = 2 * S
+    nb = pi[HOG_BINS]
+    half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
+    return (_work_arrays(K, G), np.empty(K, np.float64), np.empty(3), np.empty(3),
+            np.empty(nb), np.empty(nb), np.empty((2 * half + 3, 2 * half + 3), np.uint8))
+
+
+@numba.njit(cache=True, nogil=True)
+def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
+               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
+               use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan, direction,
+               vi, xi0, xi1, rec, dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
+               rep_i, rep_f, upd_i, upd_f, counts, stats, scratch):
+    """Visit the pixels xi0..xi1−1 of row vi (in visiting order: row vi counts from
+    the top in a forward scan, from the bottom in a backward one, and so do the
+    columns) — the body of ``_scan_rows``, which see for the state and events.
+    ``scratch`` from ``_scan_scratch``; g_in, g_out from ``_edge_bounds(pf)``."""
+    H, W = gray.shape
     S = N.shape[0]
     K = 2 * S
     nb = pi[HOG_BINS]
     as_set = pi[CAND_SET] != 0
     half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
-    # per-pixel work arrays
-    work = _work_arrays(K, fg_r.shape[2])
-    g_in, g_out = _edge_bounds(pf)
+    work, score, gc0, gc1, gh0, gh1, chg = scratch
     (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
      nx_, ny_, ox_, oy_) = work
-    score = np.empty(K, np.float64)
-    gc0 = np.empty(3)
-    gc1 = np.empty(3)
-    gh0 = np.empty(nb)
-    gh1 = np.empty(nb)
-    chg = np.empty((2 * half + 3, 2 * half + 3), np.uint8)
     # the two scan neighbours (x + dx, y + dy): left/up, or right/down
     if direction > 0:
         ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
     else:
         ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
-    for vi in range(r0, r1):
-        y = vi if direction > 0 else H - 1 - vi
-        for xi in range(W):
-            x = xi if direction > 0 else W - 1 - xi
-            step = np.int64(scan) * H * W + np.int64(vi) * W + xi
-            if use_pre:
-                # the precomputed decision holds unless a neighbour was updated
-                # in this scan; static ones are taken as they are (unless recorded)
-                pM = preM[y, x]
-                ok = not (pM <= pf[T_R])
-                for t in range(2):
-                    xa = x + (ndx0 if t == 0 else ndx1)
-                    ya = y + (ndy0 if t == 0 else ndy1)
-                    if 0 <= xa < W and 0 <= ya < H and dirty[ya, xa] != 0:
-                        ok = False
-                if ok and rec:
-                    if probe[y, x]:
-                        ok = False
-                    elif pf[SAMPLE_RATE] > 0.0:
-                        hsh = (np.uint64(x) * np.uint64(73856093)) ^ \
-                            (np.uint64(y) * np.uint64(19349663)) ^ \
-                            (np.uint64(scan) * np.uint64(83492791))
-                        if float(hsh % np.uint64(1000003)) < pf[SAMPLE_RATE] * 1000003.0:
-                            ok = False
-                if ok:
-                    Mmap[y, x] = pM
-                    Bmap[y, x] = preB[y, x]
-                    for c in range(4):
-                        Kmap[y, x, c] = preK[y, x, c]
-                    if preK[y, x, 1] == 0:
-                        stats[2] += 1
-                    continue
-            # ---- decision (Sec. 3.2.1) --------------------------------------------
-            n, nn, k, m, bm, M, cdist = _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in,
-                                                  g_out, x, y, ndx0, ndy0, ndx1, ndy1, as_set,
-                                                  work, Mmap, Bmap, Kmap)
-            dynamic = k > 0 and M <= pf[T_R]
-            if k == 0:
-                stats[2] += 1
-            chosen = -1
-            if dynamic:
-                stats[0] += 1
-                L[y, x] = 1
-                # ---- removal (Sec. 3.2.2) -----------------------------------------
-                ib, best, ntie = _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F,
-                                               hasF, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1,
-                                               n, cs, cx, cy, labels, m, fhat_c, fhat_g,
-                                               score, gc0, gc1, gh0, gh1)
-                s = cs[ib]
-                qx = cx[ib]
-                qy = cy[ib]
-                box = _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x,
-                                   y, half, chg)
-                _refresh_written(gray, nb, hb_r, hm_r, hb_s, hm_s, s, qx, qy, x, y, half, chg,
-                                 box)
-                for c in range(3):
-                    fc_r[y, x, c] = fc_s[s, qy, qx, c]
-                for j in range(fg_r.shape[2]):
-                    fg_r[y, x, j] = fg_s[s, qy, qx, j]
-                chosen = s
-                stats[1] += 1
-                if rec:
-                    e = counts[1]
-                    if e < rep_i.shape[0]:
-                        rep_i[e, R_SCAN] = scan
-                        rep_i[e, R_STEP] = step
-                        rep_i[e, R_X] = x
-                        rep_i[e, R_Y] = y
-                        rep_i[e, R_SRC] = s
-                        rep_i[e, R_SX] = qx
-                        rep_i[e, R_SY] = qy
-                        rep_i[e, R_TIE] = 1 if ntie > 1 else 0
-                        rep_i[e, R_NP] = ntie
-                        rep_f[e] = best
-                    counts[1] = e + 1
-                # ---- update (Sec. 3.2.3) ------------------------------------------
-                if pi[UPDATE] != 0:
-                    dirty[y, x] = 1
-                    _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi,
-                                            x, y, n, cs, cx, cy, labels, m, nx_, ny_, nn,
-                                            scan, step, rec, upd_i, upd_f, counts)
-            # ---- record the decision ----------------------------------------------
-            if rec:
-                why = 0
-                if dynamic:
-                    why |= 1
+    y = vi if direction > 0 else H - 1 - vi
+    for xi in range(xi0, xi1):
+        x = xi if direction > 0 else W - 1 - xi
+        step = np.int64(scan) * H * W + np.int64(vi) * W + xi
+        if use_pre:
+            # the precomputed decision holds unless a neighbour was updated
+            # in this scan; static ones are taken as they are (unless recorded)
+            pM = preM[y, x]
+            ok = not (pM <= pf[T_R])
+            for t in range(2):
+                xa = x + (ndx0 if t == 0 else ndx1)
+                ya = y + (ndy0 if t == 0 else ndy1)
+                if 0 <= xa < W and 0 <= ya < H and dirty[ya, xa] != 0:
+                    ok = False
+            if ok and rec:
                 if probe[y, x]:
-                    why |= 2
-                if why == 0 and pf[SAMPLE_RATE] > 0.0:
+                    ok = False
+                elif pf[SAMPLE_RATE] > 0.0:
                     hsh = (np.uint64(x) * np.uint64(73856093)) ^ \
                         (np.uint64(y) * np.uint64(19349663)) ^ \
                         (np.uint64(scan) * np.uint64(83492791))
                     if float(hsh % np.uint64(1000003)) < pf[SAMPLE_RATE] * 1000003.0:
-                        why |= 4
-                if why != 0:
-                    e = counts[0]
-                    if e < dec_i.shape[0]:
-                        dec_i[e, D_SCAN] = scan
-                        dec_i[e, D_STEP] = step
-                        dec_i[e, D_X] = x
-                        dec_i[e, D_Y] = y
-                        dec_i[e, D_WHY] = why
-                        dec_i[e, D_NCAND] = n
-                        dec_i[e, D_WIN] = m
-                        dec_i[e, D_NCL] = k
-                        dec_i[e, D_CHOSEN] = chosen
-                        dec_i[e, D_DYN] = 1 if dynamic else 0
-                        dec_f[e, 0] = M
-                        dec_f[e, 1] = bm
-                        dec_f[e, 2] = cdist
-                        for q in range(K):
-                            dec_cs[e, q] = -1
-                            dec_cxy[e, q, 0] = -1
-                            dec_cxy[e, q, 1] = -1
-                            dec_cB[e, q] = 0.0
-                            dec_ccl[e, q] = -1
-                        for i in range(n):
-                            q = slot[i]
-                            dec_cs[e, q] = cs[i]
-                            dec_cxy[e, q, 0] = cx[i]
-                            dec_cxy[e, q, 1] = cy[i]
-                            dec_cB[e, q] = cB[i]
-                            dec_ccl[e, q] = labels[i]
-                    counts[0] = e + 1
+                        ok = False
+            if ok:
+                Mmap[y, x] = pM
+                Bmap[y, x] = preB[y, x]
+                for c in range(4):
+                    Kmap[y, x, c] = preK[y, x, c]
+                if preK[y, x, 1] == 0:
+                    stats[2] += 1
+                continue
+        # ---- decision (Sec. 3.2.1) --------------------------------------------
+        n, nn, k, m, bm, M, cdist = _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in,
+                                              g_out, x, y, ndx0, ndy0, ndx1, ndy1, as_set,
+                                              work, Mmap, Bmap, Kmap)
+        dynamic = k > 0 and M <= pf[T_R]
+        if k == 0:
+            stats[2] += 1
+        chosen = -1
+        if dynamic:
+            stats[0] += 1
+            L[y, x] = 1
+            # ---- removal (Sec. 3.2.2) -----------------------------------------
+            ib, best, ntie = _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F,
+                                           hasF, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1,
+                                           n, cs, cx, cy, labels, m, fhat_c, fhat_g,
+                                           score, gc0, gc1, gh0, gh1)
+            s = cs[ib]
+            qx = cx[ib]
+            qy = cy[ib]
+            box = _write_patch(img, lab, gray, src_img, src_lab, src_gray, s, qx, qy, x,
+                               y, half, chg)
+            _refresh_written(gray, nb, hb_r, hm_r, hb_s, hm_s, s, qx, qy, x, y, half, chg,
+                             box)
+            for c in range(3):
+                fc_r[y, x, c] = fc_s[s, qy, qx, c]
+            for j in range(fg_r.shape[2]):
+                fg_r[y, x, j] = fg_s[s, qy, qx, j]
+            chosen = s
+            stats[1] += 1
+            if rec:
+                e = counts[1]
+                if e < rep_i.shape[0]:
+                    rep_i[e, R_SCAN] = scan
+                    rep_i[e, R_STEP] = step
+                    rep_i[e, R_X] = x
+                    rep_i[e, R_Y] = y
+                    rep_i[e, R_SRC] = s
+                    rep_i[e, R_SX] = qx
+                    rep_i[e, R_SY] = qy
+                    rep_i[e, R_TIE] = 1 if ntie > 1 else 0
+                    rep_i[e, R_NP] = ntie
+                    rep_f[e] = best
+                counts[1] = e + 1
+            # ---- update (Sec. 3.2.3) ------------------------------------------
+            if pi[UPDATE] != 0:
+                dirty[y, x] = 1
+                _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi,
+                                        x, y, n, cs, cx, cy, labels, m, nx_, ny_, nn,
+                                        scan, step, rec, upd_i, upd_f, counts)
+        # ---- record the decision ----------------------------------------------
+        if rec:
+            why = 0
+            if dynamic:
+                why |= 1
+            if probe[y, x]:
+                why |= 2
+            if why == 0 and pf[SAMPLE_RATE] > 0.0:
+                hsh = (np.uint64(x) * np.uint64(73856093)) ^ \
+                    (np.uint64(y) * np.uint64(19349663)) ^ \
+                    (np.uint64(scan) * np.uint64(83492791))
+                if float(hsh % np.uint64(1000003)) < pf[SAMPLE_RATE] * 1000003.0:
+                    why |= 4
+            if why != 0:
+                e = counts[0]
+                if e < dec_i.shape[0]:
+                    dec_i[e, D_SCAN] = scan
+                    dec_i[e, D_STEP] = step
+                    dec_i[e, D_X] = x
+                    dec_i[e, D_Y] = y
+                    dec_i[e, D_WHY] = why
+                    dec_i[e, D_NCAND] = n
+                    dec_i[e, D_WIN] = m
+                    dec_i[e, D_NCL] = k
+                    dec_i[e, D_CHOSEN] = chosen
+                    dec_i[e, D_DYN] = 1 if dynamic else 0
+                    dec_f[e, 0] = M
+                    dec_f[e, 1] = bm
+                    dec_f[e, 2] = cdist
+                    for q in range(K):
+                        dec_cs[e, q] = -1
+                        dec_cxy[e, q, 0] = -1
+                        dec_cxy[e, q, 1] = -1
+                        dec_cB[e, q] = 0.0
+                        dec_ccl[e, q] = -1
+                    for i in range(n):
+                        q = slot[i]
+                        dec_cs[e, q] = cs[i]
+                        dec_cxy[e, q, 0] = cx[i]
+                        dec_cxy[e, q, 1] = cy[i]
+                        dec_cB[e, q] = cB[i]
+                        dec_ccl[e, q] = labels[i]
+                counts[0] = e + 1
+
+
+# --- the same scan on all cores: a wavefront of row segments (exact) ---------------
+
+
+@numba.njit(cache=True, nogil=True)
+def _reach(pi):
+    """R: two visits farther apart than R px (in x or in y) touch no common state.
+
+    A visit reads N and C at its scan neighbours (1 px), the reference's Lab and
+    gradient bins within h = p // 2 (``_choose_patch``), and writes the pixels
+    within ``half`` (``_write_patch``; p // 2, or 0 for pixel writes) and the
+    gradient bins within half + 1, reading gray within half + 2
+    (``_refresh_written``)."""
+    h = pi[P] // 2
+    half = h if pi[WRITE_PATCH] != 0 else 0
+    return max(half + 1 + h, 2 * half + 2, 1)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def _scan_wavefront(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
+                    N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
+                    use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1,
+                    stats):
+    """Rows r0..r1−1 of one scan, as ``_scan_rows`` visits them, on all cores:
+    the same state afterwards, byte for byte (no events; ``stats`` += as there).
+
+    A row is cut into segments of T = R + 1 px (``_reach``); segment j of visiting
+    row i runs at wave t = j + 2i, the segments of a wave at once. Each visit's
+    predecessors in the sequential order that it depends on are in earlier waves:
+    its left neighbour, and the row above as far as R px to its right (segment
+    j + 1 of row i − 1, wave t − 1; the rows further up are further ahead). Two
+    segments of one wave are at least T + 1 > R px apart, so they touch no common
+    state, and a visit that runs before a sequential predecessor (a segment two
+    or more to the right, rows up) is one that it does not touch either. The
+    waves' segments are dealt to the threads in turn, so that the expensive
+    segments of one mover (adjacent rows) go to different threads.
+    """
+    H, W = gray.shape
+    S = N.shape[0]
+    G = stats.shape[0]
+    T = _reach(pi) + 1
+    g_in, g_out = _edge_bounds(pf)
+    nseg = (W + T - 1) // T
+    nrow = r1 - r0
+    # no events: zero-capacity buffers that the visits never write (rec False)
+    dec_i = np.zeros((0, N_DI), np.int64)
+    dec_f = np.zeros((0, 3), np.float32)
+    dec_cs = np.zeros((0, 2 * S), np.int8)
+    dec_cxy = np.zeros((0, 2 * S, 2), np.int32)
+    dec_cB = np.zeros((0, 2 * S), np.float32)
+    dec_ccl = np.zeros((0, 2 * S), np.int16)
+    rep_i = np.zeros((0, N_RI), np.int64)
+    rep_f = np.zeros(0, np.float32)
+    upd_i = np.zeros((0, N_UI), np.int64)
+    upd_f = np.zeros(0, np.float32)
+    counts = np.zeros(3, np.int64)
+    for t in range(nseg + 2 * (nrow - 1)):
+        i_lo = max(0, (t - nseg + 2) // 2)  # j = t − 2i < nseg
+        i_hi = min(nrow - 1, t // 2)  # j ≥ 0
+        n_t = i_hi - i_lo + 1
+        for g in numba.prange(G):
+            scratch = _scan_scratch(pi, S, fg_r.shape[2])
+            for k in range(g, n_t, G):
+                i = i_lo + k
+                j = t - 2 * i
+                _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s,
+                           fg_s, N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s,
+                           hm_s, use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan,
+                           direction, r0 + i, j * T, min(W, (j + 1) * T), False, dec_i, dec_f,
+                           dec_cs, dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f,
+                           counts, stats[g], scratch)

@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+import numba
 import numpy as np
 
 from dynremove.events import (
@@ -152,6 +153,18 @@ class _Buffers:
 
 # precompute the scan's decisions on all cores (exact; off only to measure it)
 PRECOMPUTE = True
+# an unrecorded scan visits on all cores, in waves of row segments (exact; off only
+# to measure it): ``_kernels._scan_wavefront``
+WAVEFRONT = True
+
+
+def compiled_scan(record: bool):
+    """The compiled scan a run calls: unrecorded, on more than one thread,
+    ``_kernels._scan_wavefront`` (all cores, the same result); otherwise (or
+    recorded, so that the events come in the visiting order) ``_kernels._scan_rows``."""
+    if WAVEFRONT and not record and numba.get_num_threads() > 1:
+        return kn._scan_wavefront
+    return kn._scan_rows
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -191,7 +204,14 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
         hb_s[s], hm_s[s] = kn._gradient_bins(st.src_gray[s], nb)
     M_maps: list[np.ndarray] = []
     summaries: list[np.ndarray] = []
-    if kernel == "numba":
+    threads = numba.get_num_threads()
+    wavefront = kernel == "numba" and compiled_scan(record) is kn._scan_wavefront
+    if wavefront:
+        def scan_fn(*state, scan, direction, r0, r1, stats):
+            per_thread = np.zeros((threads, 3), np.int64)
+            kn._scan_wavefront(*state, pf, pi, scan, direction, r0, r1, per_thread)
+            stats += per_thread.sum(0)
+    elif kernel == "numba":
         def scan_fn(*state, scan, direction, r0, r1, stats):
             kn._scan_rows(*state, pf, pi, scan, direction, r0, r1, record, *bufs.args(), stats)
     elif kernel == "reference":
@@ -220,8 +240,9 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
 
         t0 = time.perf_counter()
         # every decision from the scan's starting state, on all cores; the scan
-        # then recomputes only what its own updates invalidate (exact)
-        use_pre = kernel == "numba" and PRECOMPUTE
+        # then recomputes only what its own updates invalidate (exact). The waves
+        # decide each pixel once, on all cores, already
+        use_pre = kernel == "numba" and PRECOMPUTE and not wavefront
         preM = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
         preB = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
         preK = np.empty((H, W, 4), np.int32) if use_pre else np.empty((1, 1, 4), np.int32)
