@@ -45,6 +45,7 @@ from dynremove import io
 from dynremove.errors import InputError
 from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
+from dynremove.refine.concurrency import one_thread_per_worker
 from dynremove.pipeline import full_resolution_output, remove_dynamic
 from dynremove.video import auto_reference, blurry_reference_note
 
@@ -312,7 +313,7 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
             ) -> dict:
     """Run one set into ``out_root/<set>``; never raises (errors go into the row)."""
     if single_thread:
-        cv2.setNumThreads(1)  # in a worker: parallelism comes from joblib
+        one_thread_per_worker()  # in a worker: parallelism comes from joblib
     t0 = time.perf_counter()
     out = out_root / bs.name
     row: dict[str, Any] = dict.fromkeys(SUMMARY_FIELDS)

@@ -93,6 +93,7 @@ from dynremove.evaluation.whole_photo import (damage_percent, leftover_percent, 
                                               own_mover_fill_percent, psnr, ssim)
 from dynremove.params import Params, preset
 from dynremove.pipeline import Result, remove_dynamic
+from dynremove.refine.concurrency import one_thread_per_worker
 
 METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
@@ -354,7 +355,7 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
     failing set does not lose the others.
     """
     if single_thread:
-        cv2.setNumThreads(1)  # in a worker: parallelism comes from joblib
+        one_thread_per_worker()  # in a worker: parallelism comes from joblib
     t_set = time.perf_counter()
     try:
         ls = load_set(es, max_side=max_side, ref=ref)

@@ -15,6 +15,7 @@ from typing import TypeVar
 
 import cv2
 import joblib
+import numba
 
 T = TypeVar("T")
 
@@ -37,4 +38,13 @@ def for_each_source(fn: Callable[[int], T], n: int, *,
             on_done(k)
     return out
 
-__all__ = ["for_each_source"]
+def one_thread_per_worker() -> None:
+    """In a worker process of ``eval --jobs`` or ``batch --jobs`` (the parallelism
+    comes from the processes): OpenCV and numba on one thread each, so that two
+    workers do not run four threads on two cores (the scan's waves, whose threads
+    meet at a barrier a few thousand times a pass, lose the most to that)."""
+    cv2.setNumThreads(1)
+    numba.set_num_threads(1)
+
+
+__all__ = ["for_each_source", "one_thread_per_worker"]
