@@ -16,10 +16,19 @@ Layout (imports go one way down, ``tests/test_layers.py``): ``params``,
 ← ``pipeline`` ← ``evaluation/`` ← ``cli`` (with ``commands``).
 """
 
-from dynremove.errors import InputError
-from dynremove.events import EventSink, MemorySink, NullSink
-from dynremove.params import DEFAULT, PAPER, PRESETS, Params, preset
-from dynremove.pipeline import Result, remove_dynamic
+import os
+
+# numba's OpenMP threads wait for work asleep, not spinning: the scan's waves meet at
+# a barrier a few thousand times a pass, and with another process on the cores a
+# spinning thread holds the core that the thread it waits for needs (a pass of
+# 1.3 s took 6-16 s on a busy 2-core machine). Read when numba first starts its
+# threads; a value the user set wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from dynremove.errors import InputError  # noqa: E402
+from dynremove.events import EventSink, MemorySink, NullSink  # noqa: E402
+from dynremove.params import DEFAULT, PAPER, PRESETS, Params, preset  # noqa: E402
+from dynremove.pipeline import Result, remove_dynamic  # noqa: E402
 
 __all__ = ["remove_dynamic", "Result", "Params", "PRESETS", "DEFAULT", "PAPER", "preset",
            "InputError", "EventSink", "NullSink", "MemorySink"]

@@ -26,7 +26,7 @@ import numpy as np
 
 from dynremove import io
 from dynremove.method.scan import _kernels
-from dynremove.method.scan.driver import compiled_scan
+from dynremove.method.scan.driver import compiled_kernels
 from dynremove.batch import at_output_size, load_for_reference, write_outputs
 from dynremove.errors import InputError
 from dynremove.evaluation import composite, synth
@@ -780,14 +780,14 @@ def _note(args: argparse.Namespace, msg: str, bar: ProgressBar | None = None) ->
 
 
 def kernels_cached(record: bool = False) -> bool:
-    """Whether numba's on-disk cache holds the scan kernel that a run (recorded or
-    not: ``driver.compiled_scan``) calls, for this source.
+    """Whether numba's on-disk cache holds the scan kernels that a run (recorded or
+    not: ``driver.compiled_kernels``) calls, for this source.
 
     Asks numba's own index (its source stamp is a hash of the file's content, so a
     checkout that only touches the file's time keeps the cache); on a numba whose
     internals differ, falls back to comparing the cache's and the source's times."""
     try:
-        return bool(compiled_scan(record)._cache._cache_file._load_index())
+        return all(bool(k._cache._cache_file._load_index()) for k in compiled_kernels(record))
     except Exception:  # noqa: BLE001 - numba internals: the fallback below
         pass
     src = Path(_kernels.__file__)

@@ -165,7 +165,7 @@ def test_steps_are_unique_and_ordered(small_scene):
 ])
 def test_the_wavefront_scan_equals_the_sequential_scan(name, variant):
     """Unrecorded, the scan visits row segments in waves on all cores
-    (``_kernels._scan_wavefront``); the state it leaves is the sequential scan's
+    (``_kernels._scan`` in waves); the state it leaves is the sequential scan's
     (the recorded one) byte for byte: L, the reference's pixels and features, N,
     C, the M maps and the counts."""
     import numba

@@ -20,7 +20,7 @@ kernel                          reference
 ``_write_patch``                ``write_patch``
 ``_update_correspondences``     ``update_correspondences`` (Sec. 3.2.3)
 ``_scan_rows``                  ``scan_rows`` (Algorithm 1)
-``_scan_wavefront``             ``scan_rows`` (the same visits on all cores)
+``_scan``                       ``scan_rows`` (the driver's entry; on all cores)
 ==============================  =====================================
 
 Shapes: reference (H, W); S sources of the same size; K = 2·S candidate slots.
@@ -1213,43 +1213,41 @@ def _reach(pi):
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def _scan_wavefront(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-                    N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
-                    use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1,
-                    stats):
-    """Rows r0..r1−1 of one scan, as ``_scan_rows`` visits them, on all cores:
-    the same state afterwards, byte for byte (no events; ``stats`` += as there).
+def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
+          N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
+          use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1, rec, waves,
+          dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f,
+          counts, stats):
+    """Rows r0..r1−1 of one scan, as ``_scan_rows`` visits them (the same state and
+    events, byte for byte): the driver's one compiled entry, so that a recorded
+    and an unrecorded run share one compilation. ``stats`` (G, 3) int64: row g
+    += [dynamic, replaced, undecided] of thread g (row 0 when not ``waves``).
 
-    A row is cut into segments of T = R + 1 px (``_reach``); segment j of visiting
+    Without ``waves``: one pixel at a time, in the visiting order (events when
+    ``rec``), on one thread. With ``waves`` (and not ``rec``: no events), on all
+    cores: a row is
+    cut into segments of T = R + 1 px (``_reach``), and segment j of visiting
     row i runs at wave t = j + 2i, the segments of a wave at once. Each visit's
-    predecessors in the sequential order that it depends on are in earlier waves:
-    its left neighbour, and the row above as far as R px to its right (segment
-    j + 1 of row i − 1, wave t − 1; the rows further up are further ahead). Two
-    segments of one wave are at least T + 1 > R px apart, so they touch no common
-    state, and a visit that runs before a sequential predecessor (a segment two
-    or more to the right, rows up) is one that it does not touch either. The
-    waves' segments are dealt to the threads in turn, so that the expensive
-    segments of one mover (adjacent rows) go to different threads.
+    predecessors in the sequential order that it depends on are in earlier
+    waves: its left neighbour, and the row above as far as R px to its right
+    (segment j + 1 of row i − 1, wave t − 1; the rows further up are further
+    ahead). Two segments of one wave are at least T + 1 > R px apart, so they
+    touch no common state, and a visit that runs before a sequential
+    predecessor (a segment two or more to the right, rows up) is one that it
+    does not touch either. The waves' segments are dealt to the threads in
+    turn, so that the expensive segments of one mover (adjacent rows) go to
+    different threads.
     """
     H, W = gray.shape
     S = N.shape[0]
-    G = stats.shape[0]
-    T = _reach(pi) + 1
     g_in, g_out = _edge_bounds(pf)
+    # one visit order for both: without waves, a wave is one whole row (the
+    # parallel loop then runs once, on one thread), so that the two share one
+    # compilation of the visits (each parallel loop compiles its calls anew)
+    G = stats.shape[0] if waves else 1
+    T = _reach(pi) + 1 if waves else W
     nseg = (W + T - 1) // T
     nrow = r1 - r0
-    # no events: zero-capacity buffers that the visits never write (rec False)
-    dec_i = np.zeros((0, N_DI), np.int64)
-    dec_f = np.zeros((0, 3), np.float32)
-    dec_cs = np.zeros((0, 2 * S), np.int8)
-    dec_cxy = np.zeros((0, 2 * S, 2), np.int32)
-    dec_cB = np.zeros((0, 2 * S), np.float32)
-    dec_ccl = np.zeros((0, 2 * S), np.int16)
-    rep_i = np.zeros((0, N_RI), np.int64)
-    rep_f = np.zeros(0, np.float32)
-    upd_i = np.zeros((0, N_UI), np.int64)
-    upd_f = np.zeros(0, np.float32)
-    counts = np.zeros(3, np.int64)
     for t in range(nseg + 2 * (nrow - 1)):
         i_lo = max(0, (t - nseg + 2) // 2)  # j = t − 2i < nseg
         i_hi = min(nrow - 1, t // 2)  # j ≥ 0
@@ -1262,6 +1260,6 @@ def _scan_wavefront(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s
                 _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s,
                            fg_s, N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s,
                            hm_s, use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan,
-                           direction, r0 + i, j * T, min(W, (j + 1) * T), False, dec_i, dec_f,
+                           direction, r0 + i, j * T, min(W, (j + 1) * T), rec, dec_i, dec_f,
                            dec_cs, dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f,
                            counts, stats[g], scratch)

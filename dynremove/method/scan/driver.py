@@ -154,17 +154,22 @@ class _Buffers:
 # precompute the scan's decisions on all cores (exact; off only to measure it)
 PRECOMPUTE = True
 # an unrecorded scan visits on all cores, in waves of row segments (exact; off only
-# to measure it): ``_kernels._scan_wavefront``
+# to measure it): ``_kernels._scan``
 WAVEFRONT = True
 
 
-def compiled_scan(record: bool):
-    """The compiled scan a run calls: unrecorded, on more than one thread,
-    ``_kernels._scan_wavefront`` (all cores, the same result); otherwise (or
-    recorded, so that the events come in the visiting order) ``_kernels._scan_rows``."""
-    if WAVEFRONT and not record and numba.get_num_threads() > 1:
-        return kn._scan_wavefront
-    return kn._scan_rows
+def scan_in_waves(record: bool) -> bool:
+    """Whether a run's scan visits in waves on all cores (the same result): when it
+    is not recorded and numba has more than one thread. A recorded one visits one
+    pixel at a time, so that its events come in the visiting order."""
+    return WAVEFRONT and not record and numba.get_num_threads() > 1
+
+
+def compiled_kernels(record: bool) -> list:
+    """The compiled scan kernels a run calls (recorded or not): the scan itself
+    (``_kernels._scan``, the same entry for both), and for a recorded run the
+    decisions precomputed on all cores (``_kernels._decide_all``)."""
+    return [kn._scan] + ([kn._decide_all] if PRECOMPUTE and not scan_in_waves(record) else [])
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -204,16 +209,13 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
         hb_s[s], hm_s[s] = kn._gradient_bins(st.src_gray[s], nb)
     M_maps: list[np.ndarray] = []
     summaries: list[np.ndarray] = []
-    threads = numba.get_num_threads()
-    wavefront = kernel == "numba" and compiled_scan(record) is kn._scan_wavefront
-    if wavefront:
+    waves = kernel == "numba" and scan_in_waves(record)
+    if kernel == "numba":
         def scan_fn(*state, scan, direction, r0, r1, stats):
-            per_thread = np.zeros((threads, 3), np.int64)
-            kn._scan_wavefront(*state, pf, pi, scan, direction, r0, r1, per_thread)
+            per_thread = np.zeros((numba.get_num_threads() if waves else 1, 3), np.int64)
+            kn._scan(*state, pf, pi, scan, direction, r0, r1, record, waves, *bufs.args(),
+                     per_thread)
             stats += per_thread.sum(0)
-    elif kernel == "numba":
-        def scan_fn(*state, scan, direction, r0, r1, stats):
-            kn._scan_rows(*state, pf, pi, scan, direction, r0, r1, record, *bufs.args(), stats)
     elif kernel == "reference":
         # lazy on purpose: the reference scan needs sklearn.cluster (~1.5 s to import),
         # and only tests and bench use it. It reads Params by name, not pf/pi.
@@ -242,7 +244,7 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
         # every decision from the scan's starting state, on all cores; the scan
         # then recomputes only what its own updates invalidate (exact). The waves
         # decide each pixel once, on all cores, already
-        use_pre = kernel == "numba" and PRECOMPUTE and not wavefront
+        use_pre = kernel == "numba" and PRECOMPUTE and not waves
         preM = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
         preB = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
         preK = np.empty((H, W, 4), np.int32) if use_pre else np.empty((1, 1, 4), np.int32)
