@@ -284,17 +284,18 @@ def test_event_buffer_overflow_is_detected():
     pf, pi = pack_params(PAPER, sift_unit=U)
     bufs = _Buffers(1, 2, S, True)  # room for 2 decisions; every pixel is dynamic
     sentinel = bufs.dec_i.copy()
-    stats = np.zeros(3, np.int64)
+    stats = np.zeros((1, 3), np.int64)
     L = np.zeros((H, W), np.uint8)
-    kn._scan_rows(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
-                  st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L,
-                  np.zeros((H, W), np.float32), np.zeros((H, W, 4), np.int32),
-                  np.zeros((H, W), np.float32), np.zeros((H, W), bool),
-                  *kn._gradient_bins(st.gray, 8),
-                  *(a[None].repeat(S, 0) for a in kn._gradient_bins(st.src_gray[0], 8)),
-                  False, np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1, 4), np.int32),
-                  np.zeros((H, W), np.uint8), pf, pi, 0, 1, 0, H,
-                  True, *bufs.args(), stats)
+    kn._scan(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
+             st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L,
+             np.zeros((H, W), np.float32), np.zeros((H, W, 4), np.int32),
+             np.zeros((H, W), np.float32), np.zeros((H, W), bool),
+             *kn._gradient_bins(st.gray, 8),
+             *(a[None].repeat(S, 0) for a in kn._gradient_bins(st.src_gray[0], 8)),
+             False, np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1, 4), np.int32),
+             np.zeros((H, W), np.uint8), pf, pi, 0, 1, 0, H,
+             True, False, *bufs.args(), stats)
+    stats = stats[0]
     assert stats[0] == H * W
     assert bufs.counts[0] == H * W and bufs.counts[1] == H * W and bufs.counts[2] == H * W * S
     assert not np.array_equal(bufs.dec_i, sentinel)  # the first events were written

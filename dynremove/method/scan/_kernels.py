@@ -19,8 +19,7 @@ kernel                          reference
 ``_choose_patch``               ``choose_patch`` (q*, q̂; Sec. 3.2.2)
 ``_write_patch``                ``write_patch``
 ``_update_correspondences``     ``update_correspondences`` (Sec. 3.2.3)
-``_scan_rows``                  ``scan_rows`` (Algorithm 1)
-``_scan``                       ``scan_rows`` (the driver's entry; on all cores)
+``_scan``                       ``scan_rows`` (Algorithm 1; also on all cores)
 ==============================  =====================================
 
 Shapes: reference (H, W); S sources of the same size; K = 2·S candidate slots.
@@ -969,7 +968,7 @@ def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, pre
     during a scan they change only at dynamic pixels (the update of Sec. 3.2.3
     and the write of f at the pixel itself). So wherever neither neighbour has
     been updated yet in the scan, this precomputed decision is exactly the one
-    the sequential scan would make (``_scan_rows`` checks and recomputes the
+    the sequential scan would make (``_scan`` checks and recomputes the
     others). Fills preM (H, W) float64 (NaN: undecided), preB (H, W) float64 b_m
     and preK (H, W, 4) int32 as Kmap.
     """
@@ -992,49 +991,6 @@ def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, pre
 
 
 @numba.njit(cache=True, nogil=True)
-def _scan_rows(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-               N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
-               use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1, rec,
-               dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
-               rep_i, rep_f, upd_i, upd_f, counts, stats):
-    """Visit rows r0..r1−1 (in visiting order) of one scan; mutate the state in place.
-
-    State: img (H, W, 3) uint8, lab (H, W, 3) float32 and gray (H, W) float32 of
-    the current reference; fc_r (H, W, 3) float32 and fg_r (H, W, 128) uint8 its
-    features; sources src_img/src_lab/src_gray/fc_s/fg_s with a leading S axis;
-    N (S, H, W, 2) int32, C (S, H, W) float32; F (S, 3, 3) float64, hasF (S,) bool;
-    L (H, W) uint8 (1 = dynamic in some scan); Mmap (H, W) float32 of this scan;
-    Kmap (H, W, 4) int32 of this scan: |P|, k (clusters), |A_m| (the winning
-    cluster's size) and a bitmask of the sources in A_m (bit s); Bmap (H, W)
-    float32: b_m (the winning cluster's weight, Σ B_l); probe (H, W) bool;
-    hb_r, hm_r (H, W) and hb_s, hm_s (S, H, W): the gradient bins of the reference
-    (kept up to date after each write) and of the sources (``_gradient_bins``);
-    with ``use_pre``, preM/preB/preK from ``_decide_all`` at the scan's start are
-    taken for static pixels whose neighbours are not ``dirty`` (dirty (H, W)
-    uint8: updated in this scan, set here), so the result is the same.
-    direction +1: top-left → bottom-right, −1: the reverse.
-
-    Per pixel: ``_decision`` (``_candidates`` → ``_cluster`` → ``_decide``); if dynamic,
-    ``_choose_patch`` → ``_write_patch`` (+ f_c, f_g of q*) →
-    ``_update_correspondences``. Mirrors ``reference.scan_rows``.
-
-    Events (when ``rec``): decisions for dynamic, probe and sampled static pixels;
-    every replacement; every correspondence update. ``counts`` = [decisions,
-    replacements, updates] written (may exceed capacity: overflow). ``stats`` +=
-    [dynamic, replaced, undecided].
-    """
-    H, W = gray.shape
-    scratch = _scan_scratch(pi, N.shape[0], fg_r.shape[2])
-    g_in, g_out = _edge_bounds(pf)
-    for vi in range(r0, r1):
-        _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-                   N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
-                   use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan, direction,
-                   vi, 0, W, rec, dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
-                   rep_i, rep_f, upd_i, upd_f, counts, stats, scratch)
-
-
-@numba.njit(cache=True, nogil=True)
 def _scan_scratch(pi, S, G):
     """The work arrays of one visiting thread: those of ``_work_arrays`` (K = 2·S
     candidate slots, G = the SIFT length), the patch scores (K,), g_c and g_h of
@@ -1054,7 +1010,7 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                rep_i, rep_f, upd_i, upd_f, counts, stats, scratch):
     """Visit the pixels xi0..xi1−1 of row vi (in visiting order: row vi counts from
     the top in a forward scan, from the bottom in a backward one, and so do the
-    columns) — the body of ``_scan_rows``, which see for the state and events.
+    columns): the body of ``_scan``, which see for the state and events.
     ``scratch`` from ``_scan_scratch``; g_in, g_out from ``_edge_bounds(pf)``."""
     H, W = gray.shape
     S = N.shape[0]
@@ -1218,23 +1174,46 @@ def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
           use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1, rec, waves,
           dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f,
           counts, stats):
-    """Rows r0..r1−1 of one scan, as ``_scan_rows`` visits them (the same state and
-    events, byte for byte): the driver's one compiled entry, so that a recorded
-    and an unrecorded run share one compilation. ``stats`` (G, 3) int64: row g
-    += [dynamic, replaced, undecided] of thread g (row 0 when not ``waves``).
+    """Visit rows r0..r1−1 (in visiting order) of one scan; mutate the state in place.
+    The driver's one compiled entry (Algorithm 1), for recorded and unrecorded
+    runs alike.
+
+    State: img (H, W, 3) uint8, lab (H, W, 3) float32 and gray (H, W) float32 of
+    the current reference; fc_r (H, W, 3) float32 and fg_r (H, W, 128) uint8 its
+    features; sources src_img/src_lab/src_gray/fc_s/fg_s with a leading S axis;
+    N (S, H, W, 2) int32, C (S, H, W) float32; F (S, 3, 3) float64, hasF (S,) bool;
+    L (H, W) uint8 (1 = dynamic in some scan); Mmap (H, W) float32 of this scan;
+    Kmap (H, W, 4) int32 of this scan: |P|, k (clusters), |A_m| (the winning
+    cluster's size) and a bitmask of the sources in A_m (bit s); Bmap (H, W)
+    float32: b_m (the winning cluster's weight, Σ B_l); probe (H, W) bool;
+    hb_r, hm_r (H, W) and hb_s, hm_s (S, H, W): the gradient bins of the reference
+    (kept up to date after each write) and of the sources (``_gradient_bins``);
+    with ``use_pre``, preM/preB/preK from ``_decide_all`` at the scan's start are
+    taken for static pixels whose neighbours are not ``dirty`` (dirty (H, W)
+    uint8: updated in this scan, set here), so the result is the same.
+    direction +1: top-left → bottom-right, −1: the reverse.
+
+    Per pixel: ``_decision`` (``_candidates`` → ``_cluster`` → ``_decide``); if dynamic,
+    ``_choose_patch`` → ``_write_patch`` (+ f_c, f_g of q*) →
+    ``_update_correspondences``. Mirrors ``reference.scan_rows``.
+
+    Events (when ``rec``): decisions for dynamic, probe and sampled static pixels;
+    every replacement; every correspondence update. ``counts`` = [decisions,
+    replacements, updates] written (may exceed capacity: overflow). ``stats`` (G, 3)
+    int64: row g += [dynamic, replaced, undecided] of thread g (row 0 when not
+    ``waves``).
 
     Without ``waves``: one pixel at a time, in the visiting order (events when
     ``rec``), on one thread. With ``waves`` (and not ``rec``: no events), on all
-    cores: a row is
-    cut into segments of T = R + 1 px (``_reach``), and segment j of visiting
-    row i runs at wave t = j + 2i, the segments of a wave at once. Each visit's
-    predecessors in the sequential order that it depends on are in earlier
-    waves: its left neighbour, and the row above as far as R px to its right
-    (segment j + 1 of row i − 1, wave t − 1; the rows further up are further
-    ahead). Two segments of one wave are at least T + 1 > R px apart, so they
-    touch no common state, and a visit that runs before a sequential
-    predecessor (a segment two or more to the right, rows up) is one that it
-    does not touch either. The waves' segments are dealt to the threads in
+    cores, the same state byte for byte: a row is cut into segments of T = R + 1 px
+    (``_reach``), and segment j of visiting row i runs at wave t = j + 2i, the
+    segments of a wave at once. Each visit's predecessors in the sequential order
+    that it depends on are in earlier waves: its left neighbour, and the row above
+    as far as R px to its right (segment j + 1 of row i − 1, wave t − 1; the rows
+    further up are further ahead). Two segments of one wave are at least T + 1 > R
+    px apart, so they touch no common state, and a visit that runs before a
+    sequential predecessor (a segment two or more to the right, rows up) is one
+    that it does not touch either. The waves' segments are dealt to the threads in
     turn, so that the expensive segments of one mover (adjacent rows) go to
     different threads.
     """

@@ -2,7 +2,7 @@
 
 Slow (pure Python + numpy + ``sklearn.cluster.DBSCAN(metric="precomputed")``)
 and meant for small images: tests assert that the compiled kernel
-(``_kernels._scan_rows``) gives the same labels, pixels, N, C and events.
+(``_kernels._scan``) gives the same labels, pixels, N, C and events.
 ``scan_rows`` takes the kernel's state arrays and buffers, but reads every
 parameter from ``Params`` by name, never from the kernel's packed ``pf``/``pi``
 arrays: a wrong index in ``driver.pack_params`` makes the two disagree.
