@@ -213,7 +213,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "path (exactly that input) or 'auto' (the sharpest frame with "
                         "the most keypoint matches); default: the middle image. The run "
                         "names the one it takes")
-    r.add_argument("--out", default="out/run", help="output folder (default: out/run)")
+    r.add_argument("--out", default=None,
+                   help="output folder (default: out/<the input's name>: out/tim6 for "
+                        "tim6/frames, so that runs on other scenes keep theirs)")
     r.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
                    help="analyse a copy whose longer side is at most PX (default: only above "
                         "1280 px; 0 or 'none' = never); clean.png keeps the full size "

@@ -126,6 +126,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.probe and not args.record:
         raise InputError("--probe needs --record FILE.rrd (a probe's decisions are recorded "
                          "there, for the viewer and `dynremove inspect --pixel`)")
+    if args.out is None:
+        args.out = str(io.default_out_dir(args.images))
     # nothing a run writes may replace what it reads, or another of its outputs
     writes = [(f"--out {args.out} (its {n})", Path(args.out) / n)
               for n in (*io.RUN_OUTPUTS, "report.json")]

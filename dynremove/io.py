@@ -668,6 +668,29 @@ def _file_in_the_way(p: Path) -> Path | None:
     return None
 
 
+_GENERIC_FOLDERS = {"frames", "images", "imgs", "img", "photos", "pictures", "input", "inputs"}
+
+
+def default_out_dir(inputs: Sequence[str | os.PathLike]) -> Path:
+    """``out/<name>``: the folder a run writes to when given no ``--out``, named after
+    its input, so that runs on different scenes do not replace each other's
+    outputs. The name is the input folder's (its parent's when the folder has a
+    generic name such as ``frames``: ``tim6/frames`` gives ``out/tim6``), a
+    video's stem, or the folder that the given files share; ``out/run`` when
+    none of these names anything."""
+    paths = [Path(a) for a in inputs]
+    if len(paths) == 1 and not paths[0].is_dir():
+        name = paths[0].stem  # a video
+    else:
+        folders = {p.resolve() if p.is_dir() else p.resolve().parent for p in paths}
+        folder = folders.pop() if len(folders) == 1 else None
+        if folder is not None and folder.name.lower() in _GENERIC_FOLDERS:
+            folder = folder.parent
+        name = folder.name if folder is not None else ""
+    name = re.sub(r"[^\w.+-]+", "_", name).strip("._")
+    return Path("out") / (name or "run")
+
+
 def prepare_out_dir(out: str | os.PathLike, inputs: Sequence[str | os.PathLike] = ()
                     ) -> Path:
     """Create the output folder; InputError if it is a file or not writable, if it

@@ -470,3 +470,28 @@ def test_the_report_says_whether_the_set_was_treated_as_flat_or_3d(tmp_path, cap
                          "--preset", "paper")
     assert rc == 0, err
     assert "scene" not in json.loads((tmp_path / "paper" / "report.json").read_text())
+
+
+def test_without_out_each_scene_gets_its_own_folder(tmp_path, monkeypatch, capsys, scene):
+    """A run without --out writes to out/<the input's name>: a fresh-user trial lost
+    the first scene's outputs to the second run (both went to out/run). A folder
+    named ``frames`` is named by its parent."""
+    from dynremove.io import default_out_dir
+
+    for name in ("alpha", "beta"):
+        d = tmp_path / name / "frames"
+        d.mkdir(parents=True)
+        for i, im in enumerate(scene.images):
+            assert cv2.imwrite(str(d / f"v{i}.png"), im)
+    monkeypatch.chdir(tmp_path)
+    for name in ("alpha", "beta"):
+        rc, out, _ = run_cli(capsys, tmp_path / name / "frames", "-q")
+        assert rc == 0
+    for name in ("alpha", "beta"):
+        assert (tmp_path / "out" / name / "clean.png").is_file(), name
+    assert not (tmp_path / "out" / "run").exists()
+    assert default_out_dir([tmp_path / "alpha" / "frames" / "v0.png",
+                            tmp_path / "alpha" / "frames" / "v1.png"]) == Path("out/alpha")
+    assert default_out_dir(["clips/street walk.mp4"]) == Path("out/street_walk")
+    assert default_out_dir([tmp_path / "alpha" / "frames" / "v0.png",
+                            tmp_path / "beta" / "frames" / "v1.png"]) == Path("out/run")
