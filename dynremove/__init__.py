@@ -25,10 +25,30 @@ import os
 # threads; a value the user set wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from dynremove.errors import InputError  # noqa: E402
-from dynremove.events import EventSink, MemorySink, NullSink  # noqa: E402
-from dynremove.params import DEFAULT, PAPER, PRESETS, Params, preset  # noqa: E402
-from dynremove.pipeline import Result, remove_dynamic  # noqa: E402
+# the public API, imported when first used: ``import dynremove`` (and the command's
+# entry, ``dynremove.entry``) stays light, so that a Ctrl-C in the first second of
+# a run meets the entry's handler, not an import of numba and OpenCV
+_API = {"remove_dynamic": "dynremove.pipeline", "Result": "dynremove.pipeline",
+        "Params": "dynremove.params", "PRESETS": "dynremove.params",
+        "DEFAULT": "dynremove.params", "PAPER": "dynremove.params",
+        "preset": "dynremove.params", "InputError": "dynremove.errors",
+        "EventSink": "dynremove.events", "NullSink": "dynremove.events",
+        "MemorySink": "dynremove.events"}
+
+
+def __getattr__(name: str):
+    if name in _API:
+        import importlib
+
+        value = getattr(importlib.import_module(_API[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'dynremove' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_API))
+
 
 __all__ = ["remove_dynamic", "Result", "Params", "PRESETS", "DEFAULT", "PAPER", "preset",
            "InputError", "EventSink", "NullSink", "MemorySink"]

@@ -375,3 +375,22 @@ def test_a_ctrl_c_lost_in_a_finaliser_stops_the_run_at_the_next_stage(tmp_path, 
     assert rc == 130 and "dynremove: interrupted" in err, err
     assert not (out / "clean.png").exists()
     commands.check_stop()  # nothing left pending for the next command
+
+
+@pytest.mark.parametrize("after_s", [0.05, 0.3])
+def test_a_ctrl_c_while_the_command_starts_is_one_line(tmp_path, after_s):
+    """SIGINT during the first second (the command still importing numba and
+    OpenCV, before its own handler is set): exit 130 and one line, no Python
+    traceback; a fresh-user trial saw one from numba's import at 0.5 s."""
+    folder = _write_set(tmp_path / "set", (48, 64))
+    entry = "import sys; from dynremove.entry import main; sys.exit(main())"
+    p = subprocess.Popen([sys.executable, "-c", entry, "run", str(folder), "--out",
+                          str(tmp_path / "out")], cwd=REPO, env=ENV,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=_sigint_default)
+    time.sleep(after_s)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    assert "Traceback" not in err and "interrupted" in err, err
+    assert not (tmp_path / "out" / "clean.png").exists()

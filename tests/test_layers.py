@@ -29,7 +29,7 @@ LAYERS: list[tuple[str, int]] = [
     ("dynremove.refine", 2),
     ("dynremove.pipeline", 3),
     ("dynremove.evaluation", 4),
-    ("dynremove.cli", 5), ("dynremove.commands", 5),
+    ("dynremove.cli", 5), ("dynremove.commands", 5), ("dynremove.entry", 5),
     ("dynremove", 5),  # the package itself: the public API
 ]
 # the command line (parser and sub-commands): the only modules that may import ``viewer``
