@@ -35,7 +35,7 @@ from dynremove.evaluation.evaluate import format_ablation, format_table, run_abl
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 from dynremove.params import PRESETS, Params, preset
 from dynremove.pipeline import remove_dynamic
-from dynremove.progress import ProgressBar
+from dynremove.progress import ProgressBar, stage_labels
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
 
@@ -754,15 +754,6 @@ def record_errors(path: str, sink: Any = None):
             del stream, e
             gc.collect()
         raise InputError(f"--record {path}: cannot create the file ({reason})") from None
-
-
-def stage_labels(params: Params) -> dict[str, str]:
-    """The progress bar's names of the pipeline's stages, by what runs.
-
-    The pipeline reports both fills as "fusion" (report.json keeps that key in
-    ``seconds``); the bar names the fill the parameters choose.
-    """
-    return {"fusion": "fill by selection" if params.fill == "select" else "fused fill"}
 
 
 def _bar(args: argparse.Namespace, params: Params | None = None) -> ProgressBar:

@@ -6,6 +6,18 @@ import sys
 import time
 from typing import Mapping, TextIO
 
+from dynremove.params import Params
+
+
+def stage_labels(params: Params) -> dict[str, str]:
+    """The names the progress bar and ``bench`` give the pipeline's stages, by what
+    runs.
+
+    The pipeline reports both fills as "fusion" (report.json keeps that key in
+    ``seconds``); the bar names the fill the parameters choose.
+    """
+    return {"fusion": "fill by selection" if params.fill == "select" else "fused fill"}
+
 
 class ProgressBar:
     """Call with (stage, fraction); redraws at most every 0.1 s, newline per stage.

@@ -18,7 +18,7 @@ import pytest
 from dynremove import commands, io
 from dynremove.cli import main
 from dynremove.errors import InputError
-from dynremove.commands import stage_labels
+from dynremove.progress import stage_labels
 from dynremove.evaluation import synth
 from dynremove.params import Params
 from dynremove.progress import ProgressBar

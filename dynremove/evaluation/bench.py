@@ -18,6 +18,7 @@ from dynremove import io
 from dynremove.events import EventSink, MemorySink, NullSink
 from dynremove.evaluation import synth
 from dynremove.method.scan.driver import run_scans
+from dynremove.progress import stage_labels
 from dynremove.params import DEFAULT, Params
 from dynremove.evaluation.baselines import median_baseline
 from dynremove.pipeline import full_resolution_output, prepare, remove_dynamic
@@ -135,7 +136,7 @@ def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
     rec = (_recording_cost(scene, params, recording_sink, work)
            if recording_sink else {})
     out = {
-        "size": [W, H], "views": views, "preset": preset_name,
+        "size": [W, H], "views": views, "preset": preset_name, "fill": params.fill,
         "warmup_s": warm, "end_to_end_s": wall, "end_to_end_all_s": [r[0] for r in runs],
         "stages_s": {k: float(v) for k, v in res.timings.items()},
         "scans": per_scan, "peak_rss_mb": _peak_rss_mb(),
@@ -190,13 +191,14 @@ def _kernel_ratio(scene, params) -> dict:
 
 def _print_table(out: dict) -> None:
     W, H = out["size"]
+    labels = stage_labels(Params(fill=out.get("fill", "select")))
     print(f"\n{out['views']} views {W}x{H}, preset {out['preset']}")
-    print(f"{'stage':<16}{'seconds':>10}")
+    print(f"{'stage':<18}{'seconds':>10}")
     for k, v in out["stages_s"].items():
-        print(f"{k:<16}{v:>10.2f}")
-    print(f"{'end to end':<16}{out['end_to_end_s']:>10.2f}")
-    print(f"{'median stack':<16}{out['median_stack_s']:>10.2f}   "
-          f"(default / median stack: x{out['ratio_vs_median_stack']:.1f})")
+        print(f"{labels.get(k, k):<18}{v:>10.2f}")
+    print(f"{'end to end':<18}{out['end_to_end_s']:>10.2f}")
+    print(f"{'median stack':<18}{out['median_stack_s']:>10.2f}   (the baseline, same views: "
+          f"{out['preset']} / median stack x{out['ratio_vs_median_stack']:.1f})")
     if "full_output_end_to_end_s" in out:
         aw, ah = out["analysis_size"]
         fw, fh = out["full_output_size"]
@@ -206,10 +208,12 @@ def _print_table(out: dict) -> None:
     for s in out["scans"]:
         print(f"{s['scan']:<6}{s['seconds']:>9.2f}{s['px_per_s'] / 1e6:>9.2f}{s['dynamic_px']:>12}")
     print(f"\npeak RSS {out['peak_rss_mb']:.0f} MiB; JIT warm-up {out['warmup_s']:.1f} s; "
-          f"with MemorySink {out['memory_sink_end_to_end_s']:.2f} s")
+          f"recorded in memory (the events, no .rrd) {out['memory_sink_end_to_end_s']:.2f} s")
     if "peak_rss_mb_by_part" in out:
-        print("peak RSS by part: " + ", ".join(
-            f"{k} {v:.0f} MiB" for k, v in out["peak_rss_mb_by_part"].items()))
+        names = {"rest": "recorded runs"}
+        print("peak RSS within each part (each its own peak, not a share of the total): "
+              + ", ".join(f"{names.get(k, k)} {v:.0f} MiB"
+                          for k, v in out["peak_rss_mb_by_part"].items()))
     if "rerun_end_to_end_s" in out:
         print(f"with a Rerun recording {out['rerun_end_to_end_s']:.2f} s "
               f"(x{out['rerun_end_to_end_s'] / out['end_to_end_s']:.2f}), "
