@@ -7,6 +7,7 @@ BIN := $(VENV)/bin
 
 # the package (what `make demo` needs) ...
 $(BIN)/dynremove: pyproject.toml
+	@echo "installing dynremove and its dependencies into $(VENV) (about a minute, once)"
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e .
