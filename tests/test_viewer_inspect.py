@@ -340,6 +340,12 @@ def test_noise_candidates_are_not_counted_in_the_cluster():
     all_noise = dict(d, n_clusters=0, win_cluster=-1,
                      candidates=[dict(c, cluster=-1) for c in d["candidates"]])
     assert vd.candidate_counts(all_noise) == "6 candidates: all noise"
+    # a pixel the border votes added gets their meaning in one line (a fresh-user
+    # trial found "static in scan 0 … added by the border votes" puzzling)
+    h_votes = dict(h, stages={"scan": False, "clean": False, "votes": True, "snap": True})
+    text = vd.format_pixel_history(h_votes)
+    assert "added by the border votes" in text and vd.VOTES_LEGEND in text, text
+    assert vd.VOTES_LEGEND not in vd.format_pixel_history(h)
 
 
 def test_history_of_a_recorded_decision_counts_each_dbscan_label(tmp_path, capsys):

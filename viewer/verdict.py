@@ -295,6 +295,12 @@ LEGEND = ("(M: how alike the pixel and the winning cluster A_m of its candidate 
           "sum of its candidates' confidences B_l. step: the visiting order, the viewer's "
           "`step` timeline)")
 
+VOTES_LEGEND = ("(the border votes: the scan decides on whole patches, so its map overshoots "
+                "or stops short of an object's outline; along the map's border each pixel is "
+                "put to the sources, sampled through the background behind the map: a pixel "
+                "just outside it that no source agrees with is added, one just inside that "
+                "most sources agree with is dropped)")
+
 
 def _fold(events: list[tuple[int, str]], max_lines: int) -> list[str]:
     """Sort by step; print at most ``max_lines`` lines, eliding the middle."""
@@ -322,6 +328,8 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     lines += ["  " + v for v in verdict[1:]]
     if any(("M = " in ln or "b_m" in ln) for ln in lines):
         lines.append("  " + LEGEND)
+    if any("by the border votes" in ln for ln in lines):
+        lines.append("  " + VOTES_LEGEND)
     ev: list[tuple[int, str]] = []
     dec_scans = {d["scan"] for d in h["decisions"]}
     for sc in h.get("scans", []):
