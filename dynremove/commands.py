@@ -662,9 +662,12 @@ def cmd_export(args: argparse.Namespace) -> int:
     export_gif = args.viewer("export").export_gif
     if Path(args.out).suffix.lower() not in (".gif", ".mp4"):
         raise InputError(f"export: {args.out} must end in .gif or .mp4")
-    out = export_gif(_recording(args.recording), args.out, fps=args.fps,
-                     max_side=args.max_side, root=args.root)
-    print(f"wrote {out}")
+    rec = _recording(args.recording)
+    print(f"export: drawing a frame per snapshot of {rec} (a minute for a long run) ...",
+          file=sys.stderr)
+    t0 = time.perf_counter()
+    out = export_gif(rec, args.out, fps=args.fps, max_side=args.max_side, root=args.root)
+    print(f"wrote {out} ({time.perf_counter() - t0:.0f} s)")
     return EXIT_OK
 
 
