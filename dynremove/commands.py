@@ -663,8 +663,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     if Path(args.out).suffix.lower() not in (".gif", ".mp4"):
         raise InputError(f"export: {args.out} must end in .gif or .mp4")
     rec = _recording(args.recording)
-    print(f"export: drawing a frame per snapshot of {rec} (a minute for a long run) ...",
-          file=sys.stderr)
+    _note(args, f"drawing a frame per snapshot of {rec} (a minute for a long run)")
     t0 = time.perf_counter()
     out = export_gif(rec, args.out, fps=args.fps, max_side=args.max_side, root=args.root)
     print(f"wrote {out} ({time.perf_counter() - t0:.0f} s)")
