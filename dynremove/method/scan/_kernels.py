@@ -1231,6 +1231,8 @@ def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
         i_lo = max(0, (t - nseg + 2) // 2)  # j = t − 2i < nseg
         i_hi = min(nrow - 1, t // 2)  # j ≥ 0
         n_t = i_hi - i_lo + 1
+        if n_t <= 0:  # (without waves, every other wave: no row starts there)
+            continue
         for g in numba.prange(G):
             scratch = _scan_scratch(pi, S, fg_r.shape[2])
             for k in range(g, n_t, G):
