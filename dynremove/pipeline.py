@@ -455,9 +455,15 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             warnings.warn(msgs[-1], stacklevel=2)
         n_lg = int((dyn & selection.lingering).sum()) if selection.lingering is not None else 0
         if n_lg >= 5e-4 * dyn.size:  # (a few stray pixels of a mover are no such case)
-            msgs.append(f"{n_lg} px show a mover that most photos show in place; two or more "
-                        "sources saw the background there and filled it (--select-minority 0 "
-                        "keeps the majority's view)")
+            lg = dyn & selection.lingering
+            who = [names[srcs[k - 1]] for k in np.unique(selection.label[lg]) if k >= 1]
+            msgs.append(
+                f"{n_lg} px show a mover that most photos show in place; "
+                f"{_lingering_witnesses(who)} saw the background there and filled it"
+                + (f" (with {selection.parallax_px:.0f} px of parallax between the photos "
+                   "and so few witnesses, an edge it hides may come out misplaced)"
+                   if selection.consensus_mode == "parallax" else "")
+                + " (--select-minority 0 keeps the majority's view)")
             warnings.warn(msgs[-1], stacklevel=2)
     if not dyn.any():
         flagged = int(sum(int(sm["n_dynamic"]) for sm in summaries))
@@ -481,6 +487,15 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         warnings=msgs, stages=stages, selection=selection, source_indices=list(srcs))
     sink.finish(result)
     return result
+
+
+def _lingering_witnesses(who: list[str]) -> str:
+    """'tim1 and tim2' / 'a, b and 2 more' / 'two or more sources' (the lingering note)."""
+    if not who:
+        return "two or more sources"
+    if len(who) <= 3:
+        return who[0] if len(who) == 1 else ", ".join(who[:-1]) + " and " + who[-1]
+    return f"{', '.join(who[:2])} and {len(who) - 2} more"
 
 
 def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
