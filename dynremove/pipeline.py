@@ -458,8 +458,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             lg = dyn & selection.lingering
             who = [names[srcs[k - 1]] for k in np.unique(selection.label[lg]) if k >= 1]
             msgs.append(
-                f"{n_lg} px show a mover that most photos show in place; "
-                f"{_lingering_witnesses(who)} saw the background there and filled it"
+                f"{n_lg} px show a mover that most photos show in place; two or more "
+                f"sources saw the background there, and it was filled from {_names(who)}"
                 + (f" (with {selection.parallax_px:.0f} px of parallax between the photos "
                    "and so few witnesses, an edge it hides may come out misplaced)"
                    if selection.consensus_mode == "parallax" else "")
@@ -489,10 +489,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     return result
 
 
-def _lingering_witnesses(who: list[str]) -> str:
-    """'tim1 and tim2' / 'a, b and 2 more' / 'two or more sources' (the lingering note)."""
+def _names(who: list[str]) -> str:
+    """'tim1' / 'tim1 and tim2' / 'a, b and 2 more' (notes naming photos)."""
     if not who:
-        return "two or more sources"
+        return "them"
     if len(who) <= 3:
         return who[0] if len(who) == 1 else ", ".join(who[:-1]) + " and " + who[-1]
     return f"{', '.join(who[:2])} and {len(who) - 2} more"
