@@ -339,12 +339,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "end), file name or 'auto' (as run --ref auto; its mask must exist "
                         "in masks/) (default: the middle frame)")
     e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
-                   help=f"comma-separated subset of {','.join(METHODS)}")
+                   help=f"comma-separated subset of {','.join(METHODS)} (default: all of "
+                        "them)")
     e.add_argument("--ablation", action="store_true",
-                   help="instead of the methods: variants of the preset (dataclasses.replace "
-                        "of it, see ABLATIONS); prints mean J / PSNR per variant")
+                   help="instead of the methods: variants of the preset, each one setting "
+                        "changed (listed under --variants); prints mean J / PSNR per variant")
     e.add_argument("--variants", default=None, metavar="LIST",
-                   help=f"with --ablation: comma-separated subset of {','.join(ABLATIONS)}")
+                   help=f"with --ablation: comma-separated subset of {','.join(ABLATIONS)} "
+                        "(default: all of them)")
     e.add_argument("-q", "--quiet", action="store_true", help="no per-set progress on stderr")
     add_param_flags(e)
     e.set_defaults(fn=cmd_eval)

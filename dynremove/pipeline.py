@@ -345,9 +345,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                 drop([j for j, _, _ in dups])
         weak = [k for k, v in enumerate(views) if not geometry.aligned(v)]
         if weak:
-            msgs.append(_few_matches_note([(names[srcs[k]], views[k].n_matches)
-                                           for k in weak],
+            msgs.append(_few_matches_note([(names[srcs[k]], views[k].n_matches,
+                                            views[k].n_inliers_H) for k in weak],
                                           some_F=any(views[k].F is not None for k in weak)))
+        note = _weak_reference_note(images, ref, srcs, views, names, weak)
+        if note:
+            msgs.append(note)
         if weak and 2 * len(weak) >= len(views):
             msgs.append(f"{len(weak)} of {len(views)} sources could not be aligned to the "
                         "reference: the result is unreliable (misaligned fill, missed or "
@@ -450,20 +453,29 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         cov = _selection_coverage(cov, dyn, selection)
         n_ns = int((dyn & selection.no_source).sum())
         if n_ns:
-            msgs.append(f"{n_ns} px ({100 * n_ns / max(1, dyn.sum()):.1f} % of the replaced "
-                        "region) were seen free by no source: inpainted (OpenCV Telea)")
+            share = 100 * n_ns / max(1, dyn.sum())
+            msgs.append(f"{n_ns} px ({'under 0.1' if share < 0.1 else f'{share:.1f}'} % of "
+                        "the replaced region) were seen free by no source: inpainted "
+                        "(OpenCV Telea)")
             warnings.warn(msgs[-1], stacklevel=2)
         n_lg = int((dyn & selection.lingering).sum()) if selection.lingering is not None else 0
         if n_lg >= 5e-4 * dyn.size:  # (a few stray pixels of a mover are no such case)
             lg = dyn & selection.lingering
-            who = [names[srcs[k - 1]] for k in np.unique(selection.label[lg]) if k >= 1]
+            used = [k - 1 for k in np.unique(selection.label[lg]) if k >= 1]
+            # the witnesses: the sources that neither still show the mover there nor
+            # miss the region (reasons 7 and 4) over most of it
+            wit = [k for k in range(len(srcs)) if selection.reasons is not None and
+                   np.isin(selection.reasons[k][lg], (4, 7), invert=True).mean() >= 0.5]
+            wit = sorted(set(wit) | set(used))
+            said = (f"{_names([names[srcs[k]] for k in wit])} saw the background there "
+                    + ("and filled it" if used == wit else
+                       f"and it was filled from {_names([names[srcs[k]] for k in used])}"))
             msgs.append(
-                f"{n_lg} px show a mover that most photos show in place; two or more "
-                f"sources saw the background there, and it was filled from {_names(who)}"
-                + (f" (with {selection.parallax_px:.0f} px of parallax between the photos "
-                   "and so few witnesses, an edge it hides may come out misplaced)"
+                f"{n_lg} px show a mover that most photos show in place; {said}"
+                + (f" (with {selection.parallax_px:.0f} px of parallax between the photos, "
+                   "an edge it hides may come out misplaced)"
                    if selection.consensus_mode == "parallax" else "")
-                + " (--select-minority 0 keeps the majority's view)")
+                + "; --select-minority 0 keeps the majority's view")
             warnings.warn(msgs[-1], stacklevel=2)
     if not dyn.any():
         flagged = int(sum(int(sm["n_dynamic"]) for sm in summaries))
@@ -595,14 +607,52 @@ def _strays_note(strays: list[tuple[str, int, int]], least: int) -> str:
             "blurred, or too little overlap?")
 
 
-def _few_matches_note(weak: list[tuple[str, int]], *, some_F: bool = False) -> str:
-    """One note for every source not aligned (``geometry.aligned``; ``(name, matches)``),
-    in the form of ``io``'s per-file notes: "a.jpg, b.jpg: what". ``some_F``: some
-    of them still have an F."""
-    names = [name for name, _ in weak]
-    lo, hi = min(n for _, n in weak), max(n for _, n in weak)
+def _weak_reference_note(images, ref: int, srcs: list[int], views, names,
+                         weak: list[int], *, ratio: float = 0.6) -> str | None:
+    """A note when the reference matches the other photos far less than they match
+    each other (a reference blurred, heavily compressed or shot otherwise): then
+    the few matches are the reference's doing, not the sources'.
+
+    Checked only where matches are scarce (a source not aligned, or a median under
+    ``RETRY_BELOW`` × 6 matches): the two sources next to the reference in the
+    photos' order are matched with each other (``geometry.peer_matches``), and the
+    note is given when the median reference–source count is under ``ratio`` times
+    theirs (a JPEG of quality 15 as the reference of the sanitizer burst: 27
+    against 67; the photos as shot: 69 against 67)."""
+    counts = [v.n_matches for v in views]
+    if len(srcs) < 2 or not (weak or np.median(counts) < 6 * geometry.RETRY_BELOW):
+        return None
+    before = [k for k, s in enumerate(srcs) if s < ref]
+    after = [k for k, s in enumerate(srcs) if s > ref]
+    a, b = ((before[-1], after[0]) if before and after else
+            (before[-2], before[-1]) if len(before) >= 2 else (after[0], after[1]))
+
+    def gray(i):
+        return cv2.cvtColor(np.asarray(images[srcs[i]]), cv2.COLOR_BGR2GRAY)
+
+    peers = geometry.peer_matches(gray(a), gray(b))
+    med = float(np.median(counts))
+    if peers < 2 * geometry.RETRY_BELOW or med >= ratio * peers:
+        return None
+    return (f"the reference matches the other photos far less than they match each other "
+            f"({med:.0f} keypoint matches, median, against {peers} between "
+            f"{names[srcs[a]]} and {names[srcs[b]]}): if it is blurred, heavily "
+            "compressed or shot otherwise, another reference aligns better (--ref auto "
+            "takes the sharpest with the most matches)")
+
+
+def _few_matches_note(weak: list[tuple[str, int, int]], *, some_F: bool = False) -> str:
+    """One note for every source not aligned (``geometry.aligned``; ``(name, matches,
+    homography inliers)``), in the form of ``io``'s per-file notes: "a.jpg, b.jpg:
+    what". ``some_F``: some of them still have an F."""
+    names = [name for name, _, _ in weak]
+    lo, hi = min(n for _, n, _ in weak), max(n for _, n, _ in weak)
     what = (f"only {lo}" if lo == hi else f"only {lo} to {hi}") + \
         f" keypoint match{'' if hi == 1 else 'es'}"
+    if any(n >= geometry.MIN_MATCHES for _, n, _ in weak):
+        # (a source with more matches than some aligned one: its matches agree on no
+        # homography, which is what leaves it out)
+        what += f" (fewer than {geometry.ALIGNED_MIN_INLIERS} of them on one homography)"
     one = len(weak) == 1
     tail = (f"no homography pre-warp for {'it' if one else 'them'} (an epipolar term from "
             "an F on few matches at most)" if some_F

@@ -178,11 +178,48 @@ def test_few_matches_are_one_note_given_with_the_geometry():
 def test_few_matches_note_forms():
     from dynremove.pipeline import _few_matches_note
 
-    assert _few_matches_note([("a.jpg", 1)]) == (
+    assert _few_matches_note([("a.jpg", 1, 0)]) == (
         "a.jpg: only 1 keypoint match with the reference; no epipolar term and no "
         "homography pre-warp for it")
-    assert _few_matches_note([(f"s{i}.jpg", 9 + i) for i in range(5)]).startswith(
+    assert _few_matches_note([(f"s{i}.jpg", 9 + i, 0) for i in range(5)]).startswith(
         "5 images (s0.jpg, ..., s4.jpg): only 9 to 13 keypoint matches each")
+    # a source with more matches than an aligned one may have: what leaves it out is
+    # that they agree on no homography, and the note says so
+    assert _few_matches_note([("b.jpg", 32, 5)]).startswith(
+        "b.jpg: only 32 keypoint matches (fewer than 8 of them on one homography) with "
+        "the reference; ")
+
+
+def test_a_weak_reference_is_named_as_the_cause():
+    """The sanitizer burst with its reference re-saved as a JPEG of quality 15: every
+    source matches it poorly (17-45 matches), one is not aligned, and the note on that
+    one pointed at the source. The reference's own note says that the photos match
+    each other far better; the burst as shot gets none."""
+    from conftest import data_dir
+
+    from dynremove.method import geometry
+    from dynremove.pipeline import _weak_reference_note
+
+    d = data_dir() / "bursts" / "sanitizer" / "frames"
+    if not d.is_dir():
+        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA to the shared data folder)")
+    names = sorted(p.name for p in d.glob("*.jpg"))
+    ims = [cv2.imread(str(d / n)) for n in names]
+    ref = 3
+    srcs = [i for i in range(len(ims)) if i != ref]
+
+    def note(images):
+        g = [cv2.cvtColor(im, cv2.COLOR_BGR2GRAY) for im in images]
+        views = geometry.geometry_for_sources(g[ref], [g[s] for s in srcs])
+        weak = [k for k, v in enumerate(views) if not geometry.aligned(v)]
+        return _weak_reference_note(images, ref, srcs, views, names, weak)
+
+    assert note(ims) is None
+    low = list(ims)
+    low[ref] = cv2.imdecode(cv2.imencode(".jpg", ims[ref], [cv2.IMWRITE_JPEG_QUALITY, 15])[1], 1)
+    said = note(low)
+    assert said is not None and "sanitizer3.jpg and sanitizer5.jpg" in said
+    assert "--ref auto" in said
 
 
 def test_progress_lines_are_the_report_stages(scene):

@@ -23,6 +23,7 @@ MIN_MATCHES = 15  # fewer matches than this: no reliable F for that source
 # contrast (SIFT's contrast threshold 0.01 instead of OpenCV's 0.04): a wall and a
 # table analysed at 360x480 gave 6-14 matches for 4 sources, 387-589 with the retry
 RETRY_BELOW = MIN_MATCHES
+ALIGNED_MIN_INLIERS = 8  # a source is aligned with a homography on this many inliers
 LOW_CONTRAST = 0.01
 RETRY_MIN_INLIERS = 2 * MIN_MATCHES  # the F of a retry is kept from this many inliers
 
@@ -154,7 +155,7 @@ def aligned(view: TwoView) -> bool:
     whose homography collapsed (``plausible_homography``). Such an F is still
     used for the epipolar terms (dropping the Fs on 8-14 inliers moved the DAVIS
     J by +0.21 on drift-straight and -0.32 on motocross-jump_s3)."""
-    return view.n_inliers_H >= 8
+    return view.n_inliers_H >= ALIGNED_MIN_INLIERS
 
 
 def fit_homography(xy_a: npt.NDArray[np.float32], xy_b: npt.NDArray[np.float32], *,
@@ -236,6 +237,12 @@ def sampson_sq(F: npt.NDArray[np.float64], xy_r: npt.ArrayLike,
     e = xs[..., 0] * a + xs[..., 1] * b + c
     den = a * a + b * b + ta * ta + tb * tb
     return e * e / np.maximum(den, 1e-300)
+
+
+def peer_matches(gray_a: npt.NDArray[np.uint8], gray_b: npt.NDArray[np.uint8]) -> int:
+    """Keypoint matches between two photos (``detect`` + ``match``): how well two
+    sources match each other, to compare with how well they match the reference."""
+    return len(match(detect(gray_a)[1], detect(gray_b)[1]))
 
 
 def geometry_for_sources(ref_gray: npt.NDArray[np.uint8], src_grays: list[npt.NDArray[np.uint8]],
