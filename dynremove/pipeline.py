@@ -31,7 +31,8 @@ from dynremove.refine.duplicates import agreement_with_reference, duplicate_sour
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
-from dynremove.refine.select import Selection, median_parallax_px, select_fill
+from dynremove.refine.select import (OUTSIDE, STILL_LINGERING, Selection, median_parallax_px,
+                                     select_fill)
 from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
@@ -463,9 +464,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             lg = dyn & selection.lingering
             used = [k - 1 for k in np.unique(selection.label[lg]) if k >= 1]
             # the witnesses: the sources that neither still show the mover there nor
-            # miss the region (reasons 7 and 4) over most of it
+            # miss the region over most of it
             wit = [k for k in range(len(srcs)) if selection.reasons is not None and
-                   np.isin(selection.reasons[k][lg], (4, 7), invert=True).mean() >= 0.5]
+                   np.isin(selection.reasons[k][lg], (OUTSIDE, STILL_LINGERING),
+                           invert=True).mean() >= 0.5]
             wit = sorted(set(wit) | set(used))
             said = (f"{_names([names[srcs[k]] for k in wit])} saw the background there "
                     + ("and filled it" if used == wit else

@@ -113,6 +113,7 @@ REASONS = {0: "not considered", 1: "chosen",
            5: "disagrees with the consensus",
            6: "agrees with the consensus, not averaged in (not close to the chosen one)",
            7: "still shows the mover that lingered here"}
+OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
 
 
 _BINS = 12  # per Lab axis, in the movers' colour model
@@ -778,8 +779,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     why = np.where(d_cons < tau, 6, 5).astype(np.uint8)
     why[members[:, y0:y1, x0:x1]] = 2
     why[mv] = 3
-    why[copies] = 7
-    why[~usable[1:]] = 4
+    why[copies] = STILL_LINGERING
+    why[~usable[1:]] = OUTSIDE
     # (an inpainted pixel has no chosen source)
     why[(lab_b[None] == np.arange(1, S + 1)[:, None, None]) & ~no_src[None]] = 1
     reasons = np.zeros((S, H, W), np.uint8)
@@ -814,5 +815,5 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      lingering=lingering)
 
 
-__all__ = ["REASONS", "Selection", "median_parallax_px", "member_median", "min_witnesses",
-           "select_fill"]
+__all__ = ["OUTSIDE", "REASONS", "STILL_LINGERING", "Selection", "median_parallax_px",
+           "member_median", "min_witnesses", "select_fill"]
