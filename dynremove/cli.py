@@ -18,7 +18,7 @@ import re
 import signal
 import sys
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import cv2
 
@@ -449,6 +449,19 @@ def _on_sigint(signum: int, frame: Any) -> None:
     request_stop(KeyboardInterrupt)
 
 
+def _quiet_stops(previous: Callable[[Any], None]) -> Callable[[Any], None]:
+    """A ``sys.unraisablehook`` that says nothing of a stop a signal raised inside a
+    ``__del__`` (llvmlite frees compiled objects so while numba compiles): Python
+    would print it as "Exception ignored ... Traceback", where the command's one
+    line is all a stop may print; ``request_stop`` has kept it, and the run raises
+    it again at its next stage (``commands.check_stop``). Anything else goes to
+    ``previous``."""
+    def hook(unraisable: Any) -> None:
+        if not isinstance(unraisable.exc_value, (KeyboardInterrupt, Terminated)):
+            previous(unraisable)
+    return hook
+
+
 def viewer_module(name: str):
     """``viewer.<name>``, imported on first use (it needs Rerun).
 
@@ -490,6 +503,8 @@ def _main(argv: Sequence[str] | None) -> int:
     old = signal.signal(signal.SIGTERM, _on_sigterm)
     old_int = (signal.signal(signal.SIGINT, _on_sigint)
                if signal.getsignal(signal.SIGINT) is signal.default_int_handler else None)
+    old_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_stops(old_hook)
     try:
         rc = int(args.fn(args) or 0)
         sys.stdout.flush()  # here, so that a closed pipe is caught below, not at exit
@@ -525,6 +540,7 @@ def _main(argv: Sequence[str] | None) -> int:
         return EXIT_INTERNAL
     finally:
         clear_stop()
+        sys.unraisablehook = old_hook
         signal.signal(signal.SIGTERM, old)
         if old_int is not None:
             signal.signal(signal.SIGINT, old_int)

@@ -9,6 +9,7 @@ import dataclasses
 import io as _pyio
 import json
 import os
+import sys
 from pathlib import Path
 
 import cv2
@@ -496,3 +497,31 @@ def test_without_out_each_scene_gets_its_own_folder(tmp_path, monkeypatch, capsy
     assert default_out_dir(["clips/street walk.mp4"]) == Path("out/street_walk")
     assert default_out_dir([tmp_path / "alpha" / "frames" / "v0.png",
                             tmp_path / "beta" / "frames" / "v1.png"]) == Path("out/run")
+
+
+def test_a_stop_raised_inside_a_destructor_prints_no_traceback():
+    """A Ctrl-C that lands while numba compiles is raised inside llvmlite's ``__del__``:
+    Python printed it as "Exception ignored ... Traceback" next to the command's one
+    line (a fresh clone's CI caught it once). The command's hook keeps it quiet (the
+    stop is kept and raised again by the run); any other such error still goes to
+    the previous hook, which prints it."""
+    from dynremove.cli import _quiet_stops
+    from dynremove.commands import Terminated
+
+    class Freed:
+        def __init__(self, exc):
+            self.exc = exc
+
+        def __del__(self):
+            raise self.exc
+
+    passed_on = []
+    old = sys.unraisablehook
+    sys.unraisablehook = _quiet_stops(passed_on.append)
+    try:
+        for exc in (KeyboardInterrupt(), Terminated(), ValueError("a real error")):
+            obj = Freed(exc)
+            del obj
+    finally:
+        sys.unraisablehook = old
+    assert [type(u.exc_value) for u in passed_on] == [ValueError]
