@@ -32,8 +32,19 @@ from dynremove.params import DEFAULT, FIELD_CHOICES, PAPER, PRESETS, Params, fie
 
 
 # --- parameters as flags --------------------------------------------------------------
-def add_param_flags(ap: argparse.ArgumentParser) -> None:
-    g = ap.add_argument_group("method parameters (default: the chosen preset's values)")
+def add_param_flags(ap: argparse.ArgumentParser, *, listed: bool = True) -> None:
+    """--preset and one flag per Params field. ``listed=False`` (the commands that
+    take the method's flags through to runs: batch, demo, bench, eval): the flags
+    work but their help is one line pointing at ``run --help``, which lists them,
+    so that the command's own options are not lost under sixty method flags."""
+    title = "method parameters (default: the chosen preset's values)"
+    if listed:
+        g = ap.add_argument_group(title)
+    else:
+        g = ap.add_argument_group(title, description=(
+            "every method flag of 'dynremove run' is taken here too (--patch-size, "
+            "--select-tau, ...; 'dynremove run --help' lists them with their units and "
+            "defaults)").replace("%", "%%"))
     g.add_argument("--preset", choices=sorted(PRESETS), default="default",
                    help="'default' (best measured) or 'paper' (the method as written)")
     docs = field_docs()
@@ -44,7 +55,7 @@ def add_param_flags(ap: argparse.ArgumentParser) -> None:
         # the paper preset's value is in ``used``: not again from the comment
         doc = re.sub(r"\s*\(paper preset [^()]*\)|;\s*paper preset [^;()]*(?=\))", "",
                      docs.get(f.name, ""))
-        help_ = (doc + " " + used).strip().replace("%", "%%")
+        help_ = (doc + " " + used).strip().replace("%", "%%") if listed else argparse.SUPPRESS
         if f.type in ("bool", bool):
             g.add_argument(flag, dest=f"p_{f.name}", action=argparse.BooleanOptionalAction,
                            default=None, help=help_)
@@ -273,7 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "above 1280 px)")
     bt.add_argument("-q", "--quiet", action="store_true", help="no per-set lines on stderr")
     add_input_flags(bt, valid_mask=False)
-    add_param_flags(bt)
+    add_param_flags(bt, listed=False)
     bt.set_defaults(fn=cmd_batch)
 
     d = sub.add_parser("demo", help="run on the built-in synthetic scene and print metrics")
@@ -286,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="'full': candidates in the source views at every recorded "
                         "decision (see run --record-detail)")
     d.add_argument("-q", "--quiet", action="store_true")
-    add_param_flags(d)
+    add_param_flags(d, listed=False)
     d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002, compare=None)
 
     b = sub.add_parser(
@@ -311,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--no-reference", action="store_true",
                    help="skip the numba/reference speed ratio")
     b.add_argument("-q", "--quiet", action="store_true", help="only the table, no progress lines")
-    add_param_flags(b)
+    add_param_flags(b, listed=False)
     b.set_defaults(fn=cmd_bench)
 
     e = sub.add_parser(
@@ -348,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"with --ablation: comma-separated subset of {','.join(ABLATIONS)} "
                         "(default: all of them)")
     e.add_argument("-q", "--quiet", action="store_true", help="no per-set progress on stderr")
-    add_param_flags(e)
+    add_param_flags(e, listed=False)
     e.set_defaults(fn=cmd_eval)
 
     c = sub.add_parser(

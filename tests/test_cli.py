@@ -79,6 +79,22 @@ def test_gt_help_says_it_is_scored(capsys):
     assert "scored against it" in text and "jaccard_vs_gt" in text
 
 
+@pytest.mark.parametrize("cmd", ["batch", "demo", "bench", "eval"])
+def test_method_flags_are_listed_by_run_only(capsys, cmd):
+    """The commands that pass the method's flags through take every one of them, and
+    their help points at 'run --help' instead of listing sixty flags under their own
+    options (a fresh-user trial lost bench's and eval's options that way)."""
+    from dynremove.cli import build_parser
+    text = help_of(capsys, cmd)
+    assert "--select-tau" in text and "'dynremove run --help' lists them" in text, text
+    assert "--select-tau FLOAT" not in text and "--patch-size INT" not in text
+    assert "--select-tau FLOAT" in help_of(capsys, "run")
+    head = {"batch": ["root", "--out", "o"], "demo": [], "bench": [],
+            "eval": ["data"]}[cmd]
+    args = build_parser().parse_args([cmd, *head, "--select-tau", "7.5", "--no-snap"])
+    assert args.p_select_tau == 7.5 and args.p_snap is False
+
+
 # --- the reference: named at the start, 0-based, negative from the end ----------------
 @pytest.mark.parametrize("ref, line", [
     (None, "reference: view2.png (index 2 of 0..3, the later of the two middle images "
