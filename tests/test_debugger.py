@@ -387,3 +387,52 @@ def test_export_captions_name_the_post_scan_steps(method_run):
     stage_caps = [c for c in captions if c.startswith("after the scans: ")]
     assert [c.split(": ")[1].split()[0] for c in stage_caps] == list(res.stages)
     assert captions[0].startswith("scan 0   step ")
+
+
+def test_the_static_test_is_told(method_run):
+    """Inside L, inspect says why a pixel was or was not kept as static 3-D structure:
+    how many sources had to show the reference's content, which did (the flow match,
+    or the epipolar search with its ΔE) and why the others did not, as the fill's own
+    arrays say (the question a user asks of a static pixel that was replaced)."""
+    res, path = method_run["res"], method_run["path"]
+    sel = res.selection
+    assert sel is not None and sel.static_evidence is not None
+    rec = vi.read_selection(path)
+    names = list(rec["evidence"])
+    assert len(names) == len(res.source_indices)
+    for k, n in enumerate(names):  # recorded as computed
+        np.testing.assert_array_equal(rec["evidence"][n], sel.static_evidence[k])
+        got = rec["line_de"][n].astype(np.float64)
+        searched = np.isfinite(sel.line_de[k])
+        assert ((got == P.DE_NONE) == ~searched).all()
+        np.testing.assert_allclose(got[searched] / P.DE_SCALE, sel.line_de[k][searched],
+                                   atol=0.006)
+    np.testing.assert_array_equal(rec["static_need"], sel.static_need)
+    L = sel.static_need > 0
+    counted = np.isin(sel.static_evidence, (1, 2)).sum(0)
+    # what the fill kept as static had enough sources showing it, in a colour not the movers'
+    assert not (sel.explained & ~((counted >= sel.static_need) & (sel.ref_mover_p < 0.5))).any()
+    assert not (sel.explained & ~L).any()
+    picks = [np.nonzero(L & sel.explained), np.nonzero(L & ~sel.explained)]
+    told = 0
+    for ys, xs in picks:
+        if not len(ys):
+            continue
+        i = len(ys) // 2
+        x, y = int(xs[i]), int(ys[i])
+        line = vd.static_test_line(vi.pixel_history(path, x, y))
+        need = int(sel.static_need[y, x])
+        assert line.startswith(f"static 3-D structure? {'yes' if sel.explained[y, x] else 'no'}: "
+                               f"{int(counted[y, x])} of the {need} source"), line
+        for k, n in enumerate(names):
+            if sel.static_evidence[k, y, x]:
+                assert n in line, (n, line)
+            if sel.static_evidence[k, y, x] in (2, 3, 5) and np.isfinite(sel.line_de[k, y, x]):
+                assert f"{n} (ΔE {sel.line_de[k, y, x]:.1f})" in line, line
+        if sel.ref_mover_p[y, x] >= 0.5:
+            assert "the reference's colour is the movers'" in line
+        assert line in vd.format_pixel_history(vi.pixel_history(path, x, y))
+        told += 1
+    assert told >= 1
+    off = np.nonzero(~L)
+    assert vd.static_test_line(vi.pixel_history(path, int(off[1][0]), int(off[0][0]))) is None

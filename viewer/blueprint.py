@@ -57,7 +57,7 @@ def _maps(p: P.Paths) -> rrb.Tabs:
     )
 
 
-def _more(p: P.Paths) -> rrb.Tabs:
+def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
     per_scan = rrb.Grid(
         rrb.Spatial2DView(name="M (lossless)", origin=p(P.scan_map("M"))),
         rrb.Spatial2DView(name="verdict", origin=p(P.scan_map("verdict"))),
@@ -79,6 +79,14 @@ def _more(p: P.Paths) -> rrb.Tabs:
         rrb.Spatial2DView(name="fill", origin=p("result"),
                           contents=[p(P.RESULT_CLEAN), p(P.RESULT_SOURCE), p(P.RESULT_SEAMS),
                                     p(P.ERRORS_BACKGROUND)]),
+        # inside L: which sources show the reference's content as static, and how
+        # (green: they count; red: not found; hover a pixel for the words)
+        rrb.Grid(*[rrb.Spatial2DView(
+            name=f"static test: {n}", origin=p("result"),
+            contents=[p(P.RESULT_CLEAN), p(f"{P.RESULT_EVIDENCE}/{n}")]) for n in names],
+            rrb.Spatial2DView(name="sources needed", origin=p("result"),
+                              contents=[p(P.RESULT_CLEAN), p(P.RESULT_STATIC_NEED)]),
+            grid_columns=3, name="static 3-D test"),
         name="more maps",
     )
 
@@ -132,7 +140,7 @@ def _run_layout(names: list[str], p: P.Paths, *, label: str | None = None) -> rr
                             for s, n in enumerate(names)],
                           grid_columns=max(1, min(3, len(names))), name="similarity C_s")
     return rrb.Vertical(
-        rrb.Horizontal(_reference_view(p), rrb.Vertical(_maps(p), _more(p), name="maps",
+        rrb.Horizontal(_reference_view(p), rrb.Vertical(_maps(p), _more(p, names), name="maps",
                                                           row_shares=[3, 2]),
                        column_shares=[3, 2], name="reference"),
         rrb.Horizontal(

@@ -514,15 +514,26 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
         rows = _image_rows(store, p(rel), "SegmentationImage", index=None)
         if rows:
             out[key] = rows[0][1]
-    reasons = {}
-    prefix = p(P.RESULT_REASONS).strip("/") + "/"
-    for ent in sorted(str(e).strip("/") for e in store.schema().entity_paths()):
-        if ent.startswith(prefix):
-            rows = _image_rows(store, "/" + ent, "SegmentationImage", index=None)
-            if rows:
-                reasons[ent.rsplit("/", 1)[1]] = rows[0][1]
-    if reasons:
-        out["reasons"] = reasons
+    entities = sorted(str(e).strip("/") for e in store.schema().entity_paths())
+    for key, rel, arch in (("reasons", P.RESULT_REASONS, "SegmentationImage"),
+                           ("evidence", P.RESULT_EVIDENCE, "SegmentationImage"),
+                           ("line_de", P.RESULT_LINE_DE, "DepthImage")):
+        per_source = {}
+        prefix = p(rel).strip("/") + "/"
+        for ent in entities:
+            if ent.startswith(prefix):
+                rows = _image_rows(store, "/" + ent, arch, index=None)
+                if rows:
+                    per_source[ent.rsplit("/", 1)[1]] = rows[0][1]
+        if per_source:
+            out[key] = per_source
+    rows = _image_rows(store, p(P.RESULT_STATIC_NEED), "SegmentationImage", index=None)
+    if rows:
+        out["static_need"] = rows[0][1]
+        out["thresholds"] = _static_values(store, p(P.RESULT_STATIC_NEED))
+    rows = _image_rows(store, p(P.RESULT_REF_MOVER_P), "DepthImage", index=None)
+    if rows:
+        out["ref_mover_p"] = rows[0][1]
     return out
 
 
@@ -640,6 +651,15 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
         if k == "reasons":  # per source: why it did or did not fill this pixel
             sel[k] = {n: REASONS.get(int(a[y, x]), "?") for n, a in v.items()
                       if int(a[y, x]) > 0}
+        elif k == "evidence":  # per source: EVIDENCE code of the static 3-D test (in L)
+            sel[k] = {n: int(a[y, x]) for n, a in v.items() if int(a[y, x]) > 0}
+        elif k == "line_de":  # per source: the best ΔE on its epipolar line
+            sel[k] = {n: float(a[y, x]) / P.DE_SCALE for n, a in v.items()
+                      if int(a[y, x]) != P.DE_NONE}
+        elif k == "ref_mover_p":
+            sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.P_SCALE
+        elif k == "thresholds":
+            sel[k] = {n: (a[0] if isinstance(a, list) and a else a) for n, a in v.items()}
         else:
             sel[k] = int(v[y, x])
     return dict(

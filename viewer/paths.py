@@ -119,6 +119,17 @@ RESULT_REASONS = "result/selection/reasons"  # per source: why it did or did not
 RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure
 RESULT_LINGERING = "result/selection/lingering"  # a mover most photos show, seen free by 2+
 RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV inpainting
+# the static 3-D structure test inside L: per source, whether it shows the reference's
+# content (EVIDENCE codes) and the best CIE76 ΔE along its epipolar line (uint16,
+# round(ΔE · DE_SCALE), DE_NONE where not searched); how many sources had to show it;
+# the reference's P(mover colour) (uint16, round(P · P_SCALE), DE_NONE outside L)
+RESULT_EVIDENCE = "result/selection/static_evidence"
+RESULT_LINE_DE = "result/selection/line_de"
+RESULT_STATIC_NEED = "result/selection/static_need"
+RESULT_REF_MOVER_P = "result/selection/ref_mover_p"
+DE_SCALE = 100
+P_SCALE = 10000
+DE_NONE = 65535
 EVENTS_DECISIONS = "events/decisions"
 EVENTS_REPLACEMENTS = "events/replacements"
 EVENTS_UPDATES = "events/updates"

@@ -42,7 +42,7 @@ import rerun as rr
 
 from dynremove.evaluation.metrics import jaccard
 from dynremove.events import EventBatch, RunInfo, ScanState
-from dynremove.refine.select import REASONS
+from dynremove.refine.select import EVIDENCE, REASONS
 from viewer import paths as P
 from viewer._images import (CLASS_COLORS, REASON_NAMES, VERDICT_COLORS, VERDICT_NAMES,
                             cluster_colors, colormap, colormap_with_legend, count_classes,
@@ -55,6 +55,19 @@ from viewer.verdict import after_scan_message, before_scans_message, more_scans
 _REASON_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 120),
                    3: (230, 40, 40, 160), 4: (120, 120, 120, 120), 5: (240, 150, 30, 140),
                    6: (60, 120, 230, 120), 7: (200, 40, 200, 160)}
+
+# the static 3-D structure test (EVIDENCE): green where a source counts for "static"
+_EVIDENCE_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 140),
+                     3: (240, 200, 40, 140), 4: (200, 40, 200, 150), 5: (230, 40, 40, 160),
+                     6: (120, 120, 120, 120)}
+
+
+def _quantised(x: np.ndarray, scale: int) -> np.ndarray:
+    """(H, W) float → uint16 round(x · scale), P.DE_NONE where NaN (clipped below it)."""
+    x = np.asarray(x, np.float32)
+    q = np.clip(np.round(np.nan_to_num(x, nan=0.0) * scale), 0, P.DE_NONE - 1)
+    return np.where(np.isnan(x), P.DE_NONE, q).astype(np.uint16)
+
 
 _DIRECTION = {1: "top-left → bottom-right", -1: "bottom-right → top-left"}
 _STAT_STYLE = {  # name: (RGB, label)
@@ -434,6 +447,27 @@ class RerunSink(StepColumns):
                         [(c, w, _REASON_COLOURS[c]) for c, w in REASONS.items()]),
                         rr.SegmentationImage(np.asarray(sel.reasons[k], np.uint8)),
                         static=True)
+                if getattr(sel, "static_evidence", None) is not None:
+                    self.rec.log(self.p(f"{P.RESULT_EVIDENCE}/{name}"), rr.AnnotationContext(
+                        [(c, w, _EVIDENCE_COLOURS[c]) for c, w in EVIDENCE.items()]),
+                        rr.SegmentationImage(np.asarray(sel.static_evidence[k], np.uint8)),
+                        static=True)
+                    self.rec.log(self.p(f"{P.RESULT_LINE_DE}/{name}"), rr.DepthImage(
+                        _quantised(sel.line_de[k], P.DE_SCALE), meter=float(P.DE_SCALE),
+                        colormap="viridis", depth_range=(0.0, 30.0 * P.DE_SCALE)),
+                        static=True)
+            if getattr(sel, "static_need", None) is not None:
+                params = dict(getattr(result, "params", {}) or {})
+                self.rec.log(self.p(P.RESULT_STATIC_NEED),
+                             rr.SegmentationImage(np.asarray(sel.static_need, np.uint8)),
+                             rr.AnyValues(select_search_de=float(params.get("select_search_de",
+                                                                             float("nan"))),
+                                          select_tau=float(params.get("select_tau",
+                                                                      float("nan")))),
+                             static=True)
+                self.rec.log(self.p(P.RESULT_REF_MOVER_P), rr.DepthImage(
+                    _quantised(sel.ref_mover_p, P.P_SCALE), meter=float(P.P_SCALE),
+                    colormap="magma", depth_range=(0.0, float(P.P_SCALE))), static=True)
         clean_scan = getattr(result, "clean_scan", None)
         if clean_scan is not None:  # what the Replacement events rebuild
             self.rec.log(self.p(P.RESULT_CLEAN_SCAN), rr.EncodedImage(

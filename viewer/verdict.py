@@ -312,6 +312,48 @@ def _fold(events: list[tuple[int, str]], max_lines: int) -> list[str]:
     return lines
 
 
+def static_test_line(h: dict[str, Any]) -> str | None:
+    """The fill's static 3-D structure test at a pixel of L, in words (None outside
+    L or for a run without it): how many sources had to show the reference's content
+    as static, which did and how (the flow match, or the epipolar search's best
+    CIE76 ΔE against --select-search-de), why the others did not, grouped, and
+    whether the reference's colour, being a mover's, decided it anyway
+    (``select.EVIDENCE``)."""
+    sel = h.get("selection") or {}
+    ev, need = sel.get("evidence") or {}, sel.get("static_need", 0)
+    if not ev or not need:
+        return None
+    de = sel.get("line_de") or {}
+    search_de = (sel.get("thresholds") or {}).get("select_search_de")
+
+    def named(code: int) -> list[str]:
+        return [n + (f" (ΔE {de[n]:.1f})" if code in (2, 3, 5) and n in de else "")
+                for n, c in ev.items() if c == code]
+
+    groups = [(1, "its match shows it"),
+              (2, "found on the epipolar line"),
+              (3, "found on the epipolar line, but too few others are for that to count"),
+              (4, "the match agrees, in the movers' colours"),
+              (5, "not found: the match differs"
+                  + (f", and nothing on the epipolar line is within ΔE {search_de:.1f}"
+                     if isinstance(search_de, float) and search_de == search_de
+                     and any(n in de for n, c in ev.items() if c == 5) else "")),
+              (6, "outside the frame")]
+    parts = [f"{what}: {', '.join(who)}" for code, what in groups if (who := named(code))]
+    counted = sum(c in (1, 2) for c in ev.values())
+    kept = bool(sel.get("explained"))
+    text = (f"static 3-D structure? {'yes' if kept else 'no'}: {counted} of the {need} "
+            f"source{'s' if need > 1 else ''} needed show the reference's content here ("
+            + "; ".join(parts) + ")")
+    p = sel.get("ref_mover_p")
+    if p is not None and p >= 0.5:
+        text += (f"; the reference's colour is the movers' (P {p:.2f} ≥ 0.5): not kept "
+                 "as static whatever the sources show")
+    elif sel.get("lingering"):
+        text += "; a mover that lingered: the sources that saw the background decide"
+    return text
+
+
 def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     """The verdict in words (≤ 5 lines), then the steps that changed the pixel.
 
@@ -326,6 +368,9 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         lines = [f"pixel ({h['x']}, {h['y']}): " + outcome_line(h),
                  "  the scans: " + verdict[0]]
     lines += ["  " + v for v in verdict[1:]]
+    st = static_test_line(h)
+    if st is not None:
+        lines.append("  " + st)
     if any(("M = " in ln or "b_m" in ln) for ln in lines):
         lines.append("  " + LEGEND)
     if any("by the border votes" in ln for ln in lines):

@@ -105,6 +105,15 @@ class Selection:
     # pixels of a mover that lingered: the reference and most sources show it, two
     # or more sources saw the background (``_minority_witnesses``)
     lingering: npt.NDArray[np.bool_] | None = None
+    # the static 3-D structure test inside L (``explained``), per source (S, H, W)
+    # uint8: EVIDENCE[code] (0 outside L); the best CIE76 ΔE of the reference's
+    # content along the source's epipolar line (S, H, W) float32 (NaN where not
+    # searched); how many sources had to show it (H, W) uint8 (0 outside L); and the
+    # reference's P(mover colour) (H, W) float32 (NaN outside L)
+    static_evidence: npt.NDArray[np.uint8] | None = None
+    line_de: npt.NDArray[np.float32] | None = None
+    static_need: npt.NDArray[np.uint8] | None = None
+    ref_mover_p: npt.NDArray[np.float32] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen",
@@ -114,6 +123,18 @@ REASONS = {0: "not considered", 1: "chosen",
            6: "agrees with the consensus, not averaged in (not close to the chosen one)",
            7: "still shows the mover that lingered here"}
 OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
+
+# Inside L, whether each source shows the reference's content as static (a pixel of
+# L is kept as static 3-D structure where enough of them do: ``Selection.explained``)
+EVIDENCE = {0: "not in L",
+            1: "its match shows the reference's content (flow, on its epipolar line)",
+            2: "shows the reference's content elsewhere on its epipolar line",
+            3: "shows the reference's content on its epipolar line, but too few other "
+               "sources show it for that weaker evidence to count",
+            4: "its match agrees, but in the movers' colours",
+            5: "its match differs and nothing on its epipolar line matches",
+            6: "outside its frame"}
+EV_FLOW, EV_LINE, EV_LINE_ALONE, EV_MOVER_COLOUR, EV_NOT_FOUND, EV_UNSEEN = 1, 2, 3, 4, 5, 6
 
 
 _BINS = 12  # per Lab axis, in the movers' colour model
@@ -531,6 +552,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     votes = np.zeros((S, H, W), np.float32)
     matched = np.zeros((S, H, W), bool)  # explained by the flow match
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
+    agrees = np.zeros((S, H, W), bool)  # the flow match on its line, the reference's colour
+    line_de = np.full((S, H, W), np.nan, np.float32)  # best ΔE on the line, where searched
     seen = np.zeros((S, H, W), bool)  # the flow match inside the source's content
     base: list = [None] * S
     lab_s: list = [None] * S  # the sources' blurred Lab, exposure matched, where computed
@@ -589,6 +612,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
             cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok)
             matched[k], searched[k] = ok, cost < P.select_search_de
+            line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
+        agrees[k] = ok
 
 
     for_each_source(match, S)
@@ -645,12 +670,22 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # and at most _EXPLAIN_CAP (from 7 sources up: see there)
     need = np.minimum(np.maximum(min(2, max(1, int(np.ceil(0.5 * S - 1e-6)))),
                                  np.ceil(0.5 * seen.sum(0) - 1e-6)), _EXPLAIN_CAP).astype(np.int64)
+    flow_vote = votes > 0.5
+    line_found = np.zeros((S, H, W), bool)
     if searched.any():
         # the epipolar search is weaker evidence (any colour on the line may
         # match): it counts where at least two sources, and half of them, agree
-        found = searched & ((matched | searched).sum(0) >= np.maximum(2, need))[None]
-        votes = np.maximum(votes, found.astype(np.float32))
+        line_found = searched & ((matched | searched).sum(0) >= np.maximum(2, need))[None]
+        votes = np.maximum(votes, line_found.astype(np.float32))
     explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5) & ~minority
+    # why each source did or did not count towards ``explained`` (for inspect)
+    evidence = np.where(np.broadcast_to(mask, (S, H, W)), EV_NOT_FOUND, 0).astype(np.uint8)
+    evidence[mask[None] & searched & ~line_found] = EV_LINE_ALONE
+    evidence[mask[None] & line_found & ~flow_vote] = EV_LINE
+    evidence[mask[None] & agrees & ~flow_vote & ~line_found] = EV_MOVER_COLOUR
+    evidence[mask[None] & flow_vote] = EV_FLOW
+    evidence[mask[None] & ~seen & ~flow_vote & ~line_found] = EV_UNSEEN
+    line_de[:, ~mask] = np.nan
     core = mask & ~explained
 
     # 2. background candidates through the fields, re-aligned
@@ -812,8 +847,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons,
-                     lingering=lingering)
+                     lingering=lingering, static_evidence=evidence, line_de=line_de,
+                     static_need=np.where(mask, np.minimum(need, 255), 0).astype(np.uint8),
+                     ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32))
 
 
-__all__ = ["OUTSIDE", "REASONS", "STILL_LINGERING", "Selection", "median_parallax_px",
+__all__ = ["EVIDENCE", "OUTSIDE", "REASONS", "STILL_LINGERING", "Selection", "median_parallax_px",
            "member_median", "min_witnesses", "select_fill"]
