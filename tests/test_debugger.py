@@ -413,6 +413,7 @@ def test_the_static_test_is_told(method_run):
     # what the fill kept as static had enough sources showing it, in a colour not the movers'
     assert not (sel.explained & ~((counted >= sel.static_need) & (sel.ref_mover_p < 0.5))).any()
     assert not (sel.explained & ~L).any()
+    assert not (sel.explained & (sel.label > 0)).any()  # what the test kept stays the reference's
     picks = [np.nonzero(L & sel.explained), np.nonzero(L & ~sel.explained)]
     told = 0
     for ys, xs in picks:
@@ -420,16 +421,24 @@ def test_the_static_test_is_told(method_run):
             continue
         i = len(ys) // 2
         x, y = int(xs[i]), int(ys[i])
-        line = vd.static_test_line(vi.pixel_history(path, x, y))
+        h = vi.pixel_history(path, x, y)
+        line = vd.static_test_line(h)
         need = int(sel.static_need[y, x])
-        assert line.startswith(f"static 3-D structure? {'yes' if sel.explained[y, x] else 'no'}: "
-                               f"{int(counted[y, x])} of the {need} source"), line
+        filled = bool(res.dynamic[y, x]) and sel.label[y, x] > 0
+        # the test's verdict, told against what became of the pixel
+        head = {(True, False): "kept as static: ", (True, True): "passed (",
+                (False, True): "not passed: ", (False, False): "not passed ("}[
+            (bool(sel.explained[y, x]), filled)]
+        assert line.startswith("static 3-D structure test: " + head
+                               + f"{int(counted[y, x])} of the {need} source"), line
+        if filled:
+            assert h["source_names"][sel.label[y, x] - 1] in line
         for k, n in enumerate(names):
             if sel.static_evidence[k, y, x]:
                 assert n in line, (n, line)
             if sel.static_evidence[k, y, x] in (2, 3, 5) and np.isfinite(sel.line_de[k, y, x]):
                 assert f"{n} (ΔE {sel.line_de[k, y, x]:.1f})" in line, line
-        if sel.ref_mover_p[y, x] >= 0.5:
+        if sel.ref_mover_p[y, x] >= 0.5 and not sel.explained[y, x]:
             assert "the reference's colour is the movers'" in line
         assert line in vd.format_pixel_history(vi.pixel_history(path, x, y))
         told += 1

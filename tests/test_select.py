@@ -125,6 +125,41 @@ def test_small_regions_take_their_own_offset():
     assert np.median(_de(one, bg)[blob]) > 10.0
 
 
+def test_a_small_region_at_the_border_takes_its_own_offset():
+    """The same small region under different light, but on the photo's border: its
+    ring is cut by the border, yet the region is no less surrounded by the photo, so
+    it takes its own offset too (tim6's patch below the tube, at the bottom edge,
+    stayed ~17 L* brighter than the table with the source's offset)."""
+    from dynremove.refine.montage import component_offsets
+
+    rng = np.random.default_rng(3)
+    H, W = 120, 200
+    bg = cv2.GaussianBlur(rng.integers(60, 160, (H, W, 3)).astype(np.uint8), (0, 0), 2)
+    light = np.zeros((H, W), np.float32)
+    light[:, 130:] = 35.0
+    light = cv2.GaussianBlur(light, (0, 0), 4)
+    src = np.clip(bg + light[..., None], 0, 255).astype(np.uint8)
+    rep = np.zeros((H, W), bool)
+    rep[20:90, 20:90] = True  # the mover, where the light is the same
+    blob = np.zeros((H, W), bool)
+    blob[H - 20:, 150:178] = True  # 28 x 20 px on the bottom edge: a 3-px ring of ~220 px
+    rep |= blob
+    ref = bg.copy()
+    ref[rep] = (20, 200, 20)
+    cand = np.stack([ref, src])
+    usable = np.ones((2, H, W), bool)
+    labs = np.stack([_lab(ref), _lab(src)])
+    ring = dilate_disc(rep, 3) & ~rep
+    ry, rx = np.nonzero(ring)
+    comps = component_offsets(ref[ry, rx], src[ry, rx], labs[0, ry, rx] - labs[1, ry, rx],
+                              usable[1, ry, rx], ring, rep, rep, ring_px=3)
+    assert len(comps) == 1 and blob[comps[0][0], comps[0][1]].all()
+    assert 2 * np.count_nonzero(ring & dilate_disc(blob, 3)) < blob.sum()  # cut by the border
+    out = offset_blend(ref, cand, rep.astype(np.intp), rep, usable, labs)
+    assert np.median(_de(out, bg)[blob]) < 3.0
+    assert np.median(_de(src, bg)[blob]) > 10.0  # the source itself is brighter there
+
+
 def test_offset_blend_keeps_ring_content_near_the_ring_only():
     """A source 20 levels darker, a few levels darker still along one side of the
     ring (a misaligned edge, within ring_agrees' tolerance): the middle of the fill

@@ -255,7 +255,7 @@ def test_pixel_history_of_dynamic_pixel(run):
     assert h["final_dynamic"] is True
     text = vd.format_pixel_history(h)
     assert f"step {int(dyn['step'])}" in text and "→ DYNAMIC" in text
-    assert "replaced by the patch of" in text and "winner cluster" in text
+    assert "the scan wrote the patch of" in text and "winner cluster" in text
     assert text.splitlines()[0] == f"pixel ({x}, {y}): removed (in the final mask)"
     assert text.splitlines()[1].startswith("  the scans: dynamic in scan 0")
     assert vd.LEGEND in text  # the symbols it uses, in words

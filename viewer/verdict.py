@@ -341,17 +341,33 @@ def static_test_line(h: dict[str, Any]) -> str | None:
               (6, "outside the frame")]
     parts = [f"{what}: {', '.join(who)}" for code, what in groups if (who := named(code))]
     counted = sum(c in (1, 2) for c in ev.values())
-    kept = bool(sel.get("explained"))
-    text = (f"static 3-D structure? {'yes' if kept else 'no'}: {counted} of the {need} "
-            f"source{'s' if need > 1 else ''} needed show the reference's content here ("
-            + "; ".join(parts) + ")")
+    passed = bool(sel.get("explained"))
+    evidence = (f"{counted} of the {need} source{'s' if need > 1 else ''} needed show the "
+                "reference's content here (" + "; ".join(parts) + ")")
     p = sel.get("ref_mover_p")
-    if p is not None and p >= 0.5:
-        text += (f"; the reference's colour is the movers' (P {p:.2f} ≥ 0.5): not kept "
-                 "as static whatever the sources show")
+    if passed:
+        why_not = ""
+    elif p is not None and p >= 0.5 and counted >= need:
+        why_not = (f"; the reference's colour is the movers' (P {p:.2f} ≥ 0.5), which "
+                   "overrules that")
+    elif p is not None and p >= 0.5:
+        why_not = f"; and the reference's colour is the movers' (P {p:.2f} ≥ 0.5)"
     elif sel.get("lingering"):
-        text += "; a mover that lingered: the sources that saw the background decide"
-    return text
+        why_not = "; a mover that lingered: the sources that saw the background decide"
+    else:
+        why_not = ""
+    replaced = bool(h.get("final_dynamic")) and sel.get("source", 0) > 0
+    if passed and not replaced:
+        return "static 3-D structure test: kept as static: " + evidence
+    if passed:
+        return ("static 3-D structure test: passed (" + evidence + "), yet the fill's "
+                "candidates here, sampled through the sources' fields across L, disagree "
+                f"with the reference, and the photomontage took {_src_name(h, sel['source'] - 1)}")
+    if replaced:
+        return "static 3-D structure test: not passed: " + evidence + why_not
+    return ("static 3-D structure test: not passed (" + evidence + why_not + "), but the "
+            "photomontage kept the reference: it was the cheapest label here (its distance "
+            "to the sources' consensus, with the seams)")
 
 
 def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
@@ -398,8 +414,12 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
                + (f"; SIFT distance to the consensus {cd:.3f}" if cd == cd else ""))
         ev.append((d["step"], txt))
     for r in h["replacements"]:
-        ev.append((r["step"], f"  scan {r['scan']} step {r['step']}: replaced by the patch "
-                              f"of {r['src_name']} at ({r['src_x']},{r['src_y']}), score "
+        # (the scan's own fill, which the fill by selection redoes: "fill:" above)
+        ev.append((r["step"], f"  scan {r['scan']} step {r['step']}: the scan wrote the patch "
+                              f"of {r['src_name']} at ({r['src_x']},{r['src_y']}) here"
+                              + (" (its own fill; the final one is the fill above)"
+                                 if "source" in (h.get("selection") or {}) else "")
+                              + f", score "
                               f"{r['score']:.2f}" + (" (tie-break)" if r["tie_break"] else "")
                               + f" among {r['n_patches']} patches"))
     by_scan: dict[int, list[dict]] = {}

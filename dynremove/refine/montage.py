@@ -243,7 +243,13 @@ def component_offsets(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.
         band = dilate_disc(comp, ring_px) & ~comp
         own = band & ~replaced[y0:y1, x0:x1]
         n_own = int(np.count_nonzero(own))
-        if n_own < max(20, 0.5 * np.count_nonzero(band), 0.5 * area):
+        n_band = int(np.count_nonzero(band))
+        # against its area, the ring counts as if the photo went on past its border
+        # (a region at the border is no less surrounded by the photo: tim6's pale
+        # patch below the tube, 614 px against a 265-px ring, kept the source's offset)
+        padded = np.pad(comp, ring_px)
+        n_full = int(np.count_nonzero(dilate_disc(padded, ring_px) & ~padded))
+        if n_own < max(20, 0.5 * n_band, 0.5 * area * n_band / max(n_full, 1)):
             continue
         cy, cx = np.nonzero(own)
         idx = ring_index[cy + y0, cx + x0]

@@ -762,6 +762,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     D[1:][copies] = _FORBIDDEN
     D[~usable] = _FORBIDDEN
     D[1:, ~reg] = _FORBIDDEN
+    # what the static 3-D test kept is the reference's: the sources' candidates there
+    # come through fields interpolated across L, not through the matches that showed
+    # its content (a graph cut that could still take a source drew a bar of wall
+    # across a face in tim6; 12 composites: damage 0.502 -> 0.499 %, leftover 17.07
+    # -> 17.21 %; DAVIS J 0.569 -> 0.570)
+    D[1:, explained[roi]] = _FORBIDDEN
     D[0, ~reg] = 0.0
 
     # 4. graph cut, 5. blend
