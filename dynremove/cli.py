@@ -336,7 +336,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "in the input and are wrong in the output, CIE76 dE > 10) and leftover "
                     "% (recoverable true-mask pixels still wrong; free.png gives the "
                     "recoverable part, the rest is reported as unrecoverable %).")
-    e.add_argument("data_dir", metavar="DATA_DIR")
+    e.add_argument("data_dir", metavar="DATA_DIR",
+                   help="a folder whose sets (<set>/frames/, below it at any depth) are "
+                        "scored: ../shared/data/davis, or what 'dynremove composite' wrote")
     e.add_argument("--sets", default=None, metavar="GLOB",
                    help="only sets whose name matches (comma-separated globs)")
     e.add_argument("--jobs", type=parse_jobs, default=1, metavar="N",
@@ -351,7 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "in masks/) (default: the middle frame)")
     e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
                    help=f"comma-separated subset of {','.join(METHODS)} (default: all of "
-                        "them)")
+                        "them; a set of 7 photos of 854x480 with --jobs 2 takes 20-25 s "
+                        "for each preset, 3-4 s for each median stack, under 1 s for telea)")
     e.add_argument("--ablation", action="store_true",
                    help="instead of the methods: variants of the preset, each one setting "
                         "changed (listed under --variants); prints mean J / PSNR per variant")
