@@ -484,3 +484,12 @@ def test_web_server_on_loopback(run, tmp_path):
     finally:
         serve.stop(proc)
     assert proc.poll() is not None
+
+
+def test_m_prints_the_same_from_a_decision_and_from_the_map():
+    """The verdict reads M from the per-scan map (M · 10⁴ as uint16), the history from
+    the decision (float32): both print the map's figure, so that they never disagree at
+    the rounding boundary (a fresh-user trial saw "M = 0.25" against "M 0.24")."""
+    for M in (0.24503, 0.24496, 0.2449, 0.30001, 0.12345678):
+        q = float(np.uint16(round(M * P.M_SCALE))) / P.M_SCALE
+        assert vd.m_text(np.float32(M)) == vd.m_text(q) == f"{q:.2f}"

@@ -15,6 +15,13 @@ def _label(v: bool | None) -> str:
     return "?" if v is None else ("dynamic" if v else "static")
 
 
+def m_text(M: float) -> str:
+    """M to two decimals, as the per-scan map holds it (round(M · 10⁴) as uint16):
+    a decision's exact M and the map's print the same figure (0.24503 and 0.2450
+    both "0.24"; a trial saw "M = 0.25" in the verdict and "M 0.24" in the history)."""
+    return f"{round(float(M), 4):.2f}"
+
+
 def _src_name(h: dict[str, Any], s: int) -> str:
     names = h.get("source_names", [])
     return names[s] if 0 <= s < len(names) else f"source {s}"
@@ -198,13 +205,13 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
             why = ("no cluster of candidates formed (undecided: no M to compare with "
                    "t_r, so the scan does not call it dynamic)")
         else:
-            why = f"M = {M:.2f} {_against_t_r(M, t_r)}"
+            why = f"M = {m_text(M)} {_against_t_r(M, t_r)}"
         if dyn:
             head = f"dynamic in scan {key['scan']} (step {key['step']}): {why}"
             others = [sc["scan"] for sc in scans if sc is not key]
             if others:
                 head += f"; scans {', '.join(map(str, others))}: " + ", ".join(
-                    f"{sc['verdict']}" + (f" M {sc['M']:.2f}" if sc["M"] == sc["M"] else "")
+                    f"{sc['verdict']}" + (f" M {m_text(sc['M'])}" if sc["M"] == sc["M"] else "")
                     for sc in scans if sc is not key)
         else:
             head = (f"{key['verdict']} in every scan: scan {key['scan']} (step "
@@ -212,7 +219,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                     f"{key['verdict']} in scan {key['scan']} (step {key['step']}): {why}")
             if len(scans) > 1:
                 head += "; then " + ", ".join(
-                    f"scan {sc['scan']} M {sc['M']:.2f}" for sc in scans[1:])
+                    f"scan {sc['scan']} M {m_text(sc['M'])}" for sc in scans[1:])
         n = key.get("overwritten_before")
         if n:
             head += (f"; its content had been overwritten by {n} neighbouring "
@@ -397,7 +404,7 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         if sc["scan"] in dec_scans:
             continue
         M = sc["M"]
-        mtxt = "no cluster" if M != M else f"M {M:.2f} {_against_t_r(M, h['t_r'])}"
+        mtxt = "no cluster" if M != M else f"M {m_text(M)} {_against_t_r(M, h['t_r'])}"
         cw = cluster_words(sc, None, len(h["source_names"]), short=True)
         ev.append((sc["step"], f"  scan {sc['scan']} step {sc['step']}: {sc['verdict']} "
                                f"({mtxt}{'; ' + cw if cw and M == M else ''}; "
@@ -406,7 +413,7 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         if d["M"] != d["M"]:
             verdict = f"no cluster → {'DYNAMIC' if d['dynamic'] else 'undecided'}"
         else:
-            verdict = (f"M {d['M']:.2f} {_against_t_r(d['M'], d['t_r'])} → "
+            verdict = (f"M {m_text(d['M'])} {_against_t_r(d['M'], d['t_r'])} → "
                        f"{'DYNAMIC' if d['dynamic'] else 'static'}")
         cd = d["consensus_dist"]
         txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
