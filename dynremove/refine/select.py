@@ -550,9 +550,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
     # 1. flow matches and the pixels of L they explain
     votes = np.zeros((S, H, W), np.float32)
-    matched = np.zeros((S, H, W), bool)  # explained by the flow match
+    matched = np.zeros((S, H, W), bool)  # the flow match on its line, the reference's colour
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
-    agrees = np.zeros((S, H, W), bool)  # the flow match on its line, the reference's colour
     line_de = np.full((S, H, W), np.nan, np.float32)  # best ΔE on the line, where searched
     seen = np.zeros((S, H, W), bool)  # the flow match inside the source's content
     base: list = [None] * S
@@ -611,9 +610,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # plane): its best match along the epipolar line in this source
             lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
             cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok)
-            matched[k], searched[k] = ok, cost < P.select_search_de
+            searched[k] = cost < P.select_search_de
             line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
-        agrees[k] = ok
+        matched[k] = ok
 
 
     for_each_source(match, S)
@@ -682,10 +681,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     evidence = np.where(np.broadcast_to(mask, (S, H, W)), EV_NOT_FOUND, 0).astype(np.uint8)
     evidence[mask[None] & searched & ~line_found] = EV_LINE_ALONE
     evidence[mask[None] & line_found & ~flow_vote] = EV_LINE
-    evidence[mask[None] & agrees & ~flow_vote & ~line_found] = EV_MOVER_COLOUR
+    evidence[mask[None] & matched & ~flow_vote & ~line_found] = EV_MOVER_COLOUR
     evidence[mask[None] & flow_vote] = EV_FLOW
     evidence[mask[None] & ~seen & ~flow_vote & ~line_found] = EV_UNSEEN
-    line_de[:, ~mask] = np.nan
     core = mask & ~explained
 
     # 2. background candidates through the fields, re-aligned
