@@ -112,6 +112,7 @@ class Params:
     select_parallax_px: float = 8.0  # the set's median measured parallax (analysis px) above which it is treated as 3-D: colour consensus may keep the reference in L, the epipolar search and --snap-veto run
     select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px) is under this (0 = off)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)
+    select_track_movers: bool = True  # where the set is flat (see --select-parallax-px), a source shows the reference's mover where the flow followed it (30 % of a region of L found in its colour, off its epipolar line): that source never fills there
     select_sweep: bool = False  # in a 3-D set (see --select-parallax-px), matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible

@@ -31,7 +31,7 @@ from dynremove.refine.duplicates import agreement_with_reference, duplicate_sour
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
-from dynremove.refine.select import (OUTSIDE, STILL_LINGERING, Selection, median_parallax_px,
+from dynremove.refine.select import (FOLLOWED, OUTSIDE, STILL_LINGERING, Selection, median_parallax_px,
                                      select_fill)
 from dynremove.refine.upsample import full_resolution
 
@@ -455,9 +455,18 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         n_ns = int((dyn & selection.no_source).sum())
         if n_ns:
             share = 100 * n_ns / max(1, dyn.sum())
+            ns = dyn & selection.no_source
+            # of them, where every source that reaches the pixel shows the mover, moved
+            # (a slow mover that overlaps itself from photo to photo)
+            n_fw = 0
+            if selection.reasons is not None:
+                r = selection.reasons[:, ns]
+                n_fw = int(((r == FOLLOWED).any(0) & np.isin(r, (FOLLOWED, OUTSIDE, 3)).all(0)).sum())
+            why = (f", {n_fw} px of them because every photo shows its own copy of the mover there "
+                   "(it moved less than its size)" if n_fw >= 0.5 * n_ns else "")
             msgs.append(f"{n_ns} px ({'under 0.1' if share < 0.1 else f'{share:.1f}'} % of "
                         "the replaced region) were seen free by no source: inpainted "
-                        "(OpenCV Telea)")
+                        f"(OpenCV Telea){why}")
             warnings.warn(msgs[-1], stacklevel=2)
         n_lg = int((dyn & selection.lingering).sum()) if selection.lingering is not None else 0
         if n_lg >= 5e-4 * dyn.size:  # (a few stray pixels of a mover are no such case)
