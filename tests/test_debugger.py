@@ -87,7 +87,8 @@ def method_run(request, tmp_path_factory):
     mem = MemorySink()
     rsink = RerunSink(path, gt_mask=gt)
     res = remove_dynamic(imgs, ref=ref, params=params, sink=Tee(mem, rsink))
-    return dict(path=path, mem=mem, res=res, gt=np.asarray(gt, bool), params=params)
+    return dict(path=path, mem=mem, res=res, gt=np.asarray(gt, bool), params=params,
+                kind=request.param)
 
 
 def _naive_overwritten(mem, scan, x, y, half, H, W):
@@ -445,3 +446,26 @@ def test_the_static_test_is_told(method_run):
     assert told >= 1
     off = np.nonzero(~L)
     assert vd.static_test_line(vi.pixel_history(path, int(off[1][0]), int(off[0][0]))) is None
+
+
+def test_the_followed_movers_are_recorded(method_run):
+    """Each source's map of where the flow followed the reference's mover into it (the
+    sources that never fill there) is in the recording, over that source's image, as
+    the fill computed it; a source where nothing was followed has none."""
+    res, path = method_run["res"], method_run["path"]
+    sel = res.selection
+    got = vi.read_selection(path)
+    rec = got.get("followed", {})
+    names = list(got["reasons"])  # the sources' entity names, in order
+    assert sel.followed.shape == (len(names),) + res.dynamic.shape
+    if method_run["kind"] == "real":  # camel: every source shows its own camel, followed
+        assert len(rec) == len(names)
+    for k, n in enumerate(names):
+        if sel.followed[k].any():
+            np.testing.assert_array_equal(rec[n], sel.followed[k])
+        else:
+            assert n not in rec
+    # a source ruled out there never fills a pixel it was ruled out at
+    from dynremove.refine.select import FOLLOWED
+    assert not ((sel.reasons == FOLLOWED) & (sel.label[None] == np.arange(1, len(names) + 1)[
+        :, None, None]) & ~sel.no_source[None]).any()

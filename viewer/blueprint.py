@@ -96,7 +96,7 @@ def _source_view(p: P.Paths, name: str, s: int) -> rrb.Spatial2DView:
         name=f"{name} (source {s})",
         origin=p(P.source(name, "")),
         contents=[p(P.source(name, leaf)) for leaf in
-                  (P.IMAGE, P.MATCHES, P.CANDIDATES, P.CHOSEN_PATCH)],
+                  (P.IMAGE, P.FOLLOWED_MOVER, P.MATCHES, P.CANDIDATES, P.CHOSEN_PATCH)],
     )
 
 

@@ -504,7 +504,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     """The fill by selection's maps: ``source`` (0 = reference kept, k = source k−1),
     ``explained`` (L kept as static 3-D structure), ``seams``, ``lingering`` (a mover
     that most photos show, found by two or more sources that saw the background),
-    ``inpainted`` (no source free there: OpenCV Telea); absent keys when the run had
+    ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
+    its own frame: where the flow followed the reference's mover into it); absent
+    keys when the run had
     no selection step (or, for ``inpainted``, was recorded before it was logged)."""
     store, p = load_store(path), P.Paths(root)
     out = {}
@@ -527,6 +529,15 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
                     per_source[ent.rsplit("/", 1)[1]] = rows[0][1]
         if per_source:
             out[key] = per_source
+    followed = {}
+    prefix = p(P.SOURCES).strip("/") + "/"
+    for ent in entities:
+        if ent.startswith(prefix) and ent.endswith("/" + P.FOLLOWED_MOVER):
+            rows = _image_rows(store, "/" + ent, "SegmentationImage", index=None)
+            if rows:
+                followed[ent[len(prefix):].rsplit("/", 1)[0]] = rows[0][1].astype(bool)
+    if followed:
+        out["followed"] = followed
     rows = _image_rows(store, p(P.RESULT_STATIC_NEED), "SegmentationImage", index=None)
     if rows:
         out["static_need"] = rows[0][1]
@@ -656,6 +667,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
         elif k == "line_de":  # per source: the best ΔE on its epipolar line
             sel[k] = {n: float(a[y, x]) / P.DE_SCALE for n, a in v.items()
                       if int(a[y, x]) != P.DE_NONE}
+        elif k == "followed":  # in the sources' frames: told at (x, y) by the reasons
+            continue
         elif k == "ref_mover_p":
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.P_SCALE
         elif k == "thresholds":

@@ -31,6 +31,9 @@ Layout::
                              sampled static ones and dynamic ones at x, y % 4 == 0)
     sources/<name>/chosen_patch  Boxes2D of q* in that source (same steps)
     sources/<name>/chunk_matches  correspondences updated in the previous chunk (dim)
+    sources/<name>/followed_mover  static: where the flow followed the reference's
+                             mover into this source (fill by selection: such a
+                             source never fills there)
     scan_maps/*              per scan, at its last step, lossless: M (uint16, M·10⁴,
                              65535 = undecided), verdict, chosen_source,
                              overwritten_before, first_overwritten (derived from the
@@ -90,6 +93,7 @@ CANDIDATES = "candidates"
 CHOSEN_PATCH = "chosen_patch"
 MATCHES = "chunk_matches"
 SIMILARITY = "similarity"
+FOLLOWED_MOVER = "followed_mover"
 
 # -- the rest ------------------------------------------------------------------
 COVERAGE = "coverage"

@@ -440,6 +440,12 @@ class RerunSink(StepColumns):
                  ).astype(np.uint8)), static=True)
             for k, mv in enumerate(np.asarray(sel.movers, bool)):
                 name = src_names[k] if k < len(src_names) else f"source{k}"
+                if getattr(sel, "followed", None) is not None and sel.followed[k].any():
+                    self.rec.log(self.p(P.source(name, P.FOLLOWED_MOVER)),
+                                 rr.AnnotationContext([(1, "the reference's mover, followed "
+                                                       "here by the flow", (250, 110, 40, 110))]),
+                                 rr.SegmentationImage(sel.followed[k].astype(np.uint8)),
+                                 static=True)
                 self.rec.log(self.p(f"{P.RESULT_MOVERS}/{name}"),
                              rr.SegmentationImage(mv.astype(np.uint8)), static=True)
                 if getattr(sel, "reasons", None) is not None:

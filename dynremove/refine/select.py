@@ -124,6 +124,9 @@ class Selection:
     line_de: npt.NDArray[np.float32] | None = None
     static_need: npt.NDArray[np.uint8] | None = None
     ref_mover_p: npt.NDArray[np.float32] | None = None
+    # (S, H, W) bool, in each *source's* own frame: where the flow followed the
+    # reference's movers into it (``_followed_mover``; all False where it did not)
+    followed: npt.NDArray[np.bool_] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen",
@@ -933,7 +936,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons,
                      lingering=lingering, static_evidence=evidence, line_de=line_de,
                      static_need=np.where(mask, np.minimum(need, 255), 0).astype(np.uint8),
-                     ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32))
+                     ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
+                     followed=np.stack([np.zeros((H, W), bool) if f is None else f
+                                        for f in followed]))
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "REASONS", "STILL_LINGERING", "Selection",
