@@ -364,6 +364,9 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     else:
         why_not = ""
     replaced = bool(h.get("final_dynamic")) and sel.get("source", 0) > 0
+    if passed and p is not None and p >= 0.5:  # (only a flat set keeps such a pixel)
+        evidence += (f"; the reference's colour is the movers' (P {p:.2f} ≥ 0.5), but in a "
+                     "flat set two or more such matches count whatever the colour")
     if passed and not replaced:
         return "static 3-D structure test: kept as static: " + evidence
     if passed:

@@ -744,7 +744,18 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # match): it counts where at least two sources, and half of them, agree
         line_found = searched & ((matched | searched).sum(0) >= np.maximum(2, need))[None]
         votes = np.maximum(votes, line_found.astype(np.float32))
-    explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5) & ~minority
+    explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5)
+    if mode == "scan":
+        # where the set is flat, a flow match within the homography's few pixels of
+        # parallax, on its epipolar line, in the reference's colour, is static
+        # evidence by itself where at least two sources (and ``need``) show it: the
+        # movers' colour model, learned from L, learns the colours of L's false
+        # positives as well (where the set is 3-D the bound is wide, tens of pixels,
+        # and a slow mover's flow stays within it: there the model must agree)
+        alone = mask & (matched.sum(0) >= np.maximum(need, 2))
+        explained |= alone
+        flow_vote |= matched & alone[None]  # they count (``evidence``), whatever the colour
+    explained &= ~minority
     # why each source did or did not count towards ``explained`` (for inspect)
     evidence = np.where(np.broadcast_to(mask, (S, H, W)), EV_NOT_FOUND, 0).astype(np.uint8)
     evidence[mask[None] & searched & ~line_found] = EV_LINE_ALONE
