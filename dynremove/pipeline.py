@@ -31,8 +31,8 @@ from dynremove.refine.duplicates import agreement_with_reference, duplicate_sour
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
-from dynremove.refine.select import (FOLLOWED, OUTSIDE, STILL_LINGERING, Selection, median_parallax_px,
-                                     select_fill)
+from dynremove.refine.select import (FOLLOWED, OUTSIDE, OWN_MOVER, STILL_LINGERING, Selection,
+                                     median_parallax_px, select_fill)
 from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
@@ -461,7 +461,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             n_fw = 0
             if selection.reasons is not None:
                 r = selection.reasons[:, ns]
-                n_fw = int(((r == FOLLOWED).any(0) & np.isin(r, (FOLLOWED, OUTSIDE, 3)).all(0)).sum())
+                n_fw = int(((r == FOLLOWED).any(0) & np.isin(r, (FOLLOWED, OUTSIDE, OWN_MOVER)).all(0)).sum())
             why = (f", {n_fw} px of them because every photo shows its own copy of the mover there "
                    "(it moved less than its size)" if n_fw >= 0.5 * n_ns else "")
             msgs.append(f"{n_ns} px ({'under 0.1' if share < 0.1 else f'{share:.1f}'} % of "

@@ -137,7 +137,8 @@ REASONS = {0: "not considered", 1: "chosen",
            7: "still shows the mover that lingered here",
            8: "shows the reference's mover, moved here (the flow followed it)"}
 OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
-FOLLOWED = 8  # the code of a source showing the reference's mover where the flow took it
+OWN_MOVER, FOLLOWED = 3, 8  # the codes of a source showing a mover of its own: by colour,
+# or the reference's mover where the flow followed it
 
 # Inside L, whether each source shows the reference's content as static (a pixel of
 # L is kept as static 3-D structure where enough of them do: ``Selection.explained``)
@@ -910,7 +911,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
     why = np.where(d_cons < tau, 6, 5).astype(np.uint8)
     why[members[:, y0:y1, x0:x1]] = 2
-    why[mv] = 3
+    why[mv] = OWN_MOVER
     why[own] = FOLLOWED
     why[copies] = STILL_LINGERING
     why[~usable[1:]] = OUTSIDE
@@ -952,5 +953,5 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                                         for f in followed]))
 
 
-__all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "REASONS", "STILL_LINGERING", "Selection",
-           "median_parallax_px", "member_median", "min_witnesses", "select_fill"]
+__all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
+           "Selection", "median_parallax_px", "member_median", "min_witnesses", "select_fill"]
