@@ -517,27 +517,24 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
         if rows:
             out[key] = rows[0][1]
     entities = sorted(str(e).strip("/") for e in store.schema().entity_paths())
-    for key, rel, arch in (("reasons", P.RESULT_REASONS, "SegmentationImage"),
-                           ("evidence", P.RESULT_EVIDENCE, "SegmentationImage"),
-                           ("line_de", P.RESULT_LINE_DE, "DepthImage")):
+    # per source: <rel>/<source>, or sources/<source>/<leaf>
+    for key, head, tail, arch in (
+            ("reasons", p(P.RESULT_REASONS), "", "SegmentationImage"),
+            ("evidence", p(P.RESULT_EVIDENCE), "", "SegmentationImage"),
+            ("line_de", p(P.RESULT_LINE_DE), "", "DepthImage"),
+            ("followed", p(P.SOURCES), "/" + P.FOLLOWED_MOVER, "SegmentationImage")):
         per_source = {}
-        prefix = p(rel).strip("/") + "/"
+        prefix = head.strip("/") + "/"
         for ent in entities:
-            if ent.startswith(prefix):
+            name = ent[len(prefix):len(ent) - len(tail)]
+            if ent.startswith(prefix) and ent.endswith(tail) and name and "/" not in name:
                 rows = _image_rows(store, "/" + ent, arch, index=None)
                 if rows:
-                    per_source[ent.rsplit("/", 1)[1]] = rows[0][1]
+                    per_source[name] = rows[0][1]
         if per_source:
             out[key] = per_source
-    followed = {}
-    prefix = p(P.SOURCES).strip("/") + "/"
-    for ent in entities:
-        if ent.startswith(prefix) and ent.endswith("/" + P.FOLLOWED_MOVER):
-            rows = _image_rows(store, "/" + ent, "SegmentationImage", index=None)
-            if rows:
-                followed[ent[len(prefix):].rsplit("/", 1)[0]] = rows[0][1].astype(bool)
-    if followed:
-        out["followed"] = followed
+    if "followed" in out:
+        out["followed"] = {n: a.astype(bool) for n, a in out["followed"].items()}
     rows = _image_rows(store, p(P.RESULT_STATIC_NEED), "SegmentationImage", index=None)
     if rows:
         out["static_need"] = rows[0][1]

@@ -817,9 +817,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     own = np.zeros((S,) + reg.shape, bool)
     for k in range(S):
         if followed[k] is not None:
-            fx = np.clip(np.rint(fields[k][roi][..., 0]).astype(np.int64), 0, W - 1)
-            fy = np.clip(np.rint(fields[k][roi][..., 1]).astype(np.int64), 0, H - 1)
-            own[k] = followed[k][fy, fx] & usable[k + 1] & in_mask
+            own[k] = _valid_at(followed[k], fields[k][roi]) & usable[k + 1] & in_mask
     weight[1:][own] = 0.0
     weight[1:][copies] = 0.0
     agree = (dist < tau) & usable[:, None] & usable[None]
