@@ -96,7 +96,7 @@ class Params:
     fuse_margin_px: int = 2  # the fused region is L dilated by this
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
     fuse_realign: int = 2  # passes re-measuring the matches from the cleaned reference (paper preset 0)
-    fuse_realign_max_px: float = 8.0  # a re-measured match may move at most this far
+    fuse_realign_max_px: float = 32.0  # a re-measured match may move at most this far (px)
     near_copy_agree: float = 0.99  # drop sources agreeing with the reference on this share of pixels (0 = off)
     fill: str = "select"  # "select": one free source per region (refine.select); "median": of all
     select_tau: float = 10.0  # CIE76 ΔE under which two candidates agree

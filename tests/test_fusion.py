@@ -148,3 +148,33 @@ def test_veto_agreed_drops_static_growth_and_keeps_the_object(scene):
     assert not (regrown & ~gt).any()
     # nothing added: nothing to veto
     np.testing.assert_array_equal(mask.veto_agreed(ref, sources, Nf, gt, gt, params), gt)
+
+
+def test_the_median_fill_leaves_out_the_samples_it_is_told_show_a_mover():
+    """``median_fill(exclude=…)``: the re-alignment's target (``select_fill``) must
+    not take in a source's copy of a lingering mover. Three sources, identity
+    fields: two show gray backgrounds (60, 90), one a red mover. Unmasked, the
+    per-channel median takes the red in; with the mover's source excluded it is
+    the two grays' mean; with all three excluded, the reference stays."""
+    H, W = 20, 30
+    ref = np.full((H, W, 3), 200, np.uint8)
+    srcs = np.stack([np.full((H, W, 3), 60, np.uint8), np.full((H, W, 3), 90, np.uint8),
+                     np.full((H, W, 3), (0, 0, 255), np.uint8)])
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    flds = [np.stack([xs, ys], -1)] * 3
+    region = np.zeros((H, W), bool)
+    region[5:15, 5:25] = True
+    plain, n = fill.median_fill(ref, srcs, flds, region)
+    # per channel: median(60, 90, 0), median(60, 90, 0), median(60, 90, 255)
+    assert (plain[region] == (60, 60, 90)).all() and (n[region] == 3).all()
+    exclude = np.zeros((3, H, W), bool)
+    exclude[2, 5:15, 5:15] = True  # the mover's source, over the left half
+    out, n = fill.median_fill(ref, srcs, flds, region, exclude=exclude)
+    left, right = region.copy(), region.copy()
+    left[:, 15:], right[:, :15] = False, False
+    assert (out[left] == 75).all() and (n[left] == 2).all()  # (60 + 90) / 2, no red
+    assert (out[right] == (60, 60, 90)).all()
+    exclude[:, 5:15, 5:10] = True  # nobody may fill: the reference is kept
+    out, n = fill.median_fill(ref, srcs, flds, region, exclude=exclude)
+    assert (out[5:15, 5:10] == 200).all() and (n[5:15, 5:10] == 0).all()
+    np.testing.assert_array_equal(out[~region], ref[~region])

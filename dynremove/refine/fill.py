@@ -77,12 +77,15 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
 
 def median_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
                 fields: list[npt.NDArray[np.float32]], region: npt.NDArray[np.bool_], *,
-                combine: str = "median"
+                combine: str = "median", exclude: npt.NDArray[np.bool_] | None = None
                 ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8]]:
     """``reference`` with ``region`` replaced by the median (or medoid) of the sources.
 
     ``fields``: per source, (H, W, 2) float32 matches reference → source.
-    Returns the image and, per pixel, how many sources were inside their frame.
+    ``exclude``: (S, H, W) bool, optional: where a source's sample must not count
+    (it shows a mover); a pixel that no source may fill keeps the reference.
+    Returns the image and, per pixel, how many sources were inside their frame
+    (and not excluded).
     """
     n_valid = np.zeros(region.shape, np.uint8)
     ys, xs = np.nonzero(region)
@@ -92,6 +95,8 @@ def median_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         warped, inside = sample_bilinear(sources[s], fields[s])
         samples[s] = warped[ys, xs]
         ok[s] = inside[ys, xs]
+        if exclude is not None:
+            ok[s] &= ~exclude[s, ys, xs]
     n_valid[ys, xs] = ok.sum(0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN where no source is valid

@@ -29,7 +29,10 @@ that the scan flagged with doubled content.
    re-interpolated across the rest of L (``fields.background_field``); where
    the set has parallax, found instead by a plane + parallax sweep for the
    depth at which the sources agree (``parallax.sweep_fields``); then
-   re-aligned by flow from the filled reference (``fill.realign_fields``).
+   re-aligned by flow from the filled reference (``fill.realign_fields``; up
+   to ``fuse_realign_max_px``), filled for that with the sources' median
+   where none shows a mover (a lingering mover's copies, a mover the flow
+   followed into a source).
 3. **Consensus with independent, weighted witnesses.** A colour model of the
    movers (histogram of L against a ring around it, as GrabCut's) gives each
    candidate a mover probability; a witness counts ``1 - p``, so a source
@@ -778,7 +781,16 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                                      hole, fields)
     if P.fuse_realign > 0 and core.any():
         for _ in range(P.fuse_realign):
-            first, _ = median_fill(reference, sources, fields, dilate_disc(core, 2))
+            # the target of the re-measured matches: the sources' median where none
+            # shows a mover (a lingering mover's copies, a mover the flow followed);
+            # with them in it, a flow that may move 32 px pulled the witnesses'
+            # matches onto the copies
+            shows = minority[None] & ~wit_map
+            for k in range(S):
+                if followed[k] is not None:
+                    shows[k] |= _valid_at(followed[k], fields[k])
+            first, _ = median_fill(reference, sources, fields, dilate_disc(core, 2),
+                                   exclude=shows)
             fields = realign_fields(first, src_gray, fields, hole, [v.H for v in views],
                                     P.flow_preset, P.fuse_realign_max_px)
 
