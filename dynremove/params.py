@@ -111,6 +111,7 @@ class Params:
     select_grow_alone: bool = True  # L also grows where no source agrees with the reference (at least two see it, even if they disagree among themselves) and the reference shows the colours of L's movers
     select_parallax_px: float = 8.0  # the set's median measured parallax (analysis px) above which it is treated as 3-D: colour consensus may keep the reference in L, the epipolar search and --snap-veto run
     select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px) is under this (0 = off)
+    select_search_support_de: float = 5.0  # the epipolar search's window weighs its cells by their colour's likeness to the centre's, exp(-dE / this) in CIE76 dE (adaptive support weights, Yoon & Kweon 2006), so that a thin structure is compared, not the background around it (0 = a plain box)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)
     select_track_movers: bool = True  # where the set is flat (see --select-parallax-px), a source shows the reference's mover where the flow followed it (30 % of a region of L found in its colour, off its epipolar line): that source never fills there
     select_sweep: bool = False  # in a 3-D set (see --select-parallax-px), matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
@@ -155,7 +156,8 @@ class Params:
         if self.select_minority != 0 and not self.select_minority >= 1:
             raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
-                     "select_parallax_px", "select_margin_px", "select_search_de"):
+                     "select_parallax_px", "select_margin_px", "select_search_de",
+                     "select_search_support_de"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.fuse_combine not in ("median", "medoid"):

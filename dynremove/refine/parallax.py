@@ -305,7 +305,8 @@ def sweep_fields(src_labs: list[np.ndarray], views: list[TwoView], model: Parall
 def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np.ndarray,
                     visible: np.ndarray, region: np.ndarray, *, scale: float = 0.5,
                     box: int = 5, step_px: float = 1.0, line_px: float = 1.5,
-                    max_steps: int = 256) -> tuple[np.ndarray, np.ndarray]:
+                    max_steps: int = 256, support_de: float = 0.0
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """Best colour match of each ``region`` pixel along its epipolar line in one source.
 
     A static reference point lies, in the source, on its epipolar line at
@@ -318,6 +319,13 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     image; only the region's cells are sampled). This is a plane sweep in one
     source (Collins, CVPR 1996), without the cross-source γ of ``sweep_fields``,
     so it needs no parallax model.
+
+    With ``support_de`` > 0 the window's cells are weighted by their colour's
+    likeness to the centre cell's in the reference, exp(−ΔE / ``support_de``)
+    (adaptive support weights: Yoon & Kweon, *Adaptive support-weight approach
+    for correspondence search*, PAMI 2006): a window on a thin structure (a
+    bollard, a chimney against the sky) then compares that structure, not the
+    background around it, whose parallax differs.
 
     lab_r, lab_s : (H, W, 3) float32 Lab; view : TwoView with F; field : (H, W, 2)
     float32 flow matches; visible, region : (H, W) bool.
@@ -379,6 +387,10 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     bh, bw = by1 - by0, bx1 - bx0
     py_b, px_b, qy_b, qx_b = py - by0, px - bx0, qy - by0, qx - bx0
     buf = np.full((bh, bw, chunk), _CAP, np.float32)
+    weights = None
+    if support_de > 0:
+        weights = _support_weights(lab_r, (ww, hh), (by0, by1, bx0, bx1), qy_b, qx_b, box,
+                                   support_de)
     for i0 in range(0, n_steps, chunk):
         gs = steps[i0:i0 + chunk]
         k = len(gs)
@@ -388,7 +400,10 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
         inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
         d = np.minimum(delta_e(smp, ref_c), _CAP)
         buf[py_b, px_b, :k] = np.where(inside, d, _CAP).T
-        bf = cv2.boxFilter(buf[..., :k], -1, (box, box)).reshape(bh, bw, k)[qy_b, qx_b]
+        if weights is None:
+            bf = cv2.boxFilter(buf[..., :k], -1, (box, box)).reshape(bh, bw, k)[qy_b, qx_b]
+        else:
+            bf = _weighted_window(buf[..., :k], qy_b, qx_b, weights, box)
         j = np.argmin(bf, axis=1)  # the first of equal costs, as a sequential sweep
         c = bf[np.arange(len(qy)), j]
         better = c < c_best
@@ -403,6 +418,44 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     cost[region] = cu[region]
     best_mu[region] = mu_u[region]
     return cost, best_mu
+
+
+def _support_weights(lab_r: np.ndarray, size: tuple[int, int],
+                     bounds: tuple[int, int, int, int], qy: np.ndarray, qx: np.ndarray,
+                     box: int, support_de: float) -> np.ndarray:
+    """Adaptive support weights of ``epipolar_search``'s windows (Yoon & Kweon, 2006).
+
+    lab_r (H, W, 3) float32 Lab is resized (area) to the coarse grid ``size``
+    = (ww, hh) and cropped to ``bounds`` = (y0, y1, x0, x1); qy, qx (n,) are the
+    query cells in that crop. Returns (n, box²) float32: exp(−ΔE / support_de)
+    between each query cell and each cell of its box × box window (row-major
+    offsets), 0 for window cells outside the crop, normalised to sum 1.
+    """
+    y0, y1, x0, x1 = bounds
+    ref = cv2.resize(lab_r, size, interpolation=cv2.INTER_AREA)[y0:y1, x0:x1]
+    r = box // 2
+    pad = np.pad(ref, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
+    centre = ref[qy, qx]
+    w = np.empty((len(qy), box * box), np.float32)
+    for i, (dy, dx) in enumerate((dy, dx) for dy in range(box) for dx in range(box)):
+        d = delta_e(pad[qy + dy, qx + dx], centre)
+        w[:, i] = np.where(np.isfinite(d), np.exp(-d / support_de), 0.0)
+    return w / np.maximum(w.sum(1, keepdims=True), 1e-12)
+
+
+def _weighted_window(buf: np.ndarray, qy: np.ndarray, qx: np.ndarray, weights: np.ndarray,
+                     box: int) -> np.ndarray:
+    """Σ over the box × box window of ``weights`` · ``buf`` at the query cells.
+
+    buf (h, w, k) float32 costs; qy, qx (n,) cells; weights (n, box²) from
+    ``_support_weights``. Window cells outside ``buf`` have weight 0. Returns (n, k).
+    """
+    r = box // 2
+    pad = np.pad(buf, ((r, r), (r, r), (0, 0)), constant_values=_CAP)
+    out = np.zeros((len(qy), buf.shape[2]), np.float32)
+    for i, (dy, dx) in enumerate((dy, dx) for dy in range(box) for dx in range(box)):
+        out += weights[:, i, None] * pad[qy + dy, qx + dx]
+    return out
 
 
 __all__ = ["ParallaxModel", "epipolar_search", "epipole", "fit_parallax", "project", "sgm",

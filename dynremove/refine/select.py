@@ -18,7 +18,8 @@ that the scan flagged with doubled content.
    follow: near the border, the sources that do not reach a pixel do not vote.
    Where the set has parallax, a pixel whose flow match failed (thin
    structure against the sky, far off the plane) may instead be found by a
-   search along its epipolar line (``parallax.epipolar_search``); that weaker
+   search along its epipolar line (``parallax.epipolar_search``, its window
+   weighted by colour likeness to the centre: ``select_search_support_de``); that weaker
    evidence counts where at least two sources, and half of them, explain it.
    **A mover that lingered** (``_minority_witnesses``, ``select_minority``):
    where the reference and most sources show an object and two or more
@@ -679,7 +680,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
             lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
-            cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok)
+            cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok,
+                                      support_de=P.select_search_support_de)
             searched[k] = cost < P.select_search_de
             line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
         matched[k] = ok
