@@ -443,18 +443,28 @@ def _support_weights(lab_r: np.ndarray, size: tuple[int, int],
     return w / np.maximum(w.sum(1, keepdims=True), 1e-12)
 
 
+@numba.njit(cache=True, nogil=True, parallel=True)
 def _weighted_window(buf: np.ndarray, qy: np.ndarray, qx: np.ndarray, weights: np.ndarray,
                      box: int) -> np.ndarray:
     """Σ over the box × box window of ``weights`` · ``buf`` at the query cells.
 
-    buf (h, w, k) float32 costs; qy, qx (n,) cells; weights (n, box²) from
-    ``_support_weights``. Window cells outside ``buf`` have weight 0. Returns (n, k).
+    buf (h, w, k) float32 costs; qy, qx (n,) int cells; weights (n, box²) float32
+    from ``_support_weights``. Window cells outside ``buf`` have weight 0 and are
+    skipped. Returns (n, k) float32, summed over the offsets in row-major order.
     """
+    h, w, k = buf.shape
     r = box // 2
-    pad = np.pad(buf, ((r, r), (r, r), (0, 0)), constant_values=_CAP)
-    out = np.zeros((len(qy), buf.shape[2]), np.float32)
-    for i, (dy, dx) in enumerate((dy, dx) for dy in range(box) for dx in range(box)):
-        out += weights[:, i, None] * pad[qy + dy, qx + dx]
+    n = len(qy)
+    out = np.zeros((n, k), np.float32)
+    for q in numba.prange(n):
+        for i in range(box * box):
+            y = qy[q] + i // box - r
+            x = qx[q] + i % box - r
+            if y < 0 or y >= h or x < 0 or x >= w:
+                continue
+            wq = weights[q, i]
+            for j in range(k):
+                out[q, j] += wq * buf[y, x, j]
     return out
 
 
