@@ -369,7 +369,8 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     qy, qx = np.nonzero(rc)
     CX = (px + 0.5) * Ww / ww - 0.5
     CY = (py + 0.5) * Hh / hh - 0.5
-    ref_c = cv2.resize(lab_r, (ww, hh), interpolation=cv2.INTER_AREA)[py, px]
+    ref_coarse = cv2.resize(lab_r, (ww, hh), interpolation=cv2.INTER_AREA)
+    ref_c = ref_coarse[py, px]
     ry, rx = np.nonzero(region)
     pa = project(view.H, e, np.array([lo, hi]), np.array([rx.mean()]), np.array([ry.mean()]))
     span_px = float(np.hypot(pa[0][1] - pa[0][0], pa[1][1] - pa[1][0]))
@@ -389,8 +390,7 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     buf = np.full((bh, bw, chunk), _CAP, np.float32)
     weights = None
     if support_de > 0:
-        weights = _support_weights(lab_r, (ww, hh), (by0, by1, bx0, bx1), qy_b, qx_b, box,
-                                   support_de)
+        weights = _support_weights(ref_coarse[by0:by1, bx0:bx1], qy_b, qx_b, box, support_de)
     for i0 in range(0, n_steps, chunk):
         gs = steps[i0:i0 + chunk]
         k = len(gs)
@@ -420,19 +420,16 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     return cost, best_mu
 
 
-def _support_weights(lab_r: np.ndarray, size: tuple[int, int],
-                     bounds: tuple[int, int, int, int], qy: np.ndarray, qx: np.ndarray,
-                     box: int, support_de: float) -> np.ndarray:
+def _support_weights(ref: np.ndarray, qy: np.ndarray, qx: np.ndarray, box: int,
+                     support_de: float) -> np.ndarray:
     """Adaptive support weights of ``epipolar_search``'s windows (Yoon & Kweon, 2006).
 
-    lab_r (H, W, 3) float32 Lab is resized (area) to the coarse grid ``size``
-    = (ww, hh) and cropped to ``bounds`` = (y0, y1, x0, x1); qy, qx (n,) are the
-    query cells in that crop. Returns (n, box²) float32: exp(−ΔE / support_de)
-    between each query cell and each cell of its box × box window (row-major
-    offsets), 0 for window cells outside the crop, normalised to sum 1.
+    ref (h, w, 3) float32: the reference's Lab on the search's coarse grid, cropped
+    to the box of the sampled cells; qy, qx (n,) are the query cells in that crop.
+    Returns (n, box²) float32: exp(−ΔE / support_de) between each query cell and
+    each cell of its box × box window (row-major offsets), 0 for window cells
+    outside the crop, normalised to sum 1.
     """
-    y0, y1, x0, x1 = bounds
-    ref = cv2.resize(lab_r, size, interpolation=cv2.INTER_AREA)[y0:y1, x0:x1]
     r = box // 2
     pad = np.pad(ref, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
     centre = ref[qy, qx]
