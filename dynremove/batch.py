@@ -94,16 +94,33 @@ def at_output_size(res: Any, iset: Any, output_size: str = "full") -> Any:
     return dataclasses.replace(res, clean=clean, dynamic=dyn, coverage=cov, timings=timings)
 
 
+def own_peak_rss_mb() -> float:
+    """This process's peak resident set size (MiB) since it started its program.
+
+    Linux: ``VmHWM`` of /proc/self/status, the high-water mark of the process's
+    own address space. ``getrusage``'s ru_maxrss (the fallback elsewhere, KiB on
+    Linux, bytes on macOS) is not that for a process started from a large one
+    (a ``bench`` or a notebook): the kernel carries the parent's high-water mark
+    over the fork and exec into it, so a run started from a process of 4 GB
+    would report 4 GB.
+    """
+    try:
+        with open("/proc/self/status") as f:
+            return next(int(line.split()[1]) for line in f if line.startswith("VmHWM:")) / 1024
+    except (OSError, StopIteration, ValueError):
+        import resource
+
+        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+        return rss / 2 ** 20 if sys.platform == "darwin" else rss / 1024
+
+
 def _throughput(res: Any, iset: Any) -> dict:
     """Scan speed (reference pixels visited per second, all scans) and peak memory."""
-    import resource
-
     h, w = iset.images[0].shape[:2]
     n_scans = max(1, len(res.scans))
     t_scan = float(res.timings.get("scans", 0.0))
-    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
     return {"scan_mpx_per_s": round(h * w * n_scans / t_scan / 1e6, 3) if t_scan > 0 else None,
-            "working_mpx": round(h * w / 1e6, 3), "peak_rss_mb": round(rss, 1)}
+            "working_mpx": round(h * w / 1e6, 3), "peak_rss_mb": round(own_peak_rss_mb(), 1)}
 
 
 def _scene_entry(res) -> dict:

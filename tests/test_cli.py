@@ -95,6 +95,28 @@ def test_method_flags_are_listed_by_run_only(capsys, cmd):
     assert args.p_select_tau == 7.5 and args.p_snap is False
 
 
+@pytest.mark.parametrize("name", ["default", "paper"])
+def test_bench_passes_its_parameters_to_the_run_it_times(name):
+    """``bench --max-side`` times ``dynremove run`` in its own process with the
+    bench's parameters: ``param_argv`` gives the flags that the run's parser turns
+    back into the same Params (a bool either way, an int, a float, a choice)."""
+    import dataclasses
+
+    from dynremove.cli import build_parser
+    from dynremove.commands import params_from_args
+    from dynremove.evaluation.bench import param_argv
+    from dynremove.params import preset
+
+    base = preset(name)
+    changed = dataclasses.replace(base, snap=not base.snap, patch_size=base.patch_size + 2,
+                                  select_tau=base.select_tau + 0.1,
+                                  flow_preset="fast" if base.flow_preset != "fast" else "medium")
+    for p in (base, changed):
+        argv = param_argv(p, name)
+        assert params_from_args(build_parser().parse_args(["run", "x", *argv])) == p, argv
+    assert param_argv(base, name) == ["--preset", name]
+
+
 # --- the reference: named at the start, 0-based, negative from the end ----------------
 @pytest.mark.parametrize("ref, line", [
     (None, "reference: view2.png (index 2 of 0..3, the later of the two middle images "

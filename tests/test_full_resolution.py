@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
+
 import cv2
 import numpy as np
 import pytest
@@ -106,6 +111,34 @@ def test_bench_times_the_large_photo_path_not_a_full_size_analysis():
     # the scan's rate is over the analysed pixels
     s = out["scans"][0]
     assert s["px_per_s"] == pytest.approx(160 * 120 / s["seconds"], rel=1e-6)
+    # and ``dynremove run`` itself, in its own process: the peak RSS is that
+    # process's alone (the bench's synthetic scene held in memory is not counted)
+    u = out["user_run"]
+    assert u["clean_size"] == [320, 240] and u["seconds"] > 0 and u["analysis_s"] > 0
+    # ru_maxrss is in KiB on Linux: a process that imported NumPy, OpenCV and numba
+    # holds over 50 MiB, and a 320x240 run far less than 4 GiB
+    assert 50 < u["peak_rss_mb"] < 4096
+    assert u["command"].startswith("dynremove run <views> --ref ")
+    assert "--max-side 160" in u["command"]
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/status"),
+                    reason="the process's own peak (VmHWM) is read from Linux's /proc")
+def test_report_peak_rss_is_the_runs_own_not_its_parents(tmp_path):
+    """report.json's peak RSS is the run's own, also when a large process starts it
+    (``bench``, a notebook): getrusage's ru_maxrss carries the parent's peak over
+    the fork and exec into the child, and a 12 MP run started by the bench reported
+    the bench's 4062 MiB for its own 2711."""
+    sc = synth.make_scene(seed=0, n_views=3, size=(120, 160))
+    _write_photos(tmp_path / "set", sc.images)
+    big = np.ones(768 * 2 ** 20, np.uint8)  # 768 MiB resident in this (the parent) process
+    out = tmp_path / "out"
+    subprocess.run([sys.executable, "-m", "dynremove", "run", str(tmp_path / "set"),
+                    "--out", str(out), "--quiet"], check=True)
+    peak = json.loads((out / "report.json").read_text())["throughput"]["peak_rss_mb"]
+    assert big[-1] == 1
+    # the run alone: its libraries and a 160x120 set hold a few hundred MiB
+    assert 50 < peak < 600, peak
 
 
 def test_full_resolution_equals_the_dense_computation():
