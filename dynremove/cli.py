@@ -112,10 +112,11 @@ def parse_max_side(s: str) -> int | None:
     try:
         v = int(t)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--max-side {s}: expected pixels, 0, 'none' or "
+        # (argparse names the flag: "argument --max-side: ...")
+        raise argparse.ArgumentTypeError(f"{s!r}: expected pixels, 0, 'none' or "
                                          "'auto'") from None
     if v < 0:
-        raise argparse.ArgumentTypeError(f"--max-side {v}: must be 0 (keep the full size) "
+        raise argparse.ArgumentTypeError(f"{v}: must be 0 (keep the full size) "
                                          "or a size in pixels")
     return v
 

@@ -310,8 +310,8 @@ def _check_memory(args: argparse.Namespace, iset: io.ImageSet) -> None:
 def reference_note(ref_arg: str | None, ref: int, info: dict, names: list[str]) -> str:
     """One line naming the reference and how it was chosen (middle, given, auto)."""
     middle = ("the middle image" if len(names) % 2 else
-              f"the later of the two middle images (--ref {ref - 1} for the other)"
-              if len(names) > 2 else "the second (--ref 0 for the first)")
+              f"the later of the two middle images; --ref {ref - 1} for the other"
+              if len(names) > 2 else "the second; --ref 0 for the first")
     how = {"middle": middle, "auto": "chosen by --ref auto"}.get(
         info.get("chosen_by", ""), f"given by --ref {ref_arg}")
     return f"reference: {names[ref]} (index {ref} of 0..{len(names) - 1}, {how})"

@@ -298,8 +298,10 @@ def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
             unique.append(q)
     paths = unique
     if len(paths) < at_least:
+        # (a folder: the images found in it; files given one by one: those files)
+        where = " in " if any(Path(a).is_dir() for a in args) else ": "
         raise InputError(f"need at least 2 images, found {len(paths)}"
-                         + (f" in {', '.join(str(a) for a in args)}" if args else "")
+                         + (f"{where}{', '.join(str(a) for a in args)}" if args else "")
                          + (f" ({'; '.join(notes)})" if notes else "") + _subfolder_hint(args))
     return paths, notes
 

@@ -401,22 +401,22 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     L, M_maps, summaries = run_scans(st, params, sink=sink, probe=probe,
                                      sample_static=sample_static, chunk_rows=chunk_rows,
                                      kernel=kernel, progress=scan_progress)
-    # a stage that does not run (the paper preset's refine and fill) has no line
-    # and no entry in ``timings``
-    clock.stop()
-    # the coverage of the scans' matches (the sources that agree with the reference as
-    # the scans left it: the refinement and the fills do not change ``st``) is the
-    # last reader of the SIFT descriptors f_g: measured now, and f_g (128 bytes per
-    # pixel and photo: 0.8 GB for 5 photos at 1280×960) is released before the
-    # refinement and the fill, whose own arrays then take its place
-    t_cov = time.perf_counter()
+    # the coverage map: the sources whose match agrees with the reference as the scans
+    # left it (the refinement and the fills do not change ``st``; the fill by selection
+    # writes its own pixels into it at the end). It is the last reader of the SIFT
+    # descriptors f_g: measured now, and f_g (128 bytes per pixel and photo: 0.8 GB for
+    # 5 photos at 1280×960) is released before the refinement and the fill, whose own
+    # arrays then take its place
+    clock.start("coverage")
     cov = _coverage(st, params)
     st.fg_r = st.fg_s = None
-    t_cov = time.perf_counter() - t_cov
+    clock.stop()
     stages = {"scan": L}  # the same array as Result.dynamic_raw
     dyn = L.copy()
     clean = st.img
     ref_img = np.asarray(images[ref])
+    # a stage that does not run (the paper preset's refine and fill) has no line
+    # and no entry in ``timings``
     if params.clean_mask or params.refine_tau > 0 or params.snap:
         clock.start("refine")
     # a flat set (the fill's "scan" consensus mode): the clean-up keeps a slow mover's
@@ -455,9 +455,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         valid_ref = np.asarray(valid_masks[ref], bool)
         dyn = stages["valid"] = dyn & valid_ref
         clean = np.where(valid_ref[..., None], clean, ref_img)
-    clock.start("coverage")
-    # the sources whose match agrees with the reference (``cov``, above) and inside
-    # the fill by selection, what it used
+    # inside the fill by selection, the coverage map counts what the fill used (the
+    # fill's stage)
     if selection is not None:
         cov = _selection_coverage(cov, dyn, selection)
         n_ns = int((dyn & selection.no_source).sum())
@@ -505,7 +504,6 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         f"{params.min_region_px} px)" if flagged and params.clean_mask else ""))
         warnings.warn(msgs[-1], stacklevel=2)
     clock.stop()
-    timings["coverage"] += t_cov
     timings["total"] = time.perf_counter() - t_all
     result = Result(
         clean=clean, clean_scan=st.img, dynamic=dyn, dynamic_raw=L, M=M_maps, coverage=cov,

@@ -119,8 +119,8 @@ def test_bench_passes_its_parameters_to_the_run_it_times(name):
 
 # --- the reference: named at the start, 0-based, negative from the end ----------------
 @pytest.mark.parametrize("ref, line", [
-    (None, "reference: view2.png (index 2 of 0..3, the later of the two middle images "
-           "(--ref 1 for the other))"),
+    (None, "reference: view2.png (index 2 of 0..3, the later of the two middle images; "
+           "--ref 1 for the other)"),
     ("0", "reference: view0.png (index 0 of 0..3, given by --ref 0)"),
     ("-1", "reference: view3.png (index 3 of 0..3, given by --ref -1)"),
     ("view1", "reference: view1.png (index 1 of 0..3, given by --ref view1)"),
