@@ -120,6 +120,20 @@ def test_bench_times_the_large_photo_path_not_a_full_size_analysis():
     assert 50 < u["peak_rss_mb"] < 4096
     assert u["command"].startswith("dynremove run <views> --ref ")
     assert "--max-side 160" in u["command"]
+    # the README's speed table is made from such JSON (examples/speed_table.py)
+    import importlib.util
+    import pathlib
+
+    spec = importlib.util.spec_from_file_location(
+        "speed_table", pathlib.Path(__file__).parents[1] / "examples" / "speed_table.py")
+    speed_table = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(speed_table)
+    text = speed_table.table([out, out], ["a", "b"])
+    assert "| stage (s; 3 × 320×240) | a | b |" in text
+    assert f"| **end to end** | **{out['end_to_end_s']:.2f}** | **{out['end_to_end_s']:.2f}** |" \
+        in text
+    assert f"| `dynremove run`, own process: peak RSS, MiB | {u['peak_rss_mb']:.0f} |" in text
+    assert f"| fill by selection | {out['stages_s']['fusion']:.2f} |" in text
 
 
 @pytest.mark.skipif(not os.path.exists("/proc/self/status"),
