@@ -16,6 +16,7 @@ from typing import Callable
 
 import cv2
 import numpy as np
+from PIL import Image
 
 from dynremove import io
 from dynremove.events import EventSink, MemorySink, NullSink
@@ -202,11 +203,10 @@ def param_argv(params: Params, preset_name: str) -> list[str]:
     return argv
 
 
-def _png_size(path: Path) -> list[int]:
-    """[width, height] from a PNG's IHDR chunk (no decoding)."""
-    with open(path, "rb") as f:
-        head = f.read(24)
-    return [int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")]
+def _image_size(path: Path) -> tuple[int, int]:
+    """(width, height) of an image file, from its header (Pillow reads no pixels)."""
+    with Image.open(path) as im:
+        return im.size
 
 
 def user_run(images: list[np.ndarray], ref: int, max_side: int, params: Params,
@@ -241,7 +241,7 @@ def user_run(images: list[np.ndarray], ref: int, max_side: int, params: Params,
                                f"{proc.stderr.decode(errors='replace').strip()}")
         report = json.loads((out / "report.json").read_text())
         return {"seconds": wall, "peak_rss_mb": float(report["throughput"]["peak_rss_mb"]),
-                "clean_size": _png_size(out / "clean.png"),
+                "clean_size": list(_image_size(out / "clean.png")),
                 "analysis_s": float(report["seconds"]["total"]),
                 "command": " ".join(["dynremove run <views>", *args[2:4], *args[6:]])}
 
