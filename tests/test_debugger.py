@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 
 import cv2
@@ -198,6 +199,24 @@ def test_a_lingering_mover_is_logged_and_told(tmp_path):
     words = " ".join(vd.verdict_lines(h))
     assert "a mover that lingered" in words
     assert "still shows the mover that lingered here" in words
+
+
+def test_a_completed_fragment_is_logged_and_told(tmp_path):
+    """Pixels the graph cut kept but whose region of L it replaced almost whole
+    (``--select-complete``): the recording holds them, and inspect says why a source
+    filled them."""
+    sc = synth.make_scene(seed=2, n_views=6, size=(360, 640), n_objects=1)
+    path = tmp_path / "complete.rrd"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = remove_dynamic(sc.images, ref=sc.ref_index, sink=RerunSink(path))
+    sel = vi.read_selection(path)
+    done = sel["completed"].astype(bool)
+    np.testing.assert_array_equal(done, r.selection.completed)
+    assert done.any() and (sel["source"][done] > 0).all()
+    ys, xs = np.nonzero(done)
+    h = vi.pixel_history(path, int(xs[0]), int(ys[0]))
+    assert "--select-complete" in " ".join(vd.verdict_lines(h))
 
 
 def test_pixel_outside_the_image(fabricated, capsys):

@@ -892,3 +892,74 @@ def test_in_a_flat_set_two_matches_keep_a_pixel_whatever_its_colour(davis):
     # the sources that showed it are told as counting (inspect's static 3-D test line)
     counted = (sel.static_evidence[:, kept] == 1).sum(0)
     assert (counted >= 2).all()
+
+
+# ------------------------------------------------------------------ region completion
+def test_complete_regions_replaces_the_kept_fragments_of_a_region_replaced_almost_whole():
+    from dynremove.refine.select import complete_regions
+
+    lab = np.zeros((48, 80), np.int64)
+    core = np.zeros(lab.shape, bool)
+    # region A, 30 × 28 px, taken from label 2 but for a 14 × 14 block inside
+    # (644 of 840 px: 77 % replaced)
+    core[5:35, 2:30] = True
+    lab[5:35, 2:30] = 2
+    lab[13:27, 9:23] = 0
+    # region B, taken from label 1 on its left half only (50 %)
+    core[5:35, 40:60] = True
+    lab[5:35, 40:50] = 1
+    allowed = np.ones((3,) + lab.shape, bool)
+    allowed[2, 13, 9:23] = False  # the top row of A's block may not take label 2
+    before = lab.copy()
+    out = complete_regions(lab, core, allowed, 0.7, 3)
+    np.testing.assert_array_equal(lab, before)  # a copy
+    block = np.zeros(lab.shape, bool)
+    block[13:27, 9:23] = True
+    inner = np.zeros(lab.shape, bool)
+    inner[16:24, 12:20] = True  # more than 3 steps from A's replaced pixels
+    assert (out[block & ~inner & allowed[2]] == 2).all()
+    assert (out[inner] == 0).all()
+    assert (out[13, 9:23] == 0).all()  # not allowed there: left as it was
+    np.testing.assert_array_equal(out[:, 35:], before[:, 35:])  # B: under the share
+    np.testing.assert_array_equal(out[~core], before[~core])
+    np.testing.assert_array_equal(complete_regions(lab, core, allowed, 0.8, 3), before)
+
+
+@pytest.mark.parametrize("share", [0.0, 1.5])
+def test_select_complete_is_a_share(share):
+    if share == 0.0:
+        assert preset("default").replace(select_complete=share).select_complete == 0.0
+    else:
+        with pytest.raises(ValueError, match="select_complete must be in"):
+            preset("default").replace(select_complete=share)
+
+
+def test_completion_removes_the_fragments_of_a_real_mover(davis, tmp_path):
+    """fountain-P11 with DAVIS's goat pasted in, 3 views (the composite of the README's
+    table, seed as there): the graph cut keeps parts of the goat whose colours the
+    movers' model misses; completing its region replaces them, mover pixels almost
+    all. Measured: 2100 px completed, 94 % of them the goat's; leftover 11.3 → 9.7 %
+    of the goat, damage 0.063 → 0.066 % of the photo."""
+    from dynremove.evaluation import composite, whole_photo
+    from dynremove.evaluation.evaluate import find_sets, load_set
+
+    static = davis.parent / "static" / "fountain-P11"
+    if not static.is_dir():
+        pytest.skip(f"{static} not found")
+    composite.make_composite(static, davis, tmp_path / "c", seed=1495516104, n_views=3,
+                             object_sets=find_sets(davis, "goat"))
+    ls = load_set(find_sets(tmp_path)[0])
+    gt = ls.gt > 0
+    runs = {}
+    for share in (0.7, 0.0):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            r = remove_dynamic(ls.images, ref=ls.ref,
+                               params=preset("default").replace(select_complete=share))
+        runs[share] = (r, whole_photo.leftover_percent(r.clean, ls.background, gt, ls.free > 0)[0],
+                       whole_photo.damage_percent(ls.images[ls.ref], r.clean, ls.background, gt))
+    done = runs[0.7][0].selection.completed
+    assert done.sum() >= 500 and (done & gt).sum() >= 0.85 * done.sum()
+    assert not runs[0.0][0].selection.completed.any()
+    assert runs[0.7][1] <= runs[0.0][1] - 1.0  # leftover, % of the goat
+    assert runs[0.7][2] <= runs[0.0][2] + 0.02  # damage, % of the photo

@@ -504,15 +504,17 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     """The fill by selection's maps: ``source`` (0 = reference kept, k = source k−1),
     ``explained`` (L kept as static 3-D structure), ``seams``, ``lingering`` (a mover
     that most photos show, found by two or more sources that saw the background),
-    ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
-    its own frame: where the flow followed the reference's mover into it); absent
+    ``completed`` (kept by the graph cut, replaced because its region of L was
+    replaced almost whole), ``inpainted`` (no source free there: OpenCV Telea),
+    ``followed`` (per source, in its own frame: where the flow followed the
+    reference's mover into it); absent
     keys when the run had no selection step (or, for ``inpainted``, was recorded
     before it was logged)."""
     store, p = load_store(path), P.Paths(root)
     out = {}
     for key, rel in (("source", P.RESULT_SOURCE), ("explained", P.RESULT_EXPLAINED),
                      ("seams", P.RESULT_SEAMS), ("lingering", P.RESULT_LINGERING),
-                     ("inpainted", P.RESULT_INPAINTED)):
+                     ("completed", P.RESULT_COMPLETED), ("inpainted", P.RESULT_INPAINTED)):
         rows = _image_rows(store, p(rel), "SegmentationImage", index=None)
         if rows:
             out[key] = rows[0][1]

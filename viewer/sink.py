@@ -435,6 +435,9 @@ class RerunSink(StepColumns):
             if getattr(sel, "lingering", None) is not None:
                 self.rec.log(self.p(P.RESULT_LINGERING), rr.SegmentationImage(
                     np.asarray(sel.lingering, np.uint8)), static=True)
+            if getattr(sel, "completed", None) is not None:
+                self.rec.log(self.p(P.RESULT_COMPLETED), rr.SegmentationImage(
+                    np.asarray(sel.completed, np.uint8)), static=True)
             self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
                  ).astype(np.uint8)), static=True)

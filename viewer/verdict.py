@@ -253,7 +253,10 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                          "here" + (f" ({others})" if others else ""))
         elif k > 0:
             why = (" — a mover that lingered: the reference and most sources show it, "
-                   "the sources that saw the background filled it" if sel.get("lingering") else "")
+                   "the sources that saw the background filled it" if sel.get("lingering")
+                   else " — the photomontage kept the reference here, but the rest of its "
+                   "region of L was replaced (--select-complete): a piece of the same mover"
+                   if sel.get("completed") else "")
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):

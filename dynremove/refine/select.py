@@ -49,6 +49,9 @@ that the scan flagged with doubled content.
    the sources agree. Where the sets' parallax is large (median
    ``parallax_px`` > ``select_parallax_px``), the consensus may also keep the
    reference inside L: the scan's flags there are mostly 3-D structure.
+   A region of L that the cut replaced almost whole (``select_complete``) is
+   a mover: its fragments kept as the reference are replaced too
+   (``complete_regions``), so that no piece of it stays in the photo.
 5. **Blend** (``montage.offset_blend``): exposure and white-balance
    differences leave no edge. Pixels of L that no source shows free are
    inpainted (OpenCV Telea) and reported.
@@ -119,6 +122,9 @@ class Selection:
     # pixels of a mover that lingered: the reference and most sources show it, two
     # or more sources saw the background (``_minority_witnesses``)
     lingering: npt.NDArray[np.bool_] | None = None
+    # pixels the graph cut kept as the reference, replaced because their region of L
+    # was replaced almost whole (``complete_regions``, ``select_complete``)
+    completed: npt.NDArray[np.bool_] | None = None
     # the static 3-D structure test inside L (``explained``), per source (S, H, W)
     # uint8: EVIDENCE[code] (0 outside L); the best CIE76 ΔE of the reference's
     # content along the source's epipolar line (S, H, W) float32 (NaN where not
@@ -551,6 +557,72 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     return out, members
 
 
+def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
+                     allowed: npt.NDArray[np.bool_], share: float, reach_px: int
+                     ) -> npt.NDArray[np.intp]:
+    """Replace the kept fragments of a region that the graph cut replaced almost whole.
+
+    A connected region of ``core`` (8-connected) of which at least ``share`` of the
+    pixels took a source is a mover. Its pixels that kept the reference are
+    mostly the mover's parts whose colour the movers' model misses (a cup's
+    brown sleeve in front of a wooden desk, a camel's leg in shadow): kept, they
+    stay in the clean photo as fragments of the mover. Each of them within
+    ``reach_px`` of the region's replaced pixels (steps of the 8-neighbourhood,
+    through the kept pixels of the region) takes a neighbouring replaced
+    pixel's source (a 3×3 grey dilation per step, the largest label among the
+    neighbours, as ``morphology.grow_replaced``), where that source is allowed.
+
+    Parameters
+    ----------
+    label : (h, w) int ndarray
+        The graph cut's labels: 0 the reference, k >= 1 source k − 1.
+    core : (h, w) bool ndarray
+        The pixels of L that no static evidence explained (the suspect movers).
+    allowed : (L, h, w) bool ndarray
+        Where each label may be taken (its data cost is not forbidden: the source
+        sees the pixel, shows no mover of its own there).
+    share : float
+        In (0, 1]: the replaced share from which a region counts as replaced.
+    reach_px : int
+        How far, in pixel steps, the replaced pixels' labels spread.
+
+    Returns
+    -------
+    (h, w) int ndarray
+        ``label`` with those pixels relabelled (a copy; ``label`` is not changed).
+
+    Measured on the 12 composites and 19 DAVIS sets (README, session 36):
+    share 0.7, 6 px took the mean leftover from 16.4 to 15.6 % and the whole-image
+    PSNR from 29.20 to 29.29 dB, the damage from 0.45 to 0.48 %, DAVIS J 0.576 →
+    0.584.
+    """
+    out = label.copy()
+    n, comp = cv2.connectedComponents(core.astype(np.uint8), connectivity=8)
+    if n <= 1 or reach_px <= 0:
+        return out
+    rep = out != 0
+    size = np.bincount(comp.ravel(), minlength=n)
+    n_rep = np.bincount(comp.ravel(), weights=(rep & core).ravel(), minlength=n)
+    whole = n_rep >= share * size
+    whole[0] = False  # (not a region of core)
+    todo = whole[comp] & ~rep
+    if not todo.any():
+        return out
+    grown = np.where(rep, out, 0).astype(np.int16)
+    kernel = np.ones((3, 3), np.uint8)
+    for _ in range(int(reach_px)):
+        near = cv2.dilate(grown, kernel)
+        take = todo & (grown == 0) & (near >= 1)
+        if not take.any():
+            break
+        grown[take] = near[take]
+    ys, xs = np.nonzero(todo & (grown >= 1))
+    k = grown[ys, xs].astype(np.intp)
+    ok = allowed[k, ys, xs]
+    out[ys[ok], xs[ok]] = k[ok]
+    return out
+
+
 def median_parallax_px(views: list[TwoView]) -> float:
     """The parallax of the photo set: the median over the sources of
     ``TwoView.parallax_px`` (px; a source without a measure counts 0), 0 without
@@ -877,6 +949,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # 4. graph cut, 5. blend
     lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2,
                            distance=dist, forbidden=_FORBIDDEN)
+    cut = lab
+    if P.select_complete > 0:
+        lab = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
+                               P.select_complete_px)
     rep = lab != 0
     movers = np.zeros((S, H, W), bool)
     d_cons = delta_e(labs[1:], cons)
@@ -939,6 +1015,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     lingering[roi] = minority[roi] & (n_copies + 1 > usable[1:].sum(0) - n_copies)
     label = np.full((H, W), -1, np.int16)
     label[roi] = np.where(reg, lab, -1)
+    completed = np.zeros((H, W), bool)
+    completed[roi] = (cut == 0) & (lab != 0)
     seams = np.zeros((H, W), bool)
     seams[roi] = reg & ((np.diff(lab, axis=0, prepend=lab[:1]) != 0)
                         | (np.diff(lab, axis=1, prepend=lab[:, :1]) != 0))
@@ -958,7 +1036,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons,
-                     lingering=lingering, static_evidence=evidence, line_de=line_de,
+                     lingering=lingering, completed=completed, static_evidence=evidence,
+                     line_de=line_de,
                      static_need=np.where(mask, np.minimum(need, 255), 0).astype(np.uint8),
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
                      followed=np.stack([np.zeros((H, W), bool) if f is None else f
@@ -966,4 +1045,5 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
-           "Selection", "median_parallax_px", "member_median", "min_witnesses", "select_fill"]
+           "Selection", "complete_regions", "median_parallax_px", "member_median", "min_witnesses",
+           "select_fill"]
