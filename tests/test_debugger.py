@@ -211,9 +211,10 @@ def test_a_completed_fragment_is_logged_and_told(tmp_path):
         warnings.simplefilter("ignore")
         r = remove_dynamic(sc.images, ref=sc.ref_index, sink=RerunSink(path))
     sel = vi.read_selection(path)
-    done = sel["completed"].astype(bool)
-    np.testing.assert_array_equal(done, r.selection.completed)
+    np.testing.assert_array_equal(sel["completed"], r.selection.completed)
+    done = sel["completed"] == 1
     assert done.any() and (sel["source"][done] > 0).all()
+    assert (sel["source"][sel["completed"] == 2] == 0).all()
     ys, xs = np.nonzero(done)
     h = vi.pixel_history(path, int(xs[0]), int(ys[0]))
     assert "--select-complete" in " ".join(vd.verdict_lines(h))

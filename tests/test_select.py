@@ -895,23 +895,27 @@ def test_in_a_flat_set_two_matches_keep_a_pixel_whatever_its_colour(davis):
 
 
 # ------------------------------------------------------------------ region completion
-def test_complete_regions_replaces_the_kept_fragments_of_a_region_replaced_almost_whole():
+def test_complete_regions_decides_a_region_whole_where_the_cut_decided_most_of_it():
     from dynremove.refine.select import complete_regions
 
-    lab = np.zeros((48, 80), np.int64)
+    lab = np.zeros((48, 100), np.int64)
     core = np.zeros(lab.shape, bool)
     # region A, 30 × 28 px, taken from label 2 but for a 14 × 14 block inside
     # (644 of 840 px: 77 % replaced)
     core[5:35, 2:30] = True
     lab[5:35, 2:30] = 2
     lab[13:27, 9:23] = 0
-    # region B, taken from label 1 on its left half only (50 %)
+    # region B, taken from label 1 on its left half only (50 %): left as the cut said
     core[5:35, 40:60] = True
     lab[5:35, 40:50] = 1
+    # region C, 30 × 20 px, kept but for a 10 × 5 patch from label 1 (8 %)
+    core[5:35, 70:90] = True
+    lab[20:30, 75:80] = 1
     allowed = np.ones((3,) + lab.shape, bool)
     allowed[2, 13, 9:23] = False  # the top row of A's block may not take label 2
+    allowed[0, 20, 75:80] = False  # nor C's patch's top row the reference
     before = lab.copy()
-    out = complete_regions(lab, core, allowed, 0.7, 3)
+    out, changed = complete_regions(lab, core, allowed, 0.7, 3)
     np.testing.assert_array_equal(lab, before)  # a copy
     block = np.zeros(lab.shape, bool)
     block[13:27, 9:23] = True
@@ -920,17 +924,23 @@ def test_complete_regions_replaces_the_kept_fragments_of_a_region_replaced_almos
     assert (out[block & ~inner & allowed[2]] == 2).all()
     assert (out[inner] == 0).all()
     assert (out[13, 9:23] == 0).all()  # not allowed there: left as it was
-    np.testing.assert_array_equal(out[:, 35:], before[:, 35:])  # B: under the share
+    np.testing.assert_array_equal(out[:, 35:65], before[:, 35:65])  # B: neither share
+    assert (out[21:30, 75:80] == 0).all() and (out[20, 75:80] == 1).all()  # C
     np.testing.assert_array_equal(out[~core], before[~core])
-    np.testing.assert_array_equal(complete_regions(lab, core, allowed, 0.8, 3), before)
+    np.testing.assert_array_equal(changed == 1, (out != 0) & (before == 0))
+    np.testing.assert_array_equal(changed == 2, (out == 0) & (before != 0))
+    out, changed = complete_regions(lab, core, allowed, 0.95, 3)
+    np.testing.assert_array_equal(out, before)
+    assert not changed.any()
 
 
-@pytest.mark.parametrize("share", [0.0, 1.5])
-def test_select_complete_is_a_share(share):
-    if share == 0.0:
-        assert preset("default").replace(select_complete=share).select_complete == 0.0
+@pytest.mark.parametrize("share, ok", [(0.0, True), (0.7, True), (1.0, True), (0.5, False),
+                                       (1.5, False)])
+def test_select_complete_is_off_or_a_majority_share(share, ok):
+    if ok:
+        assert preset("default").replace(select_complete=share).select_complete == share
     else:
-        with pytest.raises(ValueError, match="select_complete must be in"):
+        with pytest.raises(ValueError, match="select_complete must be 0"):
             preset("default").replace(select_complete=share)
 
 
@@ -958,7 +968,7 @@ def test_completion_removes_the_fragments_of_a_real_mover(davis, tmp_path):
                                params=preset("default").replace(select_complete=share))
         runs[share] = (r, whole_photo.leftover_percent(r.clean, ls.background, gt, ls.free > 0)[0],
                        whole_photo.damage_percent(ls.images[ls.ref], r.clean, ls.background, gt))
-    done = runs[0.7][0].selection.completed
+    done = runs[0.7][0].selection.completed == 1
     assert done.sum() >= 500 and (done & gt).sum() >= 0.85 * done.sum()
     assert not runs[0.0][0].selection.completed.any()
     assert runs[0.7][1] <= runs[0.0][1] - 1.0  # leftover, % of the goat

@@ -504,8 +504,8 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     """The fill by selection's maps: ``source`` (0 = reference kept, k = source k−1),
     ``explained`` (L kept as static 3-D structure), ``seams``, ``lingering`` (a mover
     that most photos show, found by two or more sources that saw the background),
-    ``completed`` (kept by the graph cut, replaced because its region of L was
-    replaced almost whole), ``inpainted`` (no source free there: OpenCV Telea),
+    ``completed`` (1: kept by the graph cut, replaced because its region of L was
+    replaced almost whole; 2: the reverse), ``inpainted`` (no source free there: OpenCV Telea),
     ``followed`` (per source, in its own frame: where the flow followed the
     reference's mover into it); absent
     keys when the run had no selection step (or, for ``inpainted``, was recorded

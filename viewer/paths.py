@@ -122,7 +122,7 @@ RESULT_MOVERS = "result/selection/movers"  # per source: where it shows a mover 
 RESULT_REASONS = "result/selection/reasons"  # per source: why it did or did not fill
 RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure
 RESULT_LINGERING = "result/selection/lingering"  # a mover most photos show, seen free by 2+
-RESULT_COMPLETED = "result/selection/completed"  # kept by the cut, its region replaced almost whole
+RESULT_COMPLETED = "result/selection/completed"  # 1/2: replaced/kept with its region of L
 RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV inpainting
 # the static 3-D structure test inside L: per source, whether it shows the reference's
 # content (EVIDENCE codes) and the best CIE76 ΔE along its epipolar line (uint16,

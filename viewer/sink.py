@@ -436,8 +436,10 @@ class RerunSink(StepColumns):
                 self.rec.log(self.p(P.RESULT_LINGERING), rr.SegmentationImage(
                     np.asarray(sel.lingering, np.uint8)), static=True)
             if getattr(sel, "completed", None) is not None:
-                self.rec.log(self.p(P.RESULT_COMPLETED), rr.SegmentationImage(
-                    np.asarray(sel.completed, np.uint8)), static=True)
+                self.rec.log(self.p(P.RESULT_COMPLETED), rr.AnnotationContext(
+                    [(1, "replaced with its region of L", (255, 140, 0, 160)),
+                     (2, "kept with its region of L", (0, 160, 255, 160))]),
+                    rr.SegmentationImage(np.asarray(sel.completed, np.uint8)), static=True)
             self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
                  ).astype(np.uint8)), static=True)

@@ -256,12 +256,16 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                    "the sources that saw the background filled it" if sel.get("lingering")
                    else " — the photomontage kept the reference here, but the rest of its "
                    "region of L was replaced (--select-complete): a piece of the same mover"
-                   if sel.get("completed") else "")
+                   if sel.get("completed") == 1 else "")
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
             lines.append("fill: reference kept, explained as static 3-D structure "
                          "(parallax, not a mover)")
+        elif sel.get("completed") == 2:
+            lines.append("fill: reference kept — the photomontage took a source here, but "
+                         "kept the reference on the rest of its region of L "
+                         "(--select-complete): static, as the rest")
         else:
             lines.append("fill: reference kept" + (" (not in the final mask)"
                                                      if not h.get("final_dynamic") else ""))

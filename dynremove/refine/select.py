@@ -50,8 +50,9 @@ that the scan flagged with doubled content.
    ``parallax_px`` > ``select_parallax_px``), the consensus may also keep the
    reference inside L: the scan's flags there are mostly 3-D structure.
    A region of L that the cut replaced almost whole (``select_complete``) is
-   a mover: its fragments kept as the reference are replaced too
-   (``complete_regions``), so that no piece of it stays in the photo.
+   a mover: its fragments kept as the reference are replaced too, so that no
+   piece of it stays in the photo; one it kept almost whole is static: its
+   replaced fragments keep the reference (``complete_regions``).
 5. **Blend** (``montage.offset_blend``): exposure and white-balance
    differences leave no edge. Pixels of L that no source shows free are
    inpainted (OpenCV Telea) and reported.
@@ -122,9 +123,10 @@ class Selection:
     # pixels of a mover that lingered: the reference and most sources show it, two
     # or more sources saw the background (``_minority_witnesses``)
     lingering: npt.NDArray[np.bool_] | None = None
-    # pixels the graph cut kept as the reference, replaced because their region of L
-    # was replaced almost whole (``complete_regions``, ``select_complete``)
-    completed: npt.NDArray[np.bool_] | None = None
+    # where the graph cut's choice was overruled by its region's (``complete_regions``,
+    # ``select_complete``), uint8: 1 replaced with a region replaced almost whole, 2
+    # kept with a region kept almost whole, 0 elsewhere
+    completed: npt.NDArray[np.uint8] | None = None
     # the static 3-D structure test inside L (``explained``), per source (S, H, W)
     # uint8: EVIDENCE[code] (0 outside L); the best CIE76 ΔE of the reference's
     # content along the source's epipolar line (S, H, W) float32 (NaN where not
@@ -559,8 +561,8 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
 
 def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
                      allowed: npt.NDArray[np.bool_], share: float, reach_px: int
-                     ) -> npt.NDArray[np.intp]:
-    """Replace the kept fragments of a region that the graph cut replaced almost whole.
+                     ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.uint8]]:
+    """Decide each region of L whole where the graph cut decided most of it.
 
     A connected region of ``core`` (8-connected) of which at least ``share`` of the
     pixels took a source is a mover. Its pixels that kept the reference are
@@ -572,6 +574,11 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     pixel's source (a 3×3 grey dilation per step, the largest label among the
     neighbours, as ``morphology.grow_replaced``), where that source is allowed.
 
+    Conversely, a region of which less than ``1 − share`` took a source is static
+    (3-D structure the scans flagged, kept by the consensus): its replaced pixels,
+    fragments of a fill misplaced on that structure, keep the reference, where the
+    reference is allowed.
+
     Parameters
     ----------
     label : (h, w) int ndarray
@@ -582,32 +589,42 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         Where each label may be taken (its data cost is not forbidden: the source
         sees the pixel, shows no mover of its own there).
     share : float
-        In (0, 1]: the replaced share from which a region counts as replaced.
+        In (0.5, 1]: the replaced share from which a region counts as replaced
+        (and ``1 − share`` the share under which it counts as kept).
     reach_px : int
-        How far, in pixel steps, the replaced pixels' labels spread.
+        How far, in pixel steps, a replaced region's labels spread.
 
     Returns
     -------
-    (h, w) int ndarray
+    label : (h, w) int ndarray
         ``label`` with those pixels relabelled (a copy; ``label`` is not changed).
+    changed : (h, w) uint8 ndarray
+        1 where a pixel took a source with its region, 2 where it kept the
+        reference with its region, 0 elsewhere.
 
     Measured on the 12 composites and 19 DAVIS sets (README, session 36):
-    share 0.7, 6 px took the mean leftover from 16.4 to 15.6 % and the whole-image
-    PSNR from 29.20 to 29.29 dB, the damage from 0.45 to 0.48 %, DAVIS J 0.576 →
-    0.584.
+    share 0.7, 6 px took the mean leftover from 16.44 to 15.61 %, the damage from
+    0.454 to 0.445 % and the whole-image PSNR from 29.20 to 29.38 dB; DAVIS J
+    0.576 → 0.585.
     """
     out = label.copy()
+    changed = np.zeros(label.shape, np.uint8)
     n, comp = cv2.connectedComponents(core.astype(np.uint8), connectivity=8)
-    if n <= 1 or reach_px <= 0:
-        return out
+    if n <= 1:
+        return out, changed
     rep = out != 0
     size = np.bincount(comp.ravel(), minlength=n)
     n_rep = np.bincount(comp.ravel(), weights=(rep & core).ravel(), minlength=n)
+    kept = n_rep < (1.0 - share) * size
+    kept[0] = False  # (not a region of core)
+    back = kept[comp] & rep & allowed[0]
+    out[back] = 0
+    changed[back] = 2
     whole = n_rep >= share * size
-    whole[0] = False  # (not a region of core)
+    whole[0] = False
     todo = whole[comp] & ~rep
-    if not todo.any():
-        return out
+    if not todo.any() or reach_px <= 0:
+        return out, changed
     grown = np.where(rep, out, 0).astype(np.int16)
     kernel = np.ones((3, 3), np.uint8)
     for _ in range(int(reach_px)):
@@ -620,7 +637,8 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     k = grown[ys, xs].astype(np.intp)
     ok = allowed[k, ys, xs]
     out[ys[ok], xs[ok]] = k[ok]
-    return out
+    changed[ys[ok], xs[ok]] = 1
+    return out, changed
 
 
 def median_parallax_px(views: list[TwoView]) -> float:
@@ -949,10 +967,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # 4. graph cut, 5. blend
     lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2,
                            distance=dist, forbidden=_FORBIDDEN)
-    cut = lab
+    region_rule = np.zeros(lab.shape, np.uint8)
     if P.select_complete > 0:
-        lab = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
-                               P.select_complete_px)
+        lab, region_rule = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
+                                            P.select_complete_px)
     rep = lab != 0
     movers = np.zeros((S, H, W), bool)
     d_cons = delta_e(labs[1:], cons)
@@ -1015,8 +1033,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     lingering[roi] = minority[roi] & (n_copies + 1 > usable[1:].sum(0) - n_copies)
     label = np.full((H, W), -1, np.int16)
     label[roi] = np.where(reg, lab, -1)
-    completed = np.zeros((H, W), bool)
-    completed[roi] = (cut == 0) & (lab != 0)
+    completed = np.zeros((H, W), np.uint8)
+    completed[roi] = np.where(reg, region_rule, 0)
     seams = np.zeros((H, W), bool)
     seams[roi] = reg & ((np.diff(lab, axis=0, prepend=lab[:1]) != 0)
                         | (np.diff(lab, axis=1, prepend=lab[:, :1]) != 0))
