@@ -201,23 +201,24 @@ def test_a_lingering_mover_is_logged_and_told(tmp_path):
     assert "still shows the mover that lingered here" in words
 
 
-def test_a_completed_fragment_is_logged_and_told(tmp_path):
-    """Pixels the graph cut kept but whose region of L it replaced almost whole
-    (``--select-complete``): the recording holds them, and inspect says why a source
-    filled them."""
-    sc = synth.make_scene(seed=2, n_views=6, size=(360, 640), n_objects=1)
+def test_the_region_rule_is_logged_and_told(tmp_path):
+    """Where ``--select-complete`` overruled the graph cut, the recording holds it
+    (1: replaced with its region of L, 2: kept with it), and inspect says why."""
+    sc = synth.make_scene(seed=3, n_views=6, size=(360, 640), n_objects=1)
     path = tmp_path / "complete.rrd"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         r = remove_dynamic(sc.images, ref=sc.ref_index, sink=RerunSink(path))
     sel = vi.read_selection(path)
     np.testing.assert_array_equal(sel["completed"], r.selection.completed)
-    done = sel["completed"] == 1
-    assert done.any() and (sel["source"][done] > 0).all()
-    assert (sel["source"][sel["completed"] == 2] == 0).all()
-    ys, xs = np.nonzero(done)
-    h = vi.pixel_history(path, int(xs[0]), int(ys[0]))
-    assert "--select-complete" in " ".join(vd.verdict_lines(h))
+    for code, filled, words in ((1, True, "a piece of the same mover"),
+                                (2, False, "kept the reference on the rest of its region")):
+        at = sel["completed"] == code
+        assert at.any() and ((sel["source"][at] > 0) == filled).all()
+        ys, xs = np.nonzero(at)
+        h = vi.pixel_history(path, int(xs[0]), int(ys[0]))
+        told = " ".join(vd.verdict_lines(h))
+        assert words in told and "--select-complete" in told
 
 
 def test_pixel_outside_the_image(fabricated, capsys):

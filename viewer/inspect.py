@@ -505,11 +505,10 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     ``explained`` (L kept as static 3-D structure), ``seams``, ``lingering`` (a mover
     that most photos show, found by two or more sources that saw the background),
     ``completed`` (1: kept by the graph cut, replaced because its region of L was
-    replaced almost whole; 2: the reverse), ``inpainted`` (no source free there: OpenCV Telea),
-    ``followed`` (per source, in its own frame: where the flow followed the
-    reference's mover into it); absent
-    keys when the run had no selection step (or, for ``inpainted``, was recorded
-    before it was logged)."""
+    replaced almost whole; 2: the reverse), ``inpainted`` (no source free there:
+    OpenCV Telea), ``followed`` (per source, in its own frame: where the flow
+    followed the reference's mover into it); absent keys when the run had no
+    selection step (or, for ``inpainted``, was recorded before it was logged)."""
     store, p = load_store(path), P.Paths(root)
     out = {}
     for key, rel in (("source", P.RESULT_SOURCE), ("explained", P.RESULT_EXPLAINED),

@@ -382,6 +382,10 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                 f"with the reference, and the photomontage took {_src_name(h, sel['source'] - 1)}")
     if replaced:
         return "static 3-D structure test: not passed: " + evidence + why_not
+    if sel.get("completed") == 2:
+        return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
+                "photomontage took a source here, but the reference is kept with the rest "
+                "of its region of L, which the photomontage kept (--select-complete)")
     return ("static 3-D structure test: not passed (" + evidence + why_not + "), but the "
             "photomontage kept the reference: it was the cheapest label here (its distance "
             "to the sources' consensus, with the seams)")
