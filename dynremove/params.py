@@ -114,8 +114,8 @@ class Params:
     select_search_support_de: float = 5.0  # the epipolar search's window weighs its cells by their colour's likeness to the centre's, exp(-dE / this) in CIE76 dE (adaptive support weights, Yoon & Kweon 2006), so that a thin structure is compared, not the background around it (0 = a plain box)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)
     select_track_movers: bool = True  # where the set is flat (see --select-parallax-px), a source shows the reference's mover where the flow followed it (30 % of a region of L found in its colour, off its epipolar line): that source never fills there
-    select_complete: float = 0.7  # a region of L that the fill replaced at least this share of is a mover: its kept fragments within --select-complete-px of its replaced pixels are replaced too; one it replaced less than 1 - this share of is static: its replaced fragments keep the reference (0 = off, else in (0.5, 1])
-    select_complete_px: int = 6  # how far (px) --select-complete reaches from a region's replaced pixels
+    select_complete: float = 0.7  # decide each region of L whole where the fill decided most of it, a share in (0.5, 1]: a region replaced at least this much is a mover (its kept pieces within --select-complete-px are replaced too); one replaced less than 1 - this is static (its replaced pieces keep the reference); in between, as the fill chose (0 = off)
+    select_complete_px: int = 6  # how far (analysis px) --select-complete's replacement reaches from a region's replaced pixels (0: none; the static rule still applies)
     select_sweep: bool = False  # in a 3-D set (see --select-parallax-px), matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
