@@ -571,8 +571,8 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     stay in the clean photo as fragments of the mover. Each of them within
     ``reach_px`` of the region's replaced pixels (steps of the 8-neighbourhood,
     through the kept pixels of the region) takes a neighbouring replaced
-    pixel's source (a 3×3 grey dilation per step, the largest label among the
-    neighbours, as ``morphology.grow_replaced``), where that source is allowed.
+    pixel's source (``morphology.grow_replaced``: a 3×3 grey dilation per step, the
+    largest label among the neighbours), where that source is allowed.
 
     Conversely, a region of which less than ``1 − share`` took a source is static
     (3-D structure the scans flagged, kept by the consensus): its replaced pixels,
@@ -614,7 +614,7 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         return out, changed
     rep = out != 0
     size = np.bincount(comp.ravel(), minlength=n)
-    n_rep = np.bincount(comp.ravel(), weights=(rep & core).ravel(), minlength=n)
+    n_rep = np.bincount(comp.ravel(), weights=rep.ravel(), minlength=n)
     kept = n_rep < (1.0 - share) * size
     kept[0] = False  # (not a region of core)
     back = kept[comp] & rep & allowed[0]
@@ -625,14 +625,9 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     todo = whole[comp] & ~rep
     if not todo.any() or reach_px <= 0:
         return out, changed
-    grown = np.where(rep, out, 0).astype(np.int16)
-    kernel = np.ones((3, 3), np.uint8)
-    for _ in range(int(reach_px)):
-        near = cv2.dilate(grown, kernel)
-        take = todo & (grown == 0) & (near >= 1)
-        if not take.any():
-            break
-        grown[take] = near[take]
+    # the replaced pixels' labels grown into the region's kept pixels only (−1: fixed)
+    grown = grow_replaced(np.where(rep, out, np.where(todo, 0, -1)).astype(np.int16),
+                          int(reach_px))
     ys, xs = np.nonzero(todo & (grown >= 1))
     k = grown[ys, xs].astype(np.intp)
     ok = allowed[k, ys, xs]
