@@ -514,3 +514,23 @@ def test_an_inpainted_pixel_is_not_called_filled_from_a_source():
     assert "inpainted" in vd.outcome_line(h) and "b.png" not in vd.outcome_line(h)
     h["selection"]["inpainted"] = 0
     assert vd.outcome_line(h) == "removed (in the final mask), filled from b.png"
+
+
+def test_a_margin_pixel_written_from_a_source_is_not_called_kept():
+    """The fill may write the pixels within --select-margin-px of L; where its value
+    stays within --select-tau of the reference's, the pixel is not in the final mask.
+    A session-36 trial read "kept (not in the final mask)" and then "filled from
+    tim2" for such a pixel: both lines now say it was written, outside the mask."""
+    h = {"final_dynamic": False, "source_names": ["a.png", "b.png"],
+         "selection": {"source": 2, "inpainted": 0}, "replacements": [], "gt": None}
+    first = vd.outcome_line(h)
+    assert "written from b.png" in first and "kept" not in first, first
+    h.update(x=1, y=1, t_r=0.3, decisions=[])
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")]
+    assert len(fill) == 1 and "b.png" in fill[0] and "outside the final mask" in fill[0], fill
+    h["final_dynamic"] = True  # in the mask: no such remark
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")]
+    assert "outside the final mask" not in fill[0] and "b.png" in fill[0], fill
+    h["final_dynamic"] = False
+    h["selection"]["source"] = 0
+    assert vd.outcome_line(h) == "kept (not in the final mask)"

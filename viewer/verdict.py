@@ -257,6 +257,10 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                    else " — the photomontage kept the reference here, but the rest of its "
                    "region of L was replaced (--select-complete): a piece of the same mover"
                    if sel.get("completed") == 1 else "")
+            if not h.get("final_dynamic"):
+                why += (" — outside the final mask: the value written is within the fill's "
+                        "--select-tau of the reference's (the margin the fill may change "
+                        "around L)")
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
@@ -286,9 +290,14 @@ def outcome_line(h: dict[str, Any]) -> str:
     """What became of the pixel, in a few words: "removed (in the final mask), filled
     from view1.png" or "kept (not in the final mask)". Needs ``final_dynamic``."""
     sel = h.get("selection") or {}
-    if not h.get("final_dynamic"):
-        return "kept (not in the final mask)"
     k = sel.get("source", 0)
+    if not h.get("final_dynamic"):
+        if k > 0 and not sel.get("inpainted"):
+            # the fill's margin or a seam: a source's value written within ΔE
+            # select_tau of the reference's, so not counted in the final mask
+            return (f"not in the final mask, but written from {_src_name(h, k - 1)}, "
+                    "close to the reference's colour (the fill's margin around L)")
+        return "kept (not in the final mask)"
     if sel.get("inpainted"):
         return "removed (in the final mask), inpainted: no source shows the background there"
     if k > 0:
