@@ -926,12 +926,41 @@ def test_complete_regions_decides_a_region_whole_where_the_cut_decided_most_of_i
     assert (out[13, 9:23] == 0).all()  # not allowed there: left as it was
     np.testing.assert_array_equal(out[:, 35:65], before[:, 35:65])  # B: neither share
     assert (out[21:30, 75:80] == 0).all() and (out[20, 75:80] == 1).all()  # C
-    np.testing.assert_array_equal(out[~core], before[~core])
+    np.testing.assert_array_equal(out[~core], before[~core])  # (no margin labels here)
     np.testing.assert_array_equal(changed == 1, (out != 0) & (before == 0))
     np.testing.assert_array_equal(changed == 2, (out == 0) & (before != 0))
     out, changed = complete_regions(lab, core, allowed, 0.95, 3)
     np.testing.assert_array_equal(out, before)
     assert not changed.any()
+
+
+def test_a_region_kept_whole_takes_back_the_margin_its_fragments_reached():
+    """The cut may carry a fragment's source across L's edge into the fill's margin
+    (pixels outside ``core``); when the region keeps the reference whole, that
+    continuation goes with it (a session-36 trial saw a 1-px trail stay replaced).
+    A margin run continuing a region still replaced stays, and so does one that
+    touches no reverted pixel."""
+    from dynremove.refine.select import complete_regions
+
+    lab = np.zeros((40, 90), np.int64)
+    core = np.zeros(lab.shape, bool)
+    # region C, kept but for a 10 × 5 patch from label 1 that runs 3 px past L's edge
+    core[5:35, 10:30] = True
+    lab[20:30, 25:33] = 1
+    # region D, replaced whole from label 2, also running 3 px into the margin
+    core[5:35, 50:70] = True
+    lab[5:35, 50:73] = 2
+    # a margin-only run of label 1 away from both
+    lab[2:4, 80:88] = 1
+    allowed = np.ones((3,) + lab.shape, bool)
+    before = lab.copy()
+    out, changed = complete_regions(lab, core, allowed, 0.7, 3)
+    assert (out[:, :40] == 0).all()  # C and its trail: the reference
+    assert (changed[20:30, 25:33] == 2).all()
+    np.testing.assert_array_equal(out[:, 40:], before[:, 40:])  # D's and the lone run
+    allowed[0, 20:30, 31:33] = False  # where the reference may not be taken: left
+    out, _ = complete_regions(lab, core, allowed, 0.7, 3)
+    assert (out[20:30, 31:33] == 1).all() and (out[20:30, 25:31] == 0).all()
 
 
 @pytest.mark.parametrize("share, ok", [(0.0, True), (0.7, True), (1.0, True), (0.5, False),

@@ -577,7 +577,8 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     Conversely, a region of which less than ``1 − share`` took a source is static
     (3-D structure the scans flagged, kept by the consensus): its replaced pixels,
     fragments of a fill misplaced on that structure, keep the reference, where the
-    reference is allowed.
+    reference is allowed; so do the pixels outside ``core`` (the fill's margin)
+    whose replaced run only continued them (no pixel of ``core`` left in it).
 
     Parameters
     ----------
@@ -620,6 +621,17 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     back = kept[comp] & rep & allowed[0]
     out[back] = 0
     changed[back] = 2
+    if back.any():
+        # the cut's replaced pixels outside ``core`` (the fill's margin) that only
+        # continued the reverted ones keep the reference too: a replaced component
+        # with no pixel of ``core`` left, next to a reverted pixel
+        m, rc = cv2.connectedComponents((out != 0).astype(np.uint8), connectivity=8)
+        has_core = np.bincount(rc[core], minlength=m) > 0
+        touch = np.zeros(m, bool)
+        touch[np.unique(rc[cv2.dilate(back.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0])] = True
+        trail = (touch & ~has_core)[rc] & (rc > 0) & allowed[0]
+        out[trail] = 0
+        changed[trail] = 2
     whole = n_rep >= share * size
     whole[0] = False
     todo = whole[comp] & ~rep
