@@ -219,6 +219,17 @@ def test_the_region_rule_is_logged_and_told(tmp_path):
         h = vi.pixel_history(path, int(xs[0]), int(ys[0]))
         told = " ".join(vd.verdict_lines(h))
         assert words in told and "--select-complete" in told
+        # the share that decided it, as the core measured it, against the run's 0.7
+        f = float(r.selection.region_share[ys[0], xs[0]])
+        assert (f >= 0.7) if code == 1 else (f < 0.3)
+        assert f"replaced {100 * f:.0f} % of its region of L" in told, told
+    # the share map: the core's, quantised; NaN (none) outside the regions of L
+    q = sel["region_share"]
+    none = q == P.DE_NONE
+    np.testing.assert_array_equal(none, np.isnan(r.selection.region_share))
+    np.testing.assert_allclose(q[~none] / P.P_SCALE, r.selection.region_share[~none],
+                               atol=0.5 / P.P_SCALE)
+    assert sel["region_rule"]["select_complete"] == [0.7]
 
 
 def test_pixel_outside_the_image(fabricated, capsys):

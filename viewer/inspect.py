@@ -505,9 +505,12 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     ``explained`` (L kept as static 3-D structure), ``seams``, ``lingering`` (a mover
     that most photos show, found by two or more sources that saw the background),
     ``completed`` (1: kept by the graph cut, replaced because its region of L was
-    replaced almost whole; 2: the reverse), ``inpainted`` (no source free there:
-    OpenCV Telea), ``followed`` (per source, in its own frame: where the flow
-    followed the reference's mover into it); absent keys when the run had no
+    replaced almost whole; 2: the reverse), ``region_share`` (uint16: the share of
+    the pixel's region of L the graph cut replaced × P_SCALE, DE_NONE outside; with
+    ``region_rule``, the run's --select-complete and --select-complete-px),
+    ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
+    its own frame: where the flow followed the reference's mover into it); absent
+    keys when the run had no
     selection step (or, for ``inpainted``, was recorded before it was logged)."""
     store, p = load_store(path), P.Paths(root)
     out = {}
@@ -543,6 +546,10 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     rows = _image_rows(store, p(P.RESULT_REF_MOVER_P), "DepthImage", index=None)
     if rows:
         out["ref_mover_p"] = rows[0][1]
+    rows = _image_rows(store, p(P.RESULT_REGION_SHARE), "DepthImage", index=None)
+    if rows:
+        out["region_share"] = rows[0][1]
+        out["region_rule"] = _static_values(store, p(P.RESULT_REGION_SHARE))
     return out
 
 
@@ -667,9 +674,9 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
                       if int(a[y, x]) != P.DE_NONE}
         elif k == "followed":  # in the sources' frames: told at (x, y) by the reasons
             continue
-        elif k == "ref_mover_p":
+        elif k in ("ref_mover_p", "region_share"):
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.P_SCALE
-        elif k == "thresholds":
+        elif k in ("thresholds", "region_rule"):
             sel[k] = {n: (a[0] if isinstance(a, list) and a else a) for n, a in v.items()}
         else:
             sel[k] = int(v[y, x])

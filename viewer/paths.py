@@ -123,6 +123,10 @@ RESULT_REASONS = "result/selection/reasons"  # per source: why it did or did not
 RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure
 RESULT_LINGERING = "result/selection/lingering"  # a mover most photos show, seen free by 2+
 RESULT_COMPLETED = "result/selection/completed"  # 1/2: replaced/kept with its region of L
+# the share of each pixel's region of L that the graph cut replaced (uint16,
+# round(share · P_SCALE), DE_NONE outside the regions), --select-complete and
+# --select-complete-px as values
+RESULT_REGION_SHARE = "result/selection/region_share"
 RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV inpainting
 # the static 3-D structure test inside L: per source, whether it shows the reference's
 # content (EVIDENCE codes) and the best CIE76 ΔE along its epipolar line (uint16,

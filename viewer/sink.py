@@ -440,6 +440,16 @@ class RerunSink(StepColumns):
                     [(1, "replaced with its region of L", (255, 140, 0, 160)),
                      (2, "kept with its region of L", (0, 160, 255, 160))]),
                     rr.SegmentationImage(np.asarray(sel.completed, np.uint8)), static=True)
+            if getattr(sel, "region_share", None) is not None:
+                params = dict(getattr(result, "params", {}) or {})
+                self.rec.log(self.p(P.RESULT_REGION_SHARE), rr.DepthImage(
+                    _quantised(sel.region_share, P.P_SCALE), meter=float(P.P_SCALE),
+                    colormap="viridis", depth_range=(0.0, float(P.P_SCALE))),
+                    rr.AnyValues(select_complete=float(params.get("select_complete",
+                                                                  float("nan"))),
+                                 select_complete_px=float(params.get("select_complete_px",
+                                                                     float("nan")))),
+                    static=True)
             self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
                  ).astype(np.uint8)), static=True)

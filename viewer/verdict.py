@@ -256,6 +256,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                    "the sources that saw the background filled it" if sel.get("lingering")
                    else " — the photomontage kept the reference here, but the rest of its "
                    "region of L was replaced (--select-complete): a piece of the same mover"
+                   + (f"; {region_words(sel)}" if region_words(sel) else "")
                    if sel.get("completed") == 1 else "")
             if not h.get("final_dynamic"):
                 why += (" — outside the final mask: the value written is within the fill's "
@@ -267,9 +268,11 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
             lines.append("fill: reference kept, explained as static 3-D structure "
                          "(parallax, not a mover)")
         elif sel.get("completed") == 2:
+            region = region_words(sel)
             lines.append("fill: reference kept — the photomontage took a source here, but "
                          "kept the reference on the rest of its region of L "
-                         "(--select-complete): static, as the rest")
+                         "(--select-complete): static, as the rest"
+                         + (f"; {region}" if region else ""))
         else:
             lines.append("fill: reference kept" + (" (not in the final mask)"
                                                      if not h.get("final_dynamic") else ""))
@@ -335,6 +338,32 @@ def _fold(events: list[tuple[int, str]], max_lines: int) -> list[str]:
     return lines
 
 
+def region_words(sel: dict[str, Any]) -> str | None:
+    """The region rule (--select-complete) in numbers at a pixel of L that no static
+    evidence explained: the share of its region of L that the graph cut replaced,
+    against the run's share; None where the recording has no share there."""
+    f = sel.get("region_share")
+    if f is None:
+        return None
+    rule = sel.get("region_rule") or {}
+    share, px = rule.get("select_complete"), rule.get("select_complete_px")
+    head = f"the graph cut replaced {100 * f:.0f} % of its region of L"
+    if not isinstance(share, float) or share != share or share <= 0:
+        return head + " (--select-complete 0: no region rule)"
+    if f >= share:
+        tail = f"at least --select-complete {share:g}: a mover, replaced whole"
+        if sel.get("source", 0) == 0 and not sel.get("completed"):
+            reach = (f"{px:g} px" if isinstance(px, float) and px == px else "the reach")
+            tail += (f", but this pixel is farther than --select-complete-px {reach} from "
+                     "its replaced pixels, or no source next to it may fill it")
+    elif f < 1.0 - share:
+        tail = f"under 1 − {share:g}: static, the reference kept whole"
+    else:
+        tail = (f"between {100 * (1 - share):.0f} and {100 * share:.0f} %: each pixel as "
+                "the cut decided")
+    return f"{head} ({tail})"
+
+
 def static_test_line(h: dict[str, Any]) -> str | None:
     """The fill's static 3-D structure test at a pixel of L, in words (None outside
     L or for a run without it): how many sources had to show the reference's content
@@ -392,12 +421,15 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     if replaced:
         return "static 3-D structure test: not passed: " + evidence + why_not
     if sel.get("completed") == 2:
+        region = region_words(sel)
         return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
                 "photomontage took a source here, but the reference is kept with the rest "
-                "of its region of L, which the photomontage kept (--select-complete)")
+                "of its region of L, which the photomontage kept (--select-complete)"
+                + (f": {region}" if region else ""))
+    region = region_words(sel)
     return ("static 3-D structure test: not passed (" + evidence + why_not + "), but the "
             "photomontage kept the reference: it was the cheapest label here (its distance "
-            "to the sources' consensus, with the seams)")
+            "to the sources' consensus, with the seams)" + (f"; {region}" if region else ""))
 
 
 def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:

@@ -127,6 +127,9 @@ class Selection:
     # ``select_complete``), uint8: 1 replaced with a region replaced almost whole, 2
     # kept with a region kept almost whole, 0 elsewhere
     completed: npt.NDArray[np.uint8] | None = None
+    # the share of each pixel's region of L that the graph cut replaced, before that
+    # rule (``region_shares``), float32 in [0, 1]; NaN outside the regions
+    region_share: npt.NDArray[np.float32] | None = None
     # the static 3-D structure test inside L (``explained``), per source (S, H, W)
     # uint8: EVIDENCE[code] (0 outside L); the best CIE76 ΔE of the reference's
     # content along the source's epipolar line (S, H, W) float32 (NaN where not
@@ -559,6 +562,19 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     return out, members
 
 
+def region_shares(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_]
+                  ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float64]]:
+    """The regions of ``core`` (8-connected; (h, w) int32, 0 outside) and the share
+    of each that ``label`` (h, w) took from a source (label != 0): (n,) float64,
+    region 0's set to 0. What ``complete_regions`` compares with its share."""
+    n, comp = cv2.connectedComponents(core.astype(np.uint8), connectivity=8)
+    size = np.bincount(comp.ravel(), minlength=n)
+    n_rep = np.bincount(comp.ravel(), weights=(label != 0).ravel(), minlength=n)
+    share = n_rep / np.maximum(size, 1)
+    share[0] = 0.0
+    return comp, share
+
+
 def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
                      allowed: npt.NDArray[np.bool_], share: float, reach_px: int
                      ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.uint8]]:
@@ -610,13 +626,11 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     """
     out = label.copy()
     changed = np.zeros(label.shape, np.uint8)
-    n, comp = cv2.connectedComponents(core.astype(np.uint8), connectivity=8)
-    if n <= 1:
+    comp, frac = region_shares(label, core)
+    if len(frac) <= 1:
         return out, changed
     rep = out != 0
-    size = np.bincount(comp.ravel(), minlength=n)
-    n_rep = np.bincount(comp.ravel(), weights=rep.ravel(), minlength=n)
-    kept = n_rep < (1.0 - share) * size
+    kept = frac < 1.0 - share
     kept[0] = False  # (not a region of core)
     back = kept[comp] & rep & allowed[0]
     out[back] = 0
@@ -632,7 +646,7 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         trail = (touch & ~has_core)[rc] & (rc > 0) & allowed[0]
         out[trail] = 0
         changed[trail] = 2
-    whole = n_rep >= share * size
+    whole = frac >= share
     whole[0] = False
     todo = whole[comp] & ~rep
     if not todo.any() or reach_px <= 0:
@@ -975,6 +989,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2,
                            distance=dist, forbidden=_FORBIDDEN)
     region_rule = np.zeros(lab.shape, np.uint8)
+    rcomp, rfrac = region_shares(lab, in_core)
+    share_map = np.where(rcomp > 0, rfrac[rcomp], np.nan).astype(np.float32)
     if P.select_complete > 0:
         lab, region_rule = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
                                             P.select_complete_px)
@@ -1042,6 +1058,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     label[roi] = np.where(reg, lab, -1)
     completed = np.zeros((H, W), np.uint8)
     completed[roi] = np.where(reg, region_rule, 0)
+    region_share = np.full((H, W), np.nan, np.float32)
+    region_share[roi] = share_map
     seams = np.zeros((H, W), bool)
     seams[roi] = reg & ((np.diff(lab, axis=0, prepend=lab[:1]) != 0)
                         | (np.diff(lab, axis=1, prepend=lab[:, :1]) != 0))
@@ -1061,7 +1079,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons,
-                     lingering=lingering, completed=completed, static_evidence=evidence,
+                     lingering=lingering, completed=completed, region_share=region_share,
+                     static_evidence=evidence,
                      line_de=line_de,
                      static_need=np.where(mask, np.minimum(need, 255), 0).astype(np.uint8),
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
@@ -1071,4 +1090,4 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
            "Selection", "complete_regions", "median_parallax_px", "member_median", "min_witnesses",
-           "select_fill"]
+           "region_shares", "select_fill"]
