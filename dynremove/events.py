@@ -40,7 +40,8 @@ def decision_dtype(K: int) -> np.dtype:
     source), ``cand_B (K,) float32`` (neighbour confidence, entry of B),
     ``cand_cluster (K,) int16`` (DBSCAN label, −1 = noise), ``win_cluster``,
     ``win_weight`` (b_m), ``n_clusters``, ``consensus_dist`` (squared SIFT
-    distance of f_g(x_r) to the consensus), ``chosen_src`` (−1 when static).
+    distance ‖f_g(x_r) − f̂_g‖² to the winning cluster's weighted mean f̂_g, the
+    paper's consensus), ``chosen_src`` (−1 when static).
     """
     return np.dtype([
         ("scan", np.int32), ("step", np.int64), ("x", np.int32), ("y", np.int32),

@@ -473,7 +473,8 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         cd = d["consensus_dist"]
         txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
                + candidate_counts(d)
-               + (f"; SIFT distance to the consensus {cd:.3f}" if cd == cd else ""))
+               + (f"; squared SIFT distance to A_m's weighted mean f̂_g {cd:.3f}" if cd == cd
+                  else ""))
         ev.append((d["step"], txt))
     for r in h["replacements"]:
         # (the scan's own fill, which the fill by selection redoes: "fill:" above)
