@@ -534,3 +534,21 @@ def test_a_margin_pixel_written_from_a_source_is_not_called_kept():
     h["final_dynamic"] = False
     h["selection"]["source"] = 0
     assert vd.outcome_line(h) == "kept (not in the final mask)"
+
+
+def test_the_region_rule_is_told_with_its_share_or_as_a_margin_pixel():
+    """Code 2 of the region rule inside L gives the region's share against the run's
+    --select-complete; on a margin pixel outside L (no region, no share) it says the
+    pixel only continued a region kept whole."""
+    h = {"final_dynamic": False, "source_names": ["a.png", "b.png"], "replacements": [],
+         "gt": None, "x": 1, "y": 1, "t_r": 0.3, "decisions": [],
+         "selection": {"source": 0, "completed": 2, "region_share": 0.25,
+                       "region_rule": {"select_complete": 0.7, "select_complete_px": 6}}}
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")][0]
+    assert "replaced 25 % of its region of L" in fill and "under 30 %" in fill, fill
+    h["selection"]["region_share"] = None
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")][0]
+    assert "margin outside L" in fill and "%" not in fill, fill
+    # a kept pixel of a region replaced mostly, beyond the reach: the reach is named
+    h["selection"].update(completed=0, region_share=0.8)
+    assert "--select-complete-px 6 px" in vd.region_words(h["selection"])

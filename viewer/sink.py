@@ -445,10 +445,11 @@ class RerunSink(StepColumns):
                 self.rec.log(self.p(P.RESULT_REGION_SHARE), rr.DepthImage(
                     _quantised(sel.region_share, P.P_SCALE), meter=float(P.P_SCALE),
                     colormap="viridis", depth_range=(0.0, float(P.P_SCALE))),
+                    # (each value in the type the run's params are logged with: Rerun
+                    # gives a component one type per recording)
                     rr.AnyValues(select_complete=float(params.get("select_complete",
                                                                   float("nan"))),
-                                 select_complete_px=float(params.get("select_complete_px",
-                                                                     float("nan")))),
+                                 select_complete_px=int(params.get("select_complete_px", -1))),
                     static=True)
             self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)

@@ -179,7 +179,8 @@ _STAGE_WORDS = {"clean": "the L clean-up", "votes": "the border votes",
 
 
 def verdict_lines(h: dict[str, Any]) -> list[str]:
-    """At most five lines, in words: why the pixel ended up as it did.
+    """A few lines (at most five, then the static 3-D test's in the history's head), in
+    words: why the pixel ended up as it did.
 
     1. the scans' verdict with M vs t_r and what neighbouring patch writes had
        done to it before its turn; 2. the winning cluster A_m (size, sources,
@@ -242,7 +243,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                          f"; in the final mask: {'yes' if st[names[-1]] else 'no'}")
         else:
             kept = ", ".join(_STAGE_WORDS.get(b, b) for b in names[1:] if b != "select")
-            lines.append(f"after the scans: kept {_label(st[names[0]])} by {kept}")
+            lines.append(f"after the scans: still {_label(st[names[0]])}: not changed by {kept}")
     sel = h.get("selection") or {}
     if "source" in sel:
         k = sel["source"]
@@ -270,9 +271,11 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         elif sel.get("completed") == 2:
             region = region_words(sel)
             lines.append("fill: reference kept — the photomontage took a source here, but "
-                         "kept the reference on the rest of its region of L "
-                         "(--select-complete): static, as the rest"
-                         + (f"; {region}" if region else ""))
+                         + ("kept the reference on the rest of its region of L "
+                            f"(--select-complete): static, as the rest; {region}" if region
+                            else "this pixel, in the fill's margin outside L, only continued "
+                            "the source of a region of L that keeps the reference whole "
+                            "(--select-complete): it keeps it too"))
         else:
             lines.append("fill: reference kept" + (" (not in the final mask)"
                                                      if not h.get("final_dynamic") else ""))
@@ -350,17 +353,19 @@ def region_words(sel: dict[str, Any]) -> str | None:
     head = f"the graph cut replaced {100 * f:.0f} % of its region of L"
     if not isinstance(share, float) or share != share or share <= 0:
         return head + " (--select-complete 0: no region rule)"
+    lo, hi = 100 * (1 - share), 100 * share
     if f >= share:
-        tail = f"at least --select-complete {share:g}: a mover, replaced whole"
+        tail = f"at least {hi:.0f} % (--select-complete {share:g}): a mover, replaced whole"
         if sel.get("source", 0) == 0 and not sel.get("completed"):
-            reach = (f"{px:g} px" if isinstance(px, float) and px == px else "the reach")
+            reach = (f"{px:g} px" if isinstance(px, (int, float)) and px == px
+                     else "its reach")
             tail += (f", but this pixel is farther than --select-complete-px {reach} from "
                      "its replaced pixels, or no source next to it may fill it")
     elif f < 1.0 - share:
-        tail = f"under 1 − {share:g}: static, the reference kept whole"
+        tail = (f"under {lo:.0f} % (1 − --select-complete {share:g}): static, the "
+                "reference kept whole")
     else:
-        tail = (f"between {100 * (1 - share):.0f} and {100 * share:.0f} %: each pixel as "
-                "the cut decided")
+        tail = f"between {lo:.0f} and {hi:.0f} %: each pixel as the cut decided"
     return f"{head} ({tail})"
 
 
@@ -394,8 +399,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     parts = [f"{what}: {', '.join(who)}" for code, what in groups if (who := named(code))]
     counted = sum(c in (1, 2) for c in ev.values())
     passed = bool(sel.get("explained"))
-    evidence = (f"{counted} of the {need} source{'s' if need > 1 else ''} needed show the "
-                "reference's content here (" + "; ".join(parts) + ")")
+    evidence = (f"{counted} of the {need} source{'s' if need > 1 else ''} needed count as "
+                "showing the reference's content here (" + "; ".join(parts) + ")")
     p = sel.get("ref_mover_p")
     if passed:
         why_not = ""
@@ -419,13 +424,13 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                 "candidates here, sampled through the sources' fields across L, disagree "
                 f"with the reference, and the photomontage took {_src_name(h, sel['source'] - 1)}")
     if replaced:
-        return "static 3-D structure test: not passed: " + evidence + why_not
+        region = region_words(sel) if not sel.get("completed") else None
+        return ("static 3-D structure test: not passed: " + evidence + why_not
+                + (f"; {region}" if region else ""))
     if sel.get("completed") == 2:
-        region = region_words(sel)
         return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
                 "photomontage took a source here, but the reference is kept with the rest "
-                "of its region of L, which the photomontage kept (--select-complete)"
-                + (f": {region}" if region else ""))
+                "of its region of L, which the photomontage kept (--select-complete)")
     region = region_words(sel)
     return ("static 3-D structure test: not passed (" + evidence + why_not + "), but the "
             "photomontage kept the reference: it was the cheapest label here (its distance "
@@ -480,11 +485,13 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         # (the scan's own fill, which the fill by selection redoes: "fill:" above)
         ev.append((r["step"], f"  scan {r['scan']} step {r['step']}: the scan wrote the patch "
                               f"of {r['src_name']} at ({r['src_x']},{r['src_y']}) here"
-                              + (" (its own fill; the final one is the fill above)"
+                              + (" (the scan's own fill, redone by the fill by selection: "
+                                 "its \"fill:\" line above is what the clean photo shows)"
                                  if "source" in (h.get("selection") or {}) else "")
-                              + f", score "
-                              f"{r['score']:.2f}" + (" (tie-break)" if r["tie_break"] else "")
-                              + f" among {r['n_patches']} patches"))
+                              + f", patch score {r['score']:.2f}"
+                              + (" (tie-break)" if r["tie_break"] else "")
+                              + (f" among {r['n_patches']} patches" if r["n_patches"] != 1
+                                 else " (the only candidate patch)")))
     by_scan: dict[int, list[dict]] = {}
     for r in h["covered_by"]:
         by_scan.setdefault(r["scan"], []).append(r)
