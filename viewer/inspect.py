@@ -510,8 +510,8 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     ``region_rule``, the run's --select-complete and --select-complete-px),
     ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
     its own frame: where the flow followed the reference's mover into it); absent
-    keys when the run had no
-    selection step (or, for ``inpainted``, was recorded before it was logged)."""
+    keys when the run had no selection step (or, for ``inpainted``, was recorded
+    before it was logged)."""
     store, p = load_store(path), P.Paths(root)
     out = {}
     for key, rel in (("source", P.RESULT_SOURCE), ("explained", P.RESULT_EXPLAINED),

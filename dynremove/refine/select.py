@@ -642,8 +642,9 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         # with no pixel of ``core`` left, next to a reverted pixel
         m, rc = cv2.connectedComponents((out != 0).astype(np.uint8), connectivity=8)
         has_core = np.bincount(rc[core], minlength=m) > 0
+        near_back = cv2.dilate(back.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
         touch = np.zeros(m, bool)
-        touch[np.unique(rc[cv2.dilate(back.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0])] = True
+        touch[np.unique(rc[near_back])] = True
         trail = (touch & ~has_core)[rc] & (rc > 0) & allowed[0]
         out[trail] = 0
         changed[trail] = 2
