@@ -234,6 +234,16 @@ def test_the_region_rule_is_logged_and_told(tmp_path):
     np.testing.assert_allclose(q[~none] / P.P_SCALE, r.selection.region_share[~none],
                                atol=0.5 / P.P_SCALE)
     assert sel["region_rule"]["select_complete"] == [0.7]
+    # what the cut weighed: the core's maps, quantised (none outside the fill's region)
+    for key, names in (("data_cost", ("reference", "best_source")),
+                       ("support", ("reference", "sources"))):
+        for name, core in zip(names, getattr(r.selection, key)):
+            q = sel[key][name]
+            none = q == P.DE_NONE
+            np.testing.assert_array_equal(none, np.isnan(core), err_msg=f"{key}/{name}")
+            np.testing.assert_allclose(q[~none] / P.DE_SCALE, core[~none],
+                                       atol=0.5 / P.DE_SCALE, err_msg=f"{key}/{name}")
+    assert (~np.isnan(r.selection.data_cost[0])).sum() > 1000
 
 
 def test_pixel_outside_the_image(fabricated, capsys):

@@ -552,3 +552,19 @@ def test_the_region_rule_is_told_with_its_share_or_as_a_margin_pixel():
     # a kept pixel of a region replaced mostly, beyond the reach: the reach is named
     h["selection"].update(completed=0, region_share=0.8)
     assert "--select-complete-px 6 px" in vd.region_words(h["selection"])
+
+
+def test_what_the_cut_weighed_is_told_with_the_consensus_or_the_suspect():
+    """Where the photomontage kept the reference as the cheapest label, inspect gives
+    the two data costs and, where the reference took part in the fill's colour
+    consensus, the two supports that set them (a trial asked why the reference won)."""
+    sel = {"data_cost": {"reference": 0.0, "best_source": 42.6},
+           "support": {"reference": 3.24, "sources": 1.71}}
+    w = vd.weighed_words(sel)
+    assert "reference 0.0" in w and "cheapest source 42.6" in w and "3.24" in w \
+        and "1.71" in w, w
+    sel["support"] = {}
+    assert "--select-ref-cost" in vd.weighed_words(sel)
+    sel["data_cost"] = {"reference": 30.0}
+    assert "no source may fill it" in vd.weighed_words(sel)
+    assert vd.weighed_words({}) is None

@@ -508,6 +508,8 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     replaced almost whole; 2: the reverse), ``region_share`` (uint16: the share of
     the pixel's region of L the graph cut replaced × P_SCALE, DE_NONE outside; with
     ``region_rule``, the run's --select-complete and --select-complete-px),
+    ``data_cost`` and ``support`` (dicts of uint16 maps × DE_SCALE: what the graph
+    cut weighed, ``Selection.data_cost`` and ``Selection.support``),
     ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
     its own frame: where the flow followed the reference's mover into it); absent
     keys when the run had no selection step (or, for ``inpainted``, was recorded
@@ -546,6 +548,12 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     rows = _image_rows(store, p(P.RESULT_REF_MOVER_P), "DepthImage", index=None)
     if rows:
         out["ref_mover_p"] = rows[0][1]
+    for key, rel, names in (("data_cost", P.RESULT_DATA_COST, ("reference", "best_source")),
+                            ("support", P.RESULT_SUPPORT, ("reference", "sources"))):
+        got = {n: rows[0][1] for n in names
+               if (rows := _image_rows(store, p(f"{rel}/{n}"), "DepthImage", index=None))}
+        if got:
+            out[key] = got
     rows = _image_rows(store, p(P.RESULT_REGION_SHARE), "DepthImage", index=None)
     if rows:
         out["region_share"] = rows[0][1]
@@ -674,6 +682,9 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
                       if int(a[y, x]) != P.DE_NONE}
         elif k == "followed":  # in the sources' frames: told at (x, y) by the reasons
             continue
+        elif k in ("data_cost", "support"):  # {name: ΔE or support} where defined
+            sel[k] = {n: float(a[y, x]) / P.DE_SCALE for n, a in v.items()
+                      if int(a[y, x]) != P.DE_NONE}
         elif k in ("ref_mover_p", "region_share"):
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.P_SCALE
         elif k in ("thresholds", "region_rule"):

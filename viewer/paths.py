@@ -127,6 +127,12 @@ RESULT_COMPLETED = "result/selection/completed"  # 1/2: replaced/kept with its r
 # round(share · P_SCALE), DE_NONE outside the regions), --select-complete and
 # --select-complete-px as values
 RESULT_REGION_SHARE = "result/selection/region_share"
+# what the graph cut weighed inside the fill's region (uint16, round(x · DE_SCALE),
+# DE_NONE where not defined): data_cost/{reference,best_source}, the data costs (ΔE);
+# support/{reference,sources}, the fill's colour consensus support of the reference
+# and of the best source (none where the reference was the suspect)
+RESULT_DATA_COST = "result/selection/data_cost"
+RESULT_SUPPORT = "result/selection/support"
 RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV inpainting
 # the static 3-D structure test inside L: per source, whether it shows the reference's
 # content (EVIDENCE codes) and the best CIE76 ΔE along its epipolar line (uint16,

@@ -451,6 +451,16 @@ class RerunSink(StepColumns):
                                                                   float("nan"))),
                                  select_complete_px=int(params.get("select_complete_px", -1))),
                     static=True)
+            for rel, arr, names in ((P.RESULT_DATA_COST, getattr(sel, "data_cost", None),
+                                     ("reference", "best_source")),
+                                    (P.RESULT_SUPPORT, getattr(sel, "support", None),
+                                     ("reference", "sources"))):
+                if arr is None:
+                    continue
+                for name, a in zip(names, arr):
+                    self.rec.log(self.p(f"{rel}/{name}"), rr.DepthImage(
+                        _quantised(a, P.DE_SCALE), meter=float(P.DE_SCALE),
+                        colormap="viridis"), static=True)
             self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
                  ).astype(np.uint8)), static=True)

@@ -369,6 +369,28 @@ def region_words(sel: dict[str, Any]) -> str | None:
     return f"{head} ({tail})"
 
 
+def weighed_words(sel: dict[str, Any]) -> str | None:
+    """What the graph cut weighed at a pixel of the fill's region: the data costs of
+    the reference and of the cheapest source, and the supports of the fill's colour
+    consensus that set them; None where the recording has no costs there."""
+    cost, sup = sel.get("data_cost") or {}, sel.get("support") or {}
+    if "reference" not in cost:
+        return None
+    txt = f"data cost of the reference {cost['reference']:.1f}, " + (
+        f"of the cheapest source {cost['best_source']:.1f} (ΔE to the consensus, plus "
+        "--select-kappa and --select-gamma × its P(mover))" if "best_source" in cost
+        else "no source may fill it")
+    if "reference" in sup and "sources" in sup:
+        txt += (f"; the consensus: the reference's support {sup['reference']:.2f} (its "
+                "weight 1 − P(mover), plus each source that agrees with it or votes it "
+                f"static by flow or epipolar line) against {sup['sources']:.2f} for the "
+                "best-supported source")
+    else:
+        txt += ("; the reference was the suspect here: the consensus is the sources' own, "
+                "and keeping the reference costs --select-ref-cost")
+    return txt
+
+
 def static_test_line(h: dict[str, Any]) -> str | None:
     """The fill's static 3-D structure test at a pixel of L, in words (None outside
     L or for a run without it): how many sources had to show the reference's content
@@ -431,10 +453,11 @@ def static_test_line(h: dict[str, Any]) -> str | None:
         return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
                 "photomontage took a source here, but the reference is kept with the rest "
                 "of its region of L, which the photomontage kept (--select-complete)")
-    region = region_words(sel)
+    region, weighed = region_words(sel), weighed_words(sel)
     return ("static 3-D structure test: not passed (" + evidence + why_not + "), but the "
             "photomontage kept the reference: it was the cheapest label here (its distance "
-            "to the sources' consensus, with the seams)" + (f"; {region}" if region else ""))
+            "to the sources' consensus, with the seams" + (f": {weighed}" if weighed else "")
+            + ")" + (f"; {region}" if region else ""))
 
 
 def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:

@@ -130,6 +130,14 @@ class Selection:
     # the share of each pixel's region of L that the graph cut replaced, before that
     # rule (``region_shares``), float32 in [0, 1]; NaN outside the regions
     region_share: npt.NDArray[np.float32] | None = None
+    # what the graph cut weighed at each pixel of the region, float32 (NaN outside it):
+    # data_cost (2, H, W), the reference's and the cheapest source's (CIE76 ΔE, with
+    # κ and γ·P(mover); NaN where no source may fill); support (2, H, W), the fill's
+    # colour consensus: the reference's (itself and the sources' static votes) and the
+    # best source's (the sources agreeing with it), NaN where the reference was the
+    # suspect (its consensus left it out)
+    data_cost: npt.NDArray[np.float32] | None = None
+    support: npt.NDArray[np.float32] | None = None
     # the static 3-D structure test inside L (``explained``), per source (S, H, W)
     # uint8: EVIDENCE[code] (0 outside L); the best CIE76 ΔE of the reference's
     # content along the source's epipolar line (S, H, W) float32 (NaN where not
@@ -987,6 +995,14 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     D[0] = np.where(own.any(0) & in_core, np.maximum(D[0], 2 * _DE_CAP), D[0])
     D[0, ~reg] = 0.0
 
+    # what the cut weighs (for the debugger)
+    d_src = np.where(D[1:] < _FORBIDDEN, D[1:], np.inf).min(0)
+    cost_map = np.stack([np.where(reg, D[0], np.nan),
+                         np.where(reg & np.isfinite(d_src), d_src, np.nan)]).astype(np.float32)
+    sup_map = np.stack([np.where(reg & ~suspect, support[0], np.nan),
+                        np.where(reg & ~suspect, support[1:].max(0), np.nan)]
+                       ).astype(np.float32)
+
     # 4. graph cut, 5. blend
     lab = expansion_labels(D.astype(np.float64), labs, beta=P.select_beta, cycles=2,
                            distance=dist, forbidden=_FORBIDDEN)
@@ -1062,6 +1078,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     completed[roi] = np.where(reg, region_rule, 0)
     region_share = np.full((H, W), np.nan, np.float32)
     region_share[roi] = share_map
+    data_cost = np.full((2, H, W), np.nan, np.float32)
+    data_cost[:, y0:y1, x0:x1] = cost_map
+    sup = np.full((2, H, W), np.nan, np.float32)
+    sup[:, y0:y1, x0:x1] = sup_map
     seams = np.zeros((H, W), bool)
     seams[roi] = reg & ((np.diff(lab, axis=0, prepend=lab[:1]) != 0)
                         | (np.diff(lab, axis=1, prepend=lab[:, :1]) != 0))
@@ -1082,6 +1102,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons,
                      lingering=lingering, completed=completed, region_share=region_share,
+                     data_cost=data_cost, support=sup,
                      static_evidence=evidence,
                      line_de=line_de,
                      static_need=np.where(mask, np.minimum(need, 255), 0).astype(np.uint8),
