@@ -421,6 +421,7 @@ class RerunSink(StepColumns):
                          rr.SegmentationImage(np.asarray(stage, np.uint8)), static=True)
         sel = getattr(result, "selection", None)
         if sel is not None:  # the fill by selection (default preset)
+            params = dict(getattr(result, "params", {}) or {})
             src_names = list(getattr(self, "src_names", []))
             self.rec.log(self.p(P.RESULT_SOURCE), rr.AnnotationContext(
                 [(0, "reference kept", (0, 0, 0, 0))]
@@ -441,7 +442,6 @@ class RerunSink(StepColumns):
                      (2, "kept with its region of L", (0, 160, 255, 160))]),
                     rr.SegmentationImage(np.asarray(sel.completed, np.uint8)), static=True)
             if getattr(sel, "region_share", None) is not None:
-                params = dict(getattr(result, "params", {}) or {})
                 self.rec.log(self.p(P.RESULT_REGION_SHARE), rr.DepthImage(
                     _quantised(sel.region_share, P.P_SCALE), meter=float(P.P_SCALE),
                     colormap="viridis", depth_range=(0.0, float(P.P_SCALE))),
@@ -489,7 +489,6 @@ class RerunSink(StepColumns):
                         colormap="viridis", depth_range=(0.0, 30.0 * P.DE_SCALE)),
                         static=True)
             if getattr(sel, "static_need", None) is not None:
-                params = dict(getattr(result, "params", {}) or {})
                 self.rec.log(self.p(P.RESULT_STATIC_NEED),
                              rr.SegmentationImage(np.asarray(sel.static_need, np.uint8)),
                              rr.AnyValues(select_search_de=float(params.get("select_search_de",

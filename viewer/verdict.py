@@ -257,7 +257,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                    "the sources that saw the background filled it" if sel.get("lingering")
                    else " — the photomontage kept the reference here, but the rest of its "
                    "region of L was replaced (--select-complete): a piece of the same mover"
-                   + (f"; {region_words(sel)}" if region_words(sel) else "")
+                   + (f"; {region}" if (region := region_words(sel)) else "")
                    if sel.get("completed") == 1 else "")
             if not h.get("final_dynamic"):
                 why += (" — outside the final mask: the value written is within the fill's "

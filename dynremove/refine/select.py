@@ -585,7 +585,8 @@ def region_shares(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_]
 
 
 def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
-                     allowed: npt.NDArray[np.bool_], share: float, reach_px: int
+                     allowed: npt.NDArray[np.bool_], share: float, reach_px: int, *,
+                     regions: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.uint8]]:
     """Decide each region of L whole where the graph cut decided most of it.
 
@@ -619,6 +620,8 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         (and ``1 − share`` the share under which it counts as kept).
     reach_px : int
         How far, in pixel steps, a replaced region's labels spread.
+    regions : (comp, frac), optional
+        ``region_shares(label, core)``, when the caller has it already.
 
     Returns
     -------
@@ -635,7 +638,7 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     """
     out = label.copy()
     changed = np.zeros(label.shape, np.uint8)
-    comp, frac = region_shares(label, core)
+    comp, frac = region_shares(label, core) if regions is None else regions
     if len(frac) <= 1:
         return out, changed
     rep = out != 0
@@ -1011,7 +1014,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     share_map = np.where(rcomp > 0, rfrac[rcomp], np.nan).astype(np.float32)
     if P.select_complete > 0:
         lab, region_rule = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
-                                            P.select_complete_px)
+                                            P.select_complete_px, regions=(rcomp, rfrac))
     rep = lab != 0
     movers = np.zeros((S, H, W), bool)
     d_cons = delta_e(labs[1:], cons)
