@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import os
 import re
 import signal
@@ -88,6 +89,26 @@ def parse_positive(s: str) -> int:
     v = _integer(s)
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def parse_fps(s: str) -> float:
+    """Frames per second: a finite number in (0, 100] (a GIF stores 10 ms steps)."""
+    try:
+        v = float(s)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
+    if not (math.isfinite(v) and 0.0 < v <= 100.0):
+        raise argparse.ArgumentTypeError(f"must be a number of frames per second in (0, 100], "
+                                         f"got {s}")
+    return v
+
+
+def parse_side(s: str) -> int:
+    """A side in pixels, at least 16."""
+    v = _integer(s)
+    if v < 16:
+        raise argparse.ArgumentTypeError(f"must be at least 16 px, got {v}")
     return v
 
 
@@ -229,8 +250,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output folder (default: out/<the input's name>: out/tim6 for "
                         "tim6/frames, so that runs on other scenes keep theirs)")
     r.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
-                   help="analyse a copy whose longer side is at most PX (default: only above "
-                        "1280 px; 0 or 'none' = never); clean.png keeps the full size "
+                   help="analyse a copy whose longer side is at most PX (default, or 'auto': "
+                        "only above 1280 px; 0 or 'none' = never); clean.png keeps the full size "
                         "unless --output-size working")
     r.add_argument("--output-size", choices=("full", "working"), default="full",
                    help="clean.png at the input's full resolution (default; only the "
@@ -281,8 +302,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="reference of every set: index (0-based; negative counts from the "
                          "end), file name or 'auto' (default: middle)")
     bt.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
-                    help="downscale to at most PX (0 or 'none' = full size; default: only "
-                         "above 1280 px)")
+                    help="downscale to at most PX (0 or 'none' = full size; default, or "
+                         "'auto': only above 1280 px)")
     bt.add_argument("-q", "--quiet", action="store_true", help="no per-set lines on stderr")
     add_input_flags(bt, valid_mask=False)
     add_param_flags(bt, listed=False)
@@ -346,8 +367,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sets in parallel (joblib; -1 = all cores; default 1)")
     e.add_argument("--json", default=None, metavar="FILE", help="write the report here")
     e.add_argument("--max-side", type=parse_max_side, default=None, metavar="PX",
-                   help="downscale to at most PX (0 or 'none' = full size; default: only "
-                        "above 1280 px)")
+                   help="downscale to at most PX (0 or 'none' = full size; default, or "
+                        "'auto': only above 1280 px)")
     e.add_argument("--ref", default=None, type=parse_set_ref,
                    help="reference of every set: index (0-based; negative counts from the "
                         "end), file name or 'auto' (as run --ref auto; its mask must exist "
@@ -437,8 +458,10 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("recording", help="a .rrd file")
     x.add_argument("--gif", "--out", dest="out", required=True, metavar="OUT",
                    help="output .gif or .mp4")
-    x.add_argument("--fps", type=float, default=10.0, help="frames per second (default 10)")
-    x.add_argument("--max-side", type=int, default=480, help="longest side in px (default 480)")
+    x.add_argument("--fps", type=parse_fps, default=10.0,
+                   help="frames per second, in (0, 100] (default 10)")
+    x.add_argument("--max-side", type=parse_side, default=480, metavar="PX",
+                   help="longest side of the frames in px, at least 16 (default 480)")
     x.add_argument("--root", default="",
                    help="which run of a --compare recording: runs/main or runs/compare (or "
                         "main / compare); a plain recording has none")

@@ -39,7 +39,7 @@ class Params:
     """
 
     # --- features (Sec. 3.1) -------------------------------------------------
-    patch_size: int = 13  # p      : patch side for f_c, f_g and removal (the paper gives no value; paper preset 9)
+    patch_size: int = 13  # p      : patch side in px (odd) for f_c, f_g and removal (the paper gives no value; paper preset 9)
     sift_scale: float = 0.2  # SIFT / set-max is multiplied by this (unit of σ_g; measured)
     hog_bins: int = 8  # bins of the rotation-invariant HoG g_h
     hog_scale: float = 10.0  # unit-L2 HoG is multiplied by this (unit of σ_h)

@@ -382,6 +382,23 @@ def test_export_refuses_other_suffixes(fabricated, tmp_path, capsys):
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
+@pytest.mark.parametrize("flag", [["--fps", "0"], ["--fps", "-1"], ["--fps=nan"],
+                                  ["--max-side", "5"]])
+def test_export_refuses_bad_rates_and_sizes_and_keeps_the_old_file(fabricated, tmp_path,
+                                                                    capsys, flag):
+    """A bad --fps or --max-side is a one-line error (exit 2) before any drawing, and
+    the file already at the output path is left as it was."""
+    old = tmp_path / "keep.gif"
+    old.write_bytes(b"GIF89a not touched")
+    with pytest.raises(SystemExit) as e:
+        main(["export", str(fabricated["path"]), "--gif", str(old)] + flag)
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and flag[0].split("=")[0] in err[0]
+    assert old.read_bytes() == b"GIF89a not touched"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.gif"]
+
+
 def test_failures_print_steps_to_jump_to(fabricated):
     items = vi.failures(fabricated["path"], top=3)
     assert items and all(len(e["steps"]) == 3 for e in items)

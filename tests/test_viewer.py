@@ -416,6 +416,26 @@ def test_export_gif_and_mp4(run, tmp_path):
     cap.release()
 
 
+def test_failed_export_keeps_the_file_that_was_there(run, tmp_path, monkeypatch):
+    """The export is written under a temporary name and renamed: when writing fails
+    halfway, the old file is intact and no temporary file is left behind."""
+    out = tmp_path / "removal.gif"
+    out.write_bytes(b"an earlier export")
+
+    def half_then_fail(frames, path, *, fps=10):
+        Path(path).write_bytes(b"GIF89a half")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(export, "write_gif", half_then_fail)
+    with pytest.raises(OSError, match="disk full"):
+        export.export_gif(run["path"], out, fps=5, max_side=120)
+    assert out.read_bytes() == b"an earlier export"
+    assert [p.name for p in tmp_path.iterdir()] == ["removal.gif"]
+    with pytest.raises(ValueError, match="fps"):
+        export.export_gif(run["path"], out, fps=0, max_side=120)
+    assert out.read_bytes() == b"an earlier export"
+
+
 def gif_frames(path) -> list[np.ndarray]:
     """Every frame of a GIF as (H, W, 3) uint8 BGR, decoded by Pillow (a declared
     dependency; not every OpenCV build reads GIF animations)."""

@@ -11,6 +11,9 @@ MP4: ``cv2.VideoWriter`` ('mp4v').
 
 from __future__ import annotations
 
+import math
+import os
+import tempfile
 from pathlib import Path
 
 import cv2
@@ -108,19 +111,48 @@ def export_gif(path_rrd: str | Path, out_path: str | Path, *, fps: float = 10,
     max_side : longest side of the output, in pixels.
     """
     out_path = Path(out_path)
-    if out_path.suffix.lower() not in (".gif", ".mp4"):
+    suffix = out_path.suffix.lower()
+    if suffix not in (".gif", ".mp4"):
         raise ValueError(f"{out_path}: the output must end in .gif or .mp4")
+    _check_fps(fps)
     frames = render_frames(path_rrd, max_side=max_side, root=root)
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    if out_path.suffix.lower() == ".mp4":
-        write_mp4(frames, out_path, fps=fps)
-    else:
-        write_gif(frames, out_path, fps=fps)
+    # written under a temporary name beside it, then renamed: a failed or cut
+    # export leaves the file that was there (the suffix picks OpenCV's container)
+    fd, tmp = tempfile.mkstemp(prefix=f".{out_path.name}.", suffix=suffix, dir=out_path.parent)
+    os.close(fd)
+    try:
+        if suffix == ".mp4":
+            write_mp4(frames, tmp, fps=fps)
+        else:
+            write_gif(frames, tmp, fps=fps)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs follow the umask
+        os.replace(tmp, out_path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
     return out_path
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _check_fps(fps: float) -> None:
+    """ValueError unless ``fps`` is a finite number of frames per second in (0, 100]."""
+    if not (math.isfinite(fps) and 0.0 < fps <= 100.0):
+        raise ValueError(f"fps must be a number in (0, 100], got {fps}")
+
+
 def write_mp4(frames: list[np.ndarray], out_path: str | Path, *, fps: float = 10) -> None:
-    """Frames (BGR, same size) → MP4 ('mp4v'); sizes are padded to even numbers."""
+    """Frames (BGR, same size) → MP4 ('mp4v'); sizes are padded to even numbers.
+    ValueError for ``fps`` outside (0, 100]."""
+    _check_fps(fps)
     h, w = frames[0].shape[:2]
     H2, W2 = h + h % 2, w + w % 2
     vw = cv2.VideoWriter(str(out_path), cv2.VideoWriter_fourcc(*"mp4v"), float(fps), (W2, H2))
@@ -155,7 +187,9 @@ def gif_palette(frames: list[np.ndarray], n_colors: int = 256) -> Image.Image:
 
 def write_gif(frames: list[np.ndarray], out_path: str | Path, *, fps: float = 10,
               loop: int = 0) -> None:
-    """Frames (BGR uint8, same size) → animated GIF89a with one global palette."""
+    """Frames (BGR uint8, same size) → animated GIF89a with one global palette.
+    ValueError for no frames, frames of different sizes, or ``fps`` outside (0, 100]."""
+    _check_fps(fps)
     if not frames:
         raise ValueError("no frames to write")
     h, w = frames[0].shape[:2]
