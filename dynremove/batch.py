@@ -143,11 +143,19 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
     """clean.png, dynamic_mask.png (0/255), coverage.png and report.json, atomically.
 
     ``clean.png`` carries the reference photo's EXIF (orientation reset) and ICC
-    profile where it had them. ``reference``: how the reference was chosen
-    (merged into ``report["reference"]``); ``extra``: more top-level report entries.
+    profile where it had them, and its alpha channel where it has transparent pixels
+    (resized to the clean photo when that is smaller). ``reference``: how the
+    reference was chosen (merged into ``report["reference"]``); ``extra``: more
+    top-level report entries.
     """
     like = iset.paths[ref] if not getattr(iset, "video", None) else None
-    io.write_photo(out / "clean.png", res.clean, like=like)
+    clean = res.clean
+    alpha = io.read_alpha(like) if like is not None else None
+    if alpha is not None:
+        if alpha.shape != clean.shape[:2]:
+            alpha = cv2.resize(alpha, clean.shape[1::-1], interpolation=cv2.INTER_AREA)
+        clean = np.dstack([clean, alpha])
+    io.write_photo(out / "clean.png", clean, like=like)
     io.write_image(out / "dynamic_mask.png", res.dynamic.astype(np.uint8) * 255)
     n_src = max(1, len(iset.images) - 1)
     io.write_image(out / "coverage.png",

@@ -365,6 +365,48 @@ def _read_image_depth(path: Path, depth16: int | None = None
     """``read_image_valid``, and the bit depth a 16-bit image was read as (0 for
     any other image)."""
     path = Path(path)
+    img, alpha, notes, bits = _decode(path, depth16)
+    valid = content_mask(img, alpha)
+    partial = 0 if alpha is None else int(np.count_nonzero((alpha > 0) & (alpha < 255)))
+    if alpha is not None and valid is None:
+        notes.append(f"{path.name}: alpha channel dropped (no transparent pixels)"
+                     if not partial else
+                     f"{path.name}: alpha channel dropped ({partial} semi-transparent px "
+                     "taken at their stored colours, as if opaque)")
+    elif valid is not None:
+        how = "transparent (alpha 0) or black border" if alpha is not None else "black border"
+        notes.append(f"{path.name}: {100 * (1 - valid.mean()):.1f} % without content "
+                     f"({how}): never flagged, never used as fill"
+                     + (f"; {partial} semi-transparent px taken as opaque" if partial else ""))
+    return img, valid, notes, bits
+
+
+def read_alpha(path: str | os.PathLike) -> np.ndarray | None:
+    """The alpha channel of an image file, as its colours are read (upright, 8 bits).
+
+    Returns (H, W) uint8, or None when the file has no alpha channel, every pixel
+    of it is opaque (255), or the path is no file (a video's frame). Raises
+    ``InputError`` as ``read_image`` does.
+    ``dynremove run`` writes it into clean.png, so that a transparent border of
+    the reference stays transparent.
+    """
+    path = Path(path)
+    if path.suffix.lower() in (".jpg", ".jpeg", ".jpe") or not path.is_file():
+        return None  # (no alpha in a JPEG: not decoded a second time)
+    with open(path, "rb") as f:
+        head = np.frombuffer(f.read(32), np.uint8)
+    if head[:8].tobytes() == b"\x89PNG\r\n\x1a\n" and not _png_has_alpha(head):
+        return None  # (a PNG without an alpha channel, told by its header)
+    _, alpha, _, _ = _decode(path, None)
+    if alpha is None or not (alpha < 255).any():
+        return None
+    return alpha
+
+
+def _decode(path: Path, depth16: int | None
+            ) -> tuple[np.ndarray, np.ndarray | None, list[str], int]:
+    """An image file as (H, W, 3) uint8 BGR, upright; its alpha channel (H, W) uint8
+    or None; notes; the bit depth a 16-bit image was read as (0 for any other)."""
     bits = 0
     notes: list[str] = []
     if path.is_dir():
@@ -405,19 +447,7 @@ def _read_image_depth(path: Path, depth16: int | None = None
     elif img.shape[2] == 2:  # grey + alpha (Pillow "LA")
         alpha = img[:, :, 1]
         img = cv2.cvtColor(np.ascontiguousarray(img[:, :, 0]), cv2.COLOR_GRAY2BGR)
-    valid = content_mask(img, alpha)
-    partial = 0 if alpha is None else int(np.count_nonzero((alpha > 0) & (alpha < 255)))
-    if alpha is not None and valid is None:
-        notes.append(f"{path.name}: alpha channel dropped (no transparent pixels)"
-                     if not partial else
-                     f"{path.name}: alpha channel dropped ({partial} semi-transparent px "
-                     "taken at their stored colours, as if opaque)")
-    elif valid is not None:
-        how = "transparent (alpha 0) or black border" if alpha is not None else "black border"
-        notes.append(f"{path.name}: {100 * (1 - valid.mean()):.1f} % without content "
-                     f"({how}): never flagged, never used as fill"
-                     + (f"; {partial} semi-transparent px taken as opaque" if partial else ""))
-    return img, valid, notes, bits
+    return img, alpha, notes, bits
 
 
 def _read_with_pillow(path: Path, head: bytes) -> np.ndarray:
@@ -877,7 +907,8 @@ def photo_metadata(path: str | os.PathLike) -> dict:
 
 def write_photo(path: str | os.PathLike, img: np.ndarray, *, like: str | os.PathLike | None
                 ) -> None:
-    """Write a BGR image atomically, carrying ``like``'s EXIF and ICC profile (Pillow)."""
+    """Write a BGR or BGRA image atomically, carrying ``like``'s EXIF and ICC profile
+    (Pillow)."""
     meta = photo_metadata(like) if like is not None else {}
     if not meta:
         write_image(path, img)
@@ -894,7 +925,8 @@ def write_photo(path: str | os.PathLike, img: np.ndarray, *, like: str | os.Path
     # 1.0 s instead of 3.6 s, for a file 8 % larger (13.0 vs 12.0 MiB; level 3:
     # 1.4 s, 12.2 MiB); without metadata OpenCV writes it (0.6 s, 17 MiB)
     extra = {"JPEG": {"quality": 95}, "PNG": {"compress_level": 1}}.get(fmt, {})
-    Image.fromarray(np.ascontiguousarray(img[..., ::-1])).save(buf, format=fmt, **meta, **extra)
+    rgb = img[..., [2, 1, 0, 3]] if img.ndim == 3 and img.shape[2] == 4 else img[..., ::-1]
+    Image.fromarray(np.ascontiguousarray(rgb)).save(buf, format=fmt, **meta, **extra)
     _atomic_write_bytes(p, buf.getvalue())
 
 

@@ -232,7 +232,11 @@ def test_transparent_borders_are_never_flagged_or_filled(tmp_path, capsys, scene
     invalid = frames[ref][:, :, 3] == 0
     assert invalid.any()
     dyn = cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
-    clean = cv2.imread(str(out / "clean.png"))
+    clean_a = cv2.imread(str(out / "clean.png"), cv2.IMREAD_UNCHANGED)
+    # the reference's transparency is carried into clean.png, as it was
+    assert clean_a.shape == frames[ref].shape
+    np.testing.assert_array_equal(clean_a[:, :, 3], frames[ref][:, :, 3])
+    clean = clean_a[:, :, :3]
     assert not dyn[invalid].any()
     np.testing.assert_array_equal(clean[invalid], frames[ref][:, :, :3][invalid])
     assert rep["no_content_fraction"][paths[ref].name] == pytest.approx(invalid.mean(),
@@ -390,3 +394,7 @@ def test_rgba_png_with_an_exif_orientation_is_read_upright(tmp_path, orientation
     assert img.shape == twin.shape == ((64, 48, 3) if orientation in (6, 8) else (48, 64, 3))
     np.testing.assert_array_equal(img, twin)
     assert valid is not None and np.array_equal(~valid, (twin == 0).all(-1))
+    # read back for clean.png, the alpha is turned as the colours are
+    a = io.read_alpha(tmp_path / "a.png")
+    np.testing.assert_array_equal(a == 0, ~valid)
+    assert io.read_alpha(tmp_path / "b.png") is None
