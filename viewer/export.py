@@ -12,8 +12,6 @@ MP4: ``cv2.VideoWriter`` ('mp4v').
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import cv2
@@ -21,6 +19,7 @@ import numpy as np
 from PIL import Image
 
 from dynremove.errors import InputError
+from dynremove.io import atomic_path
 from viewer import inspect as vi
 from viewer import paths as P
 from viewer._images import overlay
@@ -116,31 +115,14 @@ def export_gif(path_rrd: str | Path, out_path: str | Path, *, fps: float = 10,
         raise ValueError(f"{out_path}: the output must end in .gif or .mp4")
     _check_fps(fps)
     frames = render_frames(path_rrd, max_side=max_side, root=root)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
     # written under a temporary name beside it, then renamed: a failed or cut
     # export leaves the file that was there (the suffix picks OpenCV's container)
-    fd, tmp = tempfile.mkstemp(prefix=f".{out_path.name}.", suffix=suffix, dir=out_path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(out_path, suffix=suffix) as tmp:
         if suffix == ".mp4":
             write_mp4(frames, tmp, fps=fps)
         else:
             write_gif(frames, tmp, fps=fps)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs follow the umask
-        os.replace(tmp, out_path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
     return out_path
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def _check_fps(fps: float) -> None:
