@@ -92,12 +92,16 @@ def parse_positive(s: str) -> int:
     return v
 
 
-def parse_fps(s: str) -> float:
-    """Frames per second: a finite number in (0, 100] (a GIF stores 10 ms steps)."""
+def _number(s: str) -> float:
     try:
-        v = float(s)
+        return float(s)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
+
+
+def parse_fps(s: str) -> float:
+    """Frames per second: a finite number in (0, 100] (a GIF stores 10 ms steps)."""
+    v = _number(s)
     if not (math.isfinite(v) and 0.0 < v <= 100.0):
         raise argparse.ArgumentTypeError(f"must be a number of frames per second in (0, 100], "
                                          f"got {s}")
@@ -114,10 +118,7 @@ def parse_side(s: str) -> int:
 
 def parse_fraction(s: str) -> float:
     """A fraction in [0, 1]."""
-    try:
-        v = float(s)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
+    v = _number(s)
     if not 0.0 <= v <= 1.0:
         raise argparse.ArgumentTypeError(f"must be a fraction in [0, 1], got {s}")
     return v
