@@ -188,7 +188,7 @@ def add_input_flags(ap: argparse.ArgumentParser, *, valid_mask: bool = True) -> 
                         "the whole clip)")
     g.add_argument("--pick", choices=("sharpest", "even"), default="sharpest",
                    help="video: the sharpest frame of each of N even windows (variance of "
-                        "the Laplacian), or the windows' centres")
+                        "the Laplacian), or the windows' centres (default: sharpest)")
     if valid_mask:
         g.add_argument("--valid-mask", default=None, metavar="PNG|DIR",
                        help="where the frames have content (white) and none (black): one "
@@ -293,7 +293,8 @@ def build_parser() -> argparse.ArgumentParser:
                     "DIR/summary.json. A set whose outputs exist with the same parameters "
                     "and inputs is skipped; a failing set is recorded in the summary and "
                     "the command exits 1 at the end.")
-    bt.add_argument("root", metavar="ROOT")
+    bt.add_argument("root", metavar="ROOT",
+                    help="folder searched for sets (itself included), or one video")
     bt.add_argument("--out", required=True, metavar="DIR", help="output folder")
     bt.add_argument("--jobs", type=parse_jobs, default=1, metavar="N",
                     help="sets in parallel (joblib; -1 = all cores; default 1)")
@@ -310,16 +311,23 @@ def build_parser() -> argparse.ArgumentParser:
     add_param_flags(bt, listed=False)
     bt.set_defaults(fn=cmd_batch)
 
-    d = sub.add_parser("demo", help="run on the built-in synthetic scene and print metrics")
+    d = sub.add_parser(
+        "demo", help="run on the built-in synthetic scene and print metrics",
+        description="Run the method (the default preset, or --preset) on the built-in "
+                    "synthetic scene (6 views "
+                    "640x360 with moving objects and a known background), write its "
+                    "outputs and a recording, and print the Jaccard of the mask and the "
+                    "PSNR inside the true mask.")
     d.add_argument("--out", default="out/demo", help="output folder (default: out/demo)")
-    d.add_argument("--scene-seed", type=int, default=0, help="seed of the synthetic scene (default 0)")
+    d.add_argument("--scene-seed", type=int, default=0, metavar="N",
+                   help="seed of the synthetic scene (default 0)")
     d.add_argument("--record", default="recordings/demo.rrd", metavar="FILE.rrd",
                    help="recording to write (default: recordings/demo.rrd)")
     d.add_argument("--no-record", action="store_true", help="do not write a recording")
     d.add_argument("--record-detail", choices=("default", "full"), default="default",
                    help="'full': candidates in the source views at every recorded "
                         "decision (see run --record-detail)")
-    d.add_argument("-q", "--quiet", action="store_true")
+    d.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     add_param_flags(d, listed=False)
     d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002, compare=None)
 

@@ -209,6 +209,9 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             if compare is not None:
                 sink_b = _make_sink(args, iset, gt, rec=rec, root="runs/compare")
                 where.stage = "during features"
+                # the compare run's notes are told apart from the main run's
+                warnings.showwarning = lambda message, *a, **k: _note(
+                    args, f"compare run: {message}", where.bar)
                 res_b = remove_dynamic(iset.images, ref=ref, params=compare, sink=sink_b,
                                        probes=probes,
                                        sample_static=args.sample_static, names=iset.names,
@@ -666,7 +669,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     _note(args, f"drawing a frame per snapshot of {rec} (a minute for a long run)")
     t0 = time.perf_counter()
     out = export_gif(rec, args.out, fps=args.fps, max_side=args.max_side, root=args.root)
-    print(f"wrote {out} ({time.perf_counter() - t0:.0f} s)")
+    print(f"wrote {out} (drawn in {time.perf_counter() - t0:.0f} s)")
     return EXIT_OK
 
 

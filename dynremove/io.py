@@ -665,8 +665,11 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
         matches = [i for i, q in enumerate(paths) if Path(q).resolve() == target]
         if not matches:
             why = "" if target.exists() else "; no such file"
-            raise InputError(f"--ref {ref}: is not one of the input images{why} (a bare "
-                             f"file name, e.g. {Path(ref).name}, matches the inputs by name)")
+            name = Path(ref).name
+            hint = (f"a bare file name, {name}, matches the inputs by name" if name in names
+                    else "the inputs: " + ", ".join(names[:8]) + (" …" if len(names) > 8
+                                                                 else ""))
+            raise InputError(f"--ref {ref}: is not one of the input images{why} ({hint})")
         return matches[0]
     matches = ([i for i, n in enumerate(names) if n == ref]
                or [i for i, n in enumerate(names) if Path(n).stem == ref])
@@ -752,6 +755,10 @@ def prepare_out_dir(out: str | os.PathLike, inputs: Sequence[str | os.PathLike] 
         raise InputError(f"--out {p}: cannot create ({e.strerror or e})") from None
     if not os.access(p, os.W_OK):
         raise InputError(f"--out {p}: not writable")
+    for n in (*RUN_OUTPUTS, "report.json"):
+        if (p / n).is_dir():
+            raise InputError(f"--out {p}: {p / n} is a folder, and the run writes a file "
+                             "of that name there; move it or choose another --out")
     return p
 
 

@@ -67,7 +67,7 @@ class Params:
     write: str = "patch"  # "patch": write p×p; "pixel": centre only
 
     # --- scans ---------------------------------------------------------------
-    max_scans: int = 1  # stop earlier when a scan finds no dynamic pixel (paper preset 4)
+    max_scans: int = 1  # at most this many scans, alternating direction; fewer when a scan finds no dynamic pixel (paper preset 4)
     update: bool = True  # update f, N and C after a write (Sec. 3.2.3)
     use_epipolar: bool = True  # λ3/λ8 terms on (off, or a source without F: the other terms rescaled to the same top score)
     use_hog: bool = True  # λ7 term on

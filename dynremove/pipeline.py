@@ -359,8 +359,9 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                             "None aligns: they may not show the reference's scene (check "
                             "the reference, --ref, and the photos), or overlap it too little"
                             if len(weak) == len(views) else
-                            "Photos of more overlap, or a larger --max-side than the "
-                            f"{W}x{H} analysed, give more matches"))
+                            "Photos that overlap more, or show more texture, give more "
+                            f"matches; so does a larger --max-side than the {W}x{H} "
+                            "analysed, where the photos were larger than that"))
         few = _seen_by_fewer_than_two(views, H, W) if len(views) >= 2 else 0.0
         if few >= 0.25:
             msgs.append(f"{100 * few:.0f} % of the reference is seen by fewer than two other "

@@ -785,6 +785,19 @@ def test_out_is_a_file(tmp_path, capsys, scene):
     assert f.read_text() == "keep me"
 
 
+def test_a_folder_in_the_place_of_an_output_is_refused_before_the_run(tmp_path, capsys,
+                                                                      scene):
+    """A fresh-user trial: a folder named report.json in --out failed after the whole
+    run, as an internal error (exit 1), with clean.png and the masks written and no
+    report. Now it is a one-line error before anything is computed or written."""
+    write_set(tmp_path / "s", scene.images[:3])
+    out = tmp_path / "o"
+    (out / "report.json").mkdir(parents=True)
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--out", out)
+    assert_input_error(rc, err, str(out / "report.json"), "is a folder")
+    assert sorted(p.name for p in out.iterdir()) == ["report.json"]
+
+
 def test_out_not_writable(tmp_path, capsys, scene):
     write_set(tmp_path / "s", scene.images[:3])
     ro = tmp_path / "ro"

@@ -315,8 +315,14 @@ def test_resolve_ref_by_path_name_stem_and_index(tmp_path, monkeypatch):
     assert io.resolve_ref(str(tmp_path / "c" / "other.jpg"), names, paths=paths) == 2
     assert io.resolve_ref("./c/other.jpg", names, paths=paths) == 2
     with pytest.raises(InputError, match=r"--ref /nowhere/x.jpg: is not one of the input "
-                                         r"images; no such file"):
+                                         r"images; no such file \(a bare file name, x.jpg, "):
         io.resolve_ref("/nowhere/x.jpg", names, paths=paths)
+    # a file of another set: its name is no input's, so the hint lists the inputs (it
+    # suggested the other set's name, which the next try refused)
+    with pytest.raises(InputError, match=r"--ref /nowhere/tim4.jpg: is not one of the input "
+                                         r"images; no such file \(the inputs: x.jpg, x.jpg, "
+                                         r"other.jpg\)"):
+        io.resolve_ref("/nowhere/tim4.jpg", names, paths=paths)
     for ref in ("x.jpg", "x"):
         with pytest.raises(InputError) as e:
             io.resolve_ref(ref, names, paths=paths)

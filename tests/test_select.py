@@ -1004,6 +1004,25 @@ def test_completion_removes_the_fragments_of_a_real_mover(davis, tmp_path):
     assert runs[0.7][2] <= runs[0.0][2] + 0.02  # damage, % of the photo
 
 
+def _tim6_with(name: str):
+    """The tim6 burst run with ``name`` as the reference: (reference image, Result)."""
+    from conftest import data_dir
+    from dynremove import io
+
+    d = data_dir() / "bursts" / "tim6" / "frames"
+    if not d.is_dir():
+        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA)")
+    iset = io.load_image_set([d])
+    ref = [p.name for p in iset.paths].index(name)
+    return iset.images[ref], remove_dynamic(iset.images, ref=ref)
+
+
+def _cup_red(bgr: np.ndarray) -> np.ndarray:
+    """Where a BGR image shows the red of tim6's cup (saturated, hue near 0)."""
+    hsv = cv2.cvtColor(bgr, cv2.COLOR_BGR2HSV)
+    return ((hsv[..., 0] < 8) | (hsv[..., 0] > 170)) & (hsv[..., 1] > 120)
+
+
 def test_a_textured_mover_that_moved_is_removed_whatever_the_homography_liked():
     """tim6 with tim3.jpg as the reference: the cup (and the tube before it) stand in
     one place in tim1-tim3 and in another in tim4-tim6. Their lettering held most of
@@ -1012,25 +1031,13 @@ def test_a_textured_mover_that_moved_is_removed_whatever_the_homography_liked():
     clean photo (none of it flagged). With the homography refitted on keypoints
     spread over the photo (``geometry.spread_homography``) the cup is removed.
     The box is drawn by hand inside the cup of tim3.jpg (720×960)."""
-    from conftest import data_dir
-    from dynremove import io
-
-    d = data_dir() / "bursts" / "tim6" / "frames"
-    if not d.is_dir():
-        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA)")
-    iset = io.load_image_set([d])
-    ref = [p.name for p in iset.paths].index("tim3.jpg")
-    r = remove_dynamic(iset.images, ref=ref)
+    reference, r = _tim6_with("tim3.jpg")
     cup = np.zeros(r.dynamic.shape, bool)
     cup[630:760, 135:205] = True
     assert r.dynamic[cup].mean() > 0.8, r.dynamic[cup].mean()
     # and the cup's red is gone from the clean photo there
-    hsv = cv2.cvtColor(r.clean, cv2.COLOR_BGR2HSV)
-    red = ((hsv[..., 0] < 8) | (hsv[..., 0] > 170)) & (hsv[..., 1] > 120)
-    red_in = cv2.cvtColor(iset.images[ref], cv2.COLOR_BGR2HSV)
-    red_in = ((red_in[..., 0] < 8) | (red_in[..., 0] > 170)) & (red_in[..., 1] > 120)
-    assert red_in[cup].mean() > 0.2  # the input shows the cup's red there
-    assert red[cup].mean() < 0.02, red[cup].mean()
+    assert _cup_red(reference)[cup].mean() > 0.2  # the input shows the cup's red there
+    assert _cup_red(r.clean)[cup].mean() < 0.02, _cup_red(r.clean)[cup].mean()
 
 
 def test_a_lingering_movers_lettering_is_filled_with_the_rest_of_it():
@@ -1042,19 +1049,11 @@ def test_a_lingering_movers_lettering_is_filled_with_the_rest_of_it():
     letters replaced, when measured). Specks the static test keeps inside a
     lingering mover, under one scan patch, are the mover's. The box is drawn by
     hand around the "Ho" of tim4.jpg (720×960)."""
-    from conftest import data_dir
-    from dynremove import io
-
-    d = data_dir() / "bursts" / "tim6" / "frames"
-    if not d.is_dir():
-        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA)")
-    iset = io.load_image_set([d])
-    ref = [p.name for p in iset.paths].index("tim4.jpg")
-    r = remove_dynamic(iset.images, ref=ref)
+    reference, r = _tim6_with("tim4.jpg")
     box = (slice(745, 795), slice(315, 375))
-    hsv = cv2.cvtColor(iset.images[ref], cv2.COLOR_BGR2HSV)[box]
+    hsv = cv2.cvtColor(reference, cv2.COLOR_BGR2HSV)[box]
     letters = (hsv[..., 1] < 60) & (hsv[..., 2] > 190)
-    red = ((hsv[..., 0] < 8) | (hsv[..., 0] > 170)) & (hsv[..., 1] > 120)
+    red = _cup_red(reference)[box]
     assert letters.sum() > 300 and red.sum() > 600  # the box holds the letters on red
     assert r.selection.replaced[box][letters].mean() > 0.95
     lab = cv2.cvtColor(r.clean.astype(np.float32) / 255, cv2.COLOR_BGR2Lab)[box]

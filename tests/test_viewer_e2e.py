@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 
+import cv2
 import numpy as np
 import pytest
 
@@ -110,6 +111,22 @@ def test_compare_logs_two_runs_side_by_side(scene, tmp_path):
     assert vi.read_run_info(rec, root="runs/compare")["params"]["t_r"] == preset("paper").t_r
     assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o2"),
                  "--compare", "no_such_field=1", "--record", str(tmp_path / "x.rrd")]) == 2
+
+
+def test_the_compare_runs_notes_are_labelled(scene, tmp_path, capsys):
+    """A fresh-user trial: --compare printed the second run's notes as the main run's,
+    so the same note came twice and two "inpainted" counts could not be told apart.
+    Two photos: each run notes it, the compare run's note says whose it is."""
+    d = tmp_path / "two"
+    d.mkdir()
+    for i in (scene.ref_index - 1, scene.ref_index):
+        cv2.imwrite(str(d / f"view{i}.png"), scene.images[i])
+    code = main(["run", str(d), "--out", str(tmp_path / "o"), "--record",
+                 str(tmp_path / "c.rrd"), "--compare", "paper"])
+    assert code == 0
+    notes = [ln for ln in capsys.readouterr().err.splitlines() if "only 2 photos" in ln]
+    assert [ln.startswith("dynremove: note: only 2 photos") for ln in notes] == [True, False]
+    assert notes[1].startswith("dynremove: note: compare run: only 2 photos")
 
 
 def _rows_by_entity(path) -> dict[str, int]:
