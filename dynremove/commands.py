@@ -643,10 +643,17 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         else:
             x, y = args.pixel
         if size is not None and 0 <= x < int(info["width"]) and 0 <= y < int(info["height"]):
-            # the run analysed smaller images: say which photo pixel this is
-            qx, qy = ins.analysis_to_photo(info, x, y)
-            print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis image "
-                  f"= photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos")
+            # the run analysed smaller images: say which photo pixel this is (the one
+            # asked for: an analysis pixel covers several, the centre one is named
+            # only when the analysis pixel was asked for)
+            if photo is not None:
+                print(f"photo pixel ({photo[0]}, {photo[1]}) of the {size[0]}x{size[1]} "
+                      f"photos is pixel ({x}, {y}) of the {info['width']}x{info['height']} "
+                      "analysis image")
+            else:
+                qx, qy = ins.analysis_to_photo(info, x, y)
+                print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis "
+                      f"image = photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos")
         hist = ins.pixel_history(path, x, y, root=args.root)
         print(vd.format_pixel_history(hist))
         if size is not None and hist.get("final_dynamic") is False:

@@ -249,12 +249,16 @@ def test_a_photo_pixel_is_refused_with_the_analysis_pixel_it_means(downscaled, c
 
 
 def test_photo_pixel_explains_the_analysis_pixel_it_falls_in(downscaled, capsys):
-    """--photo-pixel counts as clean.png at full size, --probe and --gt do."""
+    """--photo-pixel counts as clean.png at full size, --probe and --gt do. The first
+    line names the photo pixel asked for (a fresh-user trial: --photo-pixel 485,315
+    was echoed as photo pixel (484, 315), the centre of its analysis pixel)."""
     rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "200,150")
     assert rc == 0, err
     rc2, out2, _ = _inspect(capsys, downscaled, "--pixel", "50,37")  # as --probe scales it
-    assert rc2 == 0 and out == out2
-    first = out.splitlines()[0]
+    assert rc2 == 0 and out.splitlines()[1:] == out2.splitlines()[1:]
+    assert out.splitlines()[0] == ("photo pixel (200, 150) of the 256x192 photos is pixel "
+                                   "(50, 37) of the 64x48 analysis image")
+    first = out2.splitlines()[0]
     assert first == ("pixel (50, 37) of the 64x48 analysis image = photo pixel (202, 150) "
                      "of the 256x192 photos"), first
     rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "256,10")
