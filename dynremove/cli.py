@@ -108,12 +108,18 @@ def parse_fps(s: str) -> float:
     return v
 
 
+def _integer_at_least(s: str, lo: int, *, unit: str = "", flag: str = "") -> int:
+    """An integer of at least ``lo`` (the error: "[flag ]must be at least lo[ unit], got v")."""
+    v = _integer(s)
+    if v < lo:
+        raise argparse.ArgumentTypeError(f"{flag + ' ' if flag else ''}must be at least "
+                                         f"{lo}{' ' + unit if unit else ''}, got {v}")
+    return v
+
+
 def parse_side(s: str) -> int:
     """A side in pixels, at least 16."""
-    v = _integer(s)
-    if v < 16:
-        raise argparse.ArgumentTypeError(f"must be at least 16 px, got {v}")
-    return v
+    return _integer_at_least(s, 16, unit="px")
 
 
 def parse_fraction(s: str) -> float:
@@ -173,10 +179,7 @@ def parse_jobs(s: str) -> int:
 
 
 def parse_frames(s: str) -> int:
-    v = _integer(s)
-    if v < 2:
-        raise argparse.ArgumentTypeError(f"--frames must be at least 2, got {v}")
-    return v
+    return _integer_at_least(s, 2, flag="--frames")
 
 
 def add_input_flags(ap: argparse.ArgumentParser, *, valid_mask: bool = True) -> None:

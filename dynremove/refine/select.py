@@ -892,8 +892,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # white letters stayed as a translucent "Ho" over the fill (larger enclosed
     # regions are static scene seen through a mover: parkour_s3 J 0.754 -> 0.707
     # without the size bound)
-    island = fill_holes(minority.astype(np.uint8)).astype(bool) & explained
-    explained &= ~(island & ~drop_small(island, P.patch_size ** 2 + 1).astype(bool))
+    if minority.any():
+        island = fill_holes(minority.astype(np.uint8)).astype(bool) & explained
+        explained &= ~(island & ~drop_small(island, P.patch_size ** 2 + 1).astype(bool))
     # why each source did or did not count towards ``explained`` (for inspect)
     evidence = np.where(np.broadcast_to(mask, (S, H, W)), EV_NOT_FOUND, 0).astype(np.uint8)
     evidence[mask[None] & searched & ~line_found] = EV_LINE_ALONE
