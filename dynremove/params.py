@@ -109,7 +109,7 @@ class Params:
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
     select_grow_alone: bool = True  # L also grows where no source agrees with the reference (at least two see it, even if they disagree among themselves) and the reference shows the colours of L's movers
-    select_parallax_px: float = 8.0  # the set's parallax (analysis px; per source the 95th percentile of the F inliers' distance from the homography, median over the sources) above which it is treated as 3-D: colour consensus may keep the reference in L, the epipolar search and --snap-veto run
+    select_parallax_px: float = 8.0  # the set's median measured parallax (analysis px) above which it is treated as 3-D: colour consensus may keep the reference in L, the epipolar search and --snap-veto run
     select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px, weighted: see --select-search-support-de) is under this (0 = off)
     select_search_support_de: float = 5.0  # the epipolar search's window weighs its cells by their colour's likeness to the centre's, exp(-dE / this) in CIE76 dE (adaptive support weights, Yoon & Kweon 2006), so that a thin structure is compared, not the background around it (0 = a plain box)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)

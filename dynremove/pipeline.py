@@ -513,9 +513,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         geometry=[{"source": names[srcs[k]], "matches": v.n_matches,
                    "inliers_F": v.n_inliers_F, "inliers_H": v.n_inliers_H,
                    "parallax_px": (round(v.parallax_px, 2) if np.isfinite(v.parallax_px)
-                                   else None),
-                   "parallax_p95_px": (round(v.parallax_p95_px, 2)
-                                       if np.isfinite(v.parallax_p95_px) else None)}
+                                   else None)}
                   for k, v in enumerate(views)],
         warnings=msgs, stages=stages, selection=selection, source_indices=list(srcs))
     sink.finish(result)

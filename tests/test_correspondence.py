@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-import pytest
 
 from dynremove.method import correspondence as corr
 from dynremove.method import geometry
-from dynremove.params import preset
 
 H_, W_ = 96, 128
 T = (4.0, 3.0)  # background translation reference → source (px)
@@ -197,35 +195,3 @@ def test_prepare_without_F_for_one_source(small_scene):
     assert views[k].F is None and not st.hasF[k]
     assert st.hasF.sum() == len(views) - 1
     assert np.isfinite(st.C).all() and (st.C[k] <= 1.0 + 1e-6).all()
-
-
-def _facade_and_columns(rng, share, n=600):
-    """Keypoint matches of a facade (depth 10) with columns before it (depth 6) that
-    hold ``share`` of the matches, between two views 0.6 units apart (854×480,
-    f = 700 px), with 0.2 px of noise."""
-    K = np.array([[700.0, 0, 427], [0, 700.0, 240], [0, 0, 1]])
-    a = np.deg2rad(2.0)
-    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    xy = rng.uniform((0, 0), (854, 480), (n, 2))
-    Z = np.where(np.arange(n) < int(share * n), 6.0, 10.0)
-    X = (np.linalg.inv(K) @ np.c_[xy, np.ones(n)].T) * Z
-    q = K @ (R @ X + np.array([-0.6, 0.05, 0.1])[:, None])
-    xs = (q[:2] / q[2]).T + rng.normal(0, 0.2, (n, 2))
-    return xy.astype(np.float32), xs.astype(np.float32)
-
-
-@pytest.mark.parametrize("share, three_d", [(0.0, False), (0.08, True), (0.2, True)])
-def test_structure_before_the_plane_makes_the_set_3d(rng, share, three_d):
-    """A building's columns and balcony hold 8-16 % of entry-P10's matches. The 90th
-    percentile of the distance from the homography fell on the knee between the
-    facade's pixel and the columns' tens of pixels, and made the set flat or 3-D by
-    the RANSAC sample; the set's test reads the 95th."""
-    from dynremove.refine.select import median_parallax_px
-
-    xy_r, xy_s = _facade_and_columns(rng, share)
-    tv = geometry.estimate_two_view(xy_r, xy_s, seed=0)
-    assert tv.F is not None and tv.n_inliers_F >= 0.95 * len(xy_r)
-    assert tv.parallax_px <= tv.parallax_p95_px
-    if 0 < share < 0.1:
-        assert tv.parallax_px < 2.0  # the 90th percentile sees the facade only
-    assert (median_parallax_px([tv]) > preset("default").select_parallax_px) == three_d

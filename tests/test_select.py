@@ -1004,38 +1004,6 @@ def test_completion_removes_the_fragments_of_a_real_mover(davis, tmp_path):
     assert runs[0.7][2] <= runs[0.0][2] + 0.02  # damage, % of the photo
 
 
-def test_columns_before_a_facade_make_the_set_3d_and_stay(davis, tmp_path):
-    """entry-P10 with DAVIS's kite surfer pasted in, 4 views (a composite never used
-    for tuning: ``dynremove composite --seed 7 --n-views 4``, this set's seed). Its
-    columns and balcony hold about a tenth of the keypoint matches; the set's parallax
-    read at the 90th percentile was 3.5 px (flat), and the column beside the surfer
-    was flagged and refilled. Read at the 95th it is 3-D: the epipolar search finds
-    the column in the sources. Measured: damage 2.82 -> 1.02 % of the photo,
-    leftover 18.1 -> 3.9 % of the surfer."""
-    from dynremove.evaluation import composite, whole_photo
-    from dynremove.evaluation.evaluate import find_sets, load_set
-
-    static = davis.parent / "static" / "entry-P10"
-    if not static.is_dir():
-        pytest.skip(f"{static} not found")
-    composite.make_composite(static, davis, tmp_path / "c", seed=1868869221, n_views=4,
-                             object_sets=find_sets(davis, "kite-surf_s3"))
-    ls = load_set(find_sets(tmp_path)[0])
-    gt = ls.gt > 0
-    runs = {}
-    for name, limit in (("default", preset("default").select_parallax_px), ("flat", 1e9)):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            r = remove_dynamic(ls.images, ref=ls.ref,
-                               params=preset("default").replace(select_parallax_px=limit))
-        runs[name] = (r.selection.consensus_mode,
-                      whole_photo.damage_percent(ls.images[ls.ref], r.clean, ls.background, gt),
-                      whole_photo.leftover_percent(r.clean, ls.background, gt, ls.free > 0)[0])
-    assert runs["default"][0] == "parallax" and runs["flat"][0] == "scan"
-    assert runs["flat"][1] >= 2.0  # the failure: the column refilled
-    assert runs["default"][1] <= 1.5 and runs["default"][2] <= 10.0
-
-
 def _tim6_with(name: str):
     """The tim6 burst run with ``name`` as the reference: (reference image, Result)."""
     from conftest import data_dir

@@ -677,16 +677,10 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
 
 def median_parallax_px(views: list[TwoView]) -> float:
     """The parallax of the photo set: the median over the sources of
-    ``TwoView.parallax_p95_px`` (px; a source without a measure counts 0), 0 without
+    ``TwoView.parallax_px`` (px; a source without a measure counts 0), 0 without
     sources. Above ``Params.select_parallax_px`` the default preset treats the
-    set as 3-D (``Selection.consensus_mode`` "parallax", ``Params.snap_veto``).
-
-    The 95th percentile, so that 3-D structure holding 5 % of a pair's matches
-    makes the set 3-D. With the 90th, a building's columns and
-    balcony, 8-16 % of entry-P10's matches, made a 4-view composite flat or 3-D
-    by the RANSAC sample; treated as flat, its column was refilled (damage 2.8 %
-    of the photo, 1.0 % as 3-D), and DAVIS drift-straight(_s3) lost 0.2-0.3 J."""
-    return float(np.median([v.parallax_p95_px if np.isfinite(v.parallax_p95_px) else 0.0
+    set as 3-D (``Selection.consensus_mode`` "parallax", ``Params.snap_veto``)."""
+    return float(np.median([v.parallax_px if np.isfinite(v.parallax_px) else 0.0
                             for v in views])) if views else 0.0
 
 
