@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+import pytest
 
 from dynremove.method import correspondence as corr
 from dynremove.method import geometry
@@ -195,3 +196,31 @@ def test_prepare_without_F_for_one_source(small_scene):
     assert views[k].F is None and not st.hasF[k]
     assert st.hasF.sum() == len(views) - 1
     assert np.isfinite(st.C).all() and (st.C[k] <= 1.0 + 1e-6).all()
+
+
+def _facade_and_columns(rng, share, n=600):
+    """Keypoint matches of a facade (depth 10) with columns before it (depth 6) that
+    hold ``share`` of the matches, between two views 0.6 units apart (854×480,
+    f = 700 px), with 0.2 px of noise."""
+    K = np.array([[700.0, 0, 427], [0, 700.0, 240], [0, 0, 1]])
+    a = np.deg2rad(2.0)
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    xy = rng.uniform((0, 0), (854, 480), (n, 2))
+    Z = np.where(np.arange(n) < int(share * n), 6.0, 10.0)
+    X = (np.linalg.inv(K) @ np.c_[xy, np.ones(n)].T) * Z
+    q = K @ (R @ X + np.array([-0.6, 0.05, 0.1])[:, None])
+    xs = (q[:2] / q[2]).T + rng.normal(0, 0.2, (n, 2))
+    return xy.astype(np.float32), xs.astype(np.float32)
+
+
+@pytest.mark.parametrize("share", [0.0, 0.08, 0.2])
+def test_the_parallax_percentiles_of_a_facade_with_columns(rng, share):
+    """Columns before a facade holding 8 % of the matches: the 90th percentile of the
+    distance from the homography sees the facade only (under 2 px), the 95th the
+    columns (tens of px); at 20 % both see them, and a plain facade neither."""
+    xy_r, xy_s = _facade_and_columns(rng, share)
+    tv = geometry.estimate_two_view(xy_r, xy_s, seed=0)
+    assert tv.F is not None and tv.n_inliers_F >= 0.95 * len(xy_r)
+    assert tv.parallax_px <= tv.parallax_p95_px
+    assert (tv.parallax_px > 8.0) == (share > 0.1)
+    assert (tv.parallax_p95_px > 8.0) == (share > 0.0)

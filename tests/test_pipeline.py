@@ -190,6 +190,27 @@ def test_few_matches_note_forms():
         "the reference; ")
 
 
+def test_small_3d_structure_in_a_flat_set_is_told():
+    """Treated as flat by the 90th percentile of the parallax while the 95th is over
+    the limit (entry-P10's columns, 8-16 % of its matches): the run names the switch
+    that treats the set as 3-D. Nothing is said where both agree."""
+    from dynremove.method.geometry import TwoView
+    from dynremove.pipeline import _knee_note
+
+    def tv(p90, p95):
+        return TwoView(F=np.eye(3), H=np.eye(3), n_matches=800, n_inliers_F=700,
+                       n_inliers_H=500, parallax_px=p90, parallax_p95_px=p95)
+
+    note = _knee_note([tv(192.0, 325.6), tv(2.6, 226.0), tv(3.5, 143.6)], 8.0)
+    assert note.startswith("the set was treated as flat (median parallax 3.5 px, at most "
+                           "--select-parallax-px 8), though 5 % of the matches depart "
+                           "from one plane by 226 px or more")
+    assert note.endswith("--select-parallax-px 0 treats the set as 3-D")
+    assert _knee_note([tv(1.0, 2.0), tv(1.5, 3.0)], 8.0) == ""  # flat by both
+    assert _knee_note([tv(12.0, 30.0), tv(9.0, 20.0)], 8.0) == ""  # 3-D by both
+    assert _knee_note([], 8.0) == ""
+
+
 def test_a_weak_reference_is_named_as_the_cause():
     """The sanitizer burst with its reference re-saved as a JPEG of quality 15: every
     source matches it poorly (17-45 matches), one is not aligned, and the note on that
