@@ -640,8 +640,8 @@ def _knee_note(views: list[geometry.TwoView], limit: float) -> str:
         return ""
     return (f"the set was treated as flat (median parallax {p90:.1f} px, at most "
             f"--select-parallax-px {limit:g}), though 5 % of the matches depart from one "
-            f"plane by {p95:.0f} px or more: if static structure before the scene (a column, a post) was "
-            "removed, --select-parallax-px 0 treats the set as 3-D")
+            f"plane by {p95:.0f} px or more: if static structure before the scene (a "
+            "column, a post) was removed, --select-parallax-px 0 treats the set as 3-D")
 
 
 def _strays_note(strays: list[tuple[str, int, int]], least: int) -> str:
