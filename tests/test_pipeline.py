@@ -202,9 +202,9 @@ def test_small_3d_structure_in_a_flat_set_is_told():
                        n_inliers_H=500, parallax_px=p90, parallax_p95_px=p95)
 
     note = _knee_note([tv(192.0, 325.6), tv(2.6, 226.0), tv(3.5, 143.6)], 8.0)
-    assert note.startswith("the set was treated as flat (median parallax 3.5 px, at most "
-                           "--select-parallax-px 8), though 5 % of the matches depart "
-                           "from one plane by 226 px or more")
+    assert note.startswith("the set was treated as flat (median parallax 3.5 px, not over "
+                           "the 8 px of --select-parallax-px), though 5 % of the matches "
+                           "depart from one plane by 226 px or more")
     assert note.endswith("--select-parallax-px 0 treats the set as 3-D")
     assert _knee_note([tv(1.0, 2.0), tv(1.5, 3.0)], 8.0) == ""  # flat by both
     assert _knee_note([tv(12.0, 30.0), tv(9.0, 20.0)], 8.0) == ""  # 3-D by both
