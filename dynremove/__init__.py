@@ -25,6 +25,42 @@ import os
 # threads; a value the user set wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+
+def _numba_cache_dir(package_dir: str) -> str | None:
+    """Where numba should cache the compiled kernels when it cannot beside the source.
+
+    numba caches in the ``__pycache__`` folders next to the code; a user who cannot
+    write there (a system-wide install, a shared checkout) got a traceback from any
+    command, ``--version`` too: "cannot cache function …: no locator available". Then
+    the cache goes to ``$XDG_CACHE_HOME/dynremove/numba`` (``~/.cache`` by default),
+    else to a per-user folder in the temporary directory. None where the source's
+    folder is writable (numba's own choice stands) or ``NUMBA_CACHE_DIR`` is set.
+    """
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return None
+    kernels = os.path.join(package_dir, "method", "scan")
+    pycache = os.path.join(kernels, "__pycache__")
+    if os.access(pycache if os.path.isdir(pycache) else kernels, os.W_OK):
+        return None
+    import tempfile
+
+    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    uid = os.getuid() if hasattr(os, "getuid") else os.getpid()
+    for d in (os.path.join(home, "dynremove", "numba"),
+              os.path.join(tempfile.gettempdir(), f"dynremove-numba-{uid}")):
+        try:
+            os.makedirs(d, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(d, os.W_OK):
+            return d
+    return None
+
+
+_cache = _numba_cache_dir(os.path.dirname(os.path.abspath(__file__)))
+if _cache is not None:  # read when numba is first imported
+    os.environ["NUMBA_CACHE_DIR"] = _cache
+
 # the public API, imported when first used: ``import dynremove`` (and the command's
 # entry, ``dynremove.entry``) stays light, so that a Ctrl-C in the first second of
 # a run meets the entry's handler, not an import of numba and OpenCV
