@@ -425,6 +425,10 @@ def _record_interruption(args: argparse.Namespace, stage: str, iset: io.ImageSet
         for s in live:
             if s is not None:
                 s.interrupted(stage)
+                kept = getattr(s, "partial_path", None)
+                if kept is not None:
+                    print(f"dynremove: note: {args.record} from before is kept; this run's "
+                          f"recording, cut short, is {kept}", file=sys.stderr)
     except Exception as e:  # noqa: BLE001 - e.g. disk full: exit as interrupted anyway
         print(f"dynremove: note: {args.record}: could not record the interruption "
               f"({type(e).__name__}: {' '.join(str(e).split())})", file=sys.stderr)

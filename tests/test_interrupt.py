@@ -182,6 +182,34 @@ def test_sink_interrupted_before_start(tmp_path):
     assert _log_texts(rrd2) == ["interrupted before the scans began"]
 
 
+def test_a_cut_run_keeps_the_earlier_recording_at_its_path(tmp_path):
+    """A fresh-user trial: ``run --record keep.rrd`` over a good recording, cut
+    short, left a partial one in its place. The earlier file is kept; the cut run's
+    is ``keep.partial.rrd`` beside it, and no temporary file is left. A whole run
+    replaces the earlier file."""
+    rrd = tmp_path / "keep.rrd"
+    rrd.write_bytes(b"an earlier recording")
+    ims = [np.full((40, 60, 3), 10 * i, np.uint8) for i in range(3)]
+    sink = RerunSink(rrd)
+    sink.begin(["a.png", "b.png", "c.png"], (40, 60), images=ims, ref=1)
+    sink.interrupted()
+    assert rrd.read_bytes() == b"an earlier recording"
+    assert sink.partial_path == tmp_path / "keep.partial.rrd"
+    assert _log_texts(sink.partial_path)[-1] == "interrupted before the scans began"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.partial.rrd", "keep.rrd"]
+
+    import warnings
+
+    from dynremove.pipeline import remove_dynamic
+
+    scene = synth.make_scene(seed=0, n_views=3, size=(60, 96))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (the run's notes)
+        remove_dynamic(scene.images, ref=scene.ref_index, sink=RerunSink(rrd))
+    assert rrd.read_bytes() != b"an earlier recording" and vi.load_store(rrd) is not None
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.partial.rrd", "keep.rrd"]
+
+
 # --- before the sink exists: loading, reference, opening the recording ---------------------
 def _wait_for_main(p: subprocess.Popen, timeout: float = 120) -> None:
     """Until ``dynremove.cli.main`` runs: it installs the SIGTERM handler (Linux:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import os
 import time
 import uuid
 from pathlib import Path
@@ -187,6 +188,11 @@ class RerunSink(StepColumns):
         self.jpeg_quality = jpeg_quality
         self.skip_unchanged_images = skip_unchanged_images
         self._closed = False
+        self._done = False  # finish() ran: the recording is whole
+        # a file an earlier run left at ``path``: this run writes beside it and replaces
+        # it only when whole; cut short, it is kept and this run's is ``partial_path``
+        self._earlier: Path | None = None
+        self.partial_path: Path | None = None
         self._opened = False  # the file is open (begin() or start())
         self._scans_began = False
         self._seen = (0, 0)  # (scan, step) last seen, for interrupted()
@@ -272,6 +278,9 @@ class RerunSink(StepColumns):
         self.path.parent.mkdir(parents=True, exist_ok=True)
         bp = None if src_names is None else make_blueprint(src_names, root=self.p.root,
                                                            size=size)
+        if self.path.exists():
+            self._earlier = self.path
+            self.path = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:8]}.tmp")
         self.rec.save(self.path, default_blueprint=bp)
         self._bp_sources = src_names
         self._opened = True
@@ -527,6 +536,7 @@ class RerunSink(StepColumns):
         self.rec.log(self.p(P.LOG), rr.TextLog("; ".join(lines), level=rr.TextLogLevel.INFO))
         self.rec.disable_timeline(P.STAGE_TIMELINE)
         self._tick("finish", t0)
+        self._done = True
         self.close()
 
     def close(self) -> None:
@@ -540,6 +550,21 @@ class RerunSink(StepColumns):
         finally:
             if self._owns_rec:
                 self.rec.disconnect()
+                self._settle()
+
+    def _settle(self) -> None:
+        """Put the closed file in place: over an earlier run's file when this recording
+        is whole, else beside it as ``<name>.partial.rrd`` (the earlier one is kept)."""
+        if self._earlier is None or not self.path.exists():
+            return
+        if self._done:
+            os.replace(self.path, self._earlier)
+            self.path = self._earlier
+        else:
+            self.partial_path = self._earlier.with_name(
+                f"{self._earlier.stem}.partial{self._earlier.suffix}")
+            os.replace(self.path, self.partial_path)
+            self.path = self.partial_path
 
     def __enter__(self) -> RerunSink:
         return self
