@@ -576,13 +576,14 @@ def _analysis_note(size: tuple[int, int], photo: tuple[int, int]) -> str:
 
 def format_failures(items: list[dict[str, Any]]) -> str:
     """One line per failure region."""
-    lines = ["region (kind, area, bbox), a pixel in it, the steps at which each scan "
-             "visited that pixel (jump to them on the `step` timeline):"]
+    lines = ["region (kind, area, box: top-left x,y and width x height), a pixel in it, "
+             "the steps at which each scan visited that pixel (one per scan; jump to them "
+             "on the `step` timeline):"]
     for e in items:
         x0, y0, w, h = e["bbox"]
         steps = ", ".join(str(s) for s in e.get("steps", []))
         ph = e.get("photo_pixel")
-        s = (f"{e['kind']} {e['area']:6d} px  ({x0},{y0}) {w}x{h}  pixel "
+        s = (f"{e['kind']} {e['area']:6d} px  box ({x0},{y0}) {w}x{h} px  pixel "
              f"{e['pixel'][0]},{e['pixel'][1]}"
              + (f" (photo {ph[0]},{ph[1]})" if ph else "")
              + f"  steps {steps}; {e['n_decisions']} recorded decisions")
