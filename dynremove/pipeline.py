@@ -633,11 +633,8 @@ def _knee_note(views: list[geometry.TwoView], limit: float) -> str:
     fits the epipolar geometry, so the 95th does not decide by itself: it made 3-D a
     car the camera pans with (car-roundabout, --ref 5) and synthetic scenes whose
     lingering mover the 3-D consensus then kept (README, session 41)."""
-    def med(vals):
-        return float(np.median([v if np.isfinite(v) else 0.0 for v in vals])) if vals else 0.0
-
-    p90 = med([v.parallax_px for v in views])
-    p95 = med([v.parallax_p95_px for v in views])
+    p90 = median_parallax_px(views)
+    p95 = median_parallax_px(views, "parallax_p95_px")
     if not p90 <= limit < p95:
         return ""
     return (f"the set was treated as flat (median parallax {p90:.1f} px, not over the "

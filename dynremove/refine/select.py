@@ -675,13 +675,14 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     return out, changed
 
 
-def median_parallax_px(views: list[TwoView]) -> float:
+def median_parallax_px(views: list[TwoView], field: str = "parallax_px") -> float:
     """The parallax of the photo set: the median over the sources of
     ``TwoView.parallax_px`` (px; a source without a measure counts 0), 0 without
     sources. Above ``Params.select_parallax_px`` the default preset treats the
-    set as 3-D (``Selection.consensus_mode`` "parallax", ``Params.snap_veto``)."""
-    return float(np.median([v.parallax_px if np.isfinite(v.parallax_px) else 0.0
-                            for v in views])) if views else 0.0
+    set as 3-D (``Selection.consensus_mode`` "parallax", ``Params.snap_veto``).
+    ``field="parallax_p95_px"``: the same median of the 95th percentile."""
+    vals = [getattr(v, field) for v in views]
+    return float(np.median([x if np.isfinite(x) else 0.0 for x in vals])) if views else 0.0
 
 
 def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
