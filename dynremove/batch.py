@@ -453,16 +453,38 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     options = {"params": params.to_dict(), "preset": preset_name, "max_side": max_side,
                "ref": ref, "frames": frames, "span": span, "pick": pick}
     t0 = time.perf_counter()
-    rows, workers = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler,
-                             on_done=on_done, prev=prev)
-    summary = {"root": str(root), "out": str(out), "sets": rows,
-               "n_ok": sum(r["status"] == "ok" and not r.get("skipped") for r in rows),
-               "n_skipped": sum(bool(r.get("skipped")) for r in rows),
-               "n_failed": sum(r["status"] == "error" for r in rows),
-               "wall_s": round(time.perf_counter() - t0, 3),
-               "jobs": None if scheduler else jobs, "scheduler": scheduler,
-               "workers": workers, "preset": preset_name, "options": options,
-               "notes": notes}
+    results: dict[str, dict] = {}
+
+    def summary_of(rows: list[dict], workers: int | None, **extra) -> dict:
+        return {"root": str(root), "out": str(out), "sets": rows,
+                "n_ok": sum(r["status"] == "ok" and not r.get("skipped") for r in rows),
+                "n_skipped": sum(bool(r.get("skipped")) for r in rows),
+                "n_failed": sum(r["status"] == "error" for r in rows),
+                "wall_s": round(time.perf_counter() - t0, 3),
+                "jobs": None if scheduler else jobs, "scheduler": scheduler,
+                "workers": workers, "preset": preset_name, "options": options,
+                "notes": notes, **extra}
+
+    try:
+        rows, workers = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler,
+                                 on_done=on_done, prev=prev, results=results)
+    except BaseException:
+        # interrupted (Ctrl-C, SIGTERM) or failed: the summary still lists the sets
+        # that finished (each set's own outputs are already whole on disk), and says
+        # how many did not run; the same command again resumes
+        done = [results[bs.name] for bs in sets if bs.name in results]
+        _write_summary(out, summary_of(done, None, interrupted=True,
+                                       n_not_run=len(sets) - len(done)))
+        raise
+    summary = summary_of(rows, workers)
+    _write_summary(out, summary)
+    return summary
+
+
+def _write_summary(out: Path, summary: dict) -> None:
+    """``summary.json`` and ``summary.csv`` (SUMMARY_FIELDS, one row per set), each
+    written atomically."""
+    rows = summary["sets"]
     io.write_json(out / "summary.json", summary)
     buf = _pyio.StringIO()
     w = csv.DictWriter(buf, fieldnames=SUMMARY_FIELDS, lineterminator="\n")
@@ -471,18 +493,19 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
         w.writerow({k: NOTES_SEP.join(r.get(k) or []) if k == "notes" else r.get(k)
                     for k in SUMMARY_FIELDS})
     io._atomic_write_bytes(out / "summary.csv", buf.getvalue().encode())
-    return summary
 
 
 def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
              scheduler: str | None, on_done: Callable[[int, int, dict], None] | None,
-             prev: dict[str, dict] | None = None) -> tuple[list[dict], int]:
+             prev: dict[str, dict] | None = None,
+             results: dict[str, dict] | None = None) -> tuple[list[dict], int]:
     """The rows in set order, and the number of workers (joblib's, or the Dask
     cluster's when ``scheduler``). ``prev``: the previous summary's rows by set
-    (:func:`_keep_earlier`)."""
+    (:func:`_keep_earlier`). ``results``: filled with each row by set name as it
+    arrives (what finished is there when the run is cut short)."""
     from joblib import Parallel, delayed, effective_n_jobs, parallel_config
 
-    results: dict[str, dict] = {}
+    results = {} if results is None else results
     on_done = _with_earlier(on_done, prev or {})
     if not scheduler:
         if jobs == 1:

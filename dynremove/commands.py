@@ -572,11 +572,27 @@ def cmd_batch(args: argparse.Namespace) -> int:
     from dynremove.batch import run_batch, stderr_progress
 
     params = params_from_args(args)
-    s = run_batch(args.root, args.out, params=params, preset_name=args.preset,
-                  jobs=args.jobs, max_side=args.max_side, ref=args.ref, frames=args.frames,
-                  span=args.span, pick=args.pick, scheduler=args.scheduler,
-                  on_done=None if args.quiet else stderr_progress,
-                  on_note=lambda n: _note(args, n))
+    finished = [0, 0]  # sets finished, sets in all
+
+    def on_done(k: int, n: int, row: dict) -> None:
+        finished[:] = [k, n]
+        if not args.quiet:
+            stderr_progress(k, n, row)
+
+    try:
+        s = run_batch(args.root, args.out, params=params, preset_name=args.preset,
+                      jobs=args.jobs, max_side=args.max_side, ref=args.ref,
+                      frames=args.frames, span=args.span, pick=args.pick,
+                      scheduler=args.scheduler, on_done=on_done,
+                      on_note=lambda n: _note(args, n))
+    except BaseException as e:
+        if interruption(e) is not None and (Path(args.out) / "summary.csv").is_file():
+            k, n = finished
+            done = (f"{k} of {n} sets finished ({args.out}/summary.csv lists "
+                    f"{'it' if k == 1 else 'them'})" if k else "no set had finished")
+            print(f"dynremove: batch cut short: {done}; run the same command again to "
+                  "resume (finished sets are skipped)", file=sys.stderr)
+        raise
     n_sets = len(s["sets"])
     print(f"{n_sets} set{'s' if n_sets != 1 else ''}: {s['n_ok']} done, {s['n_skipped']} skipped (already "
           f"done), {s['n_failed']} failed; wall {s['wall_s']:.1f} s -> {args.out}/summary.csv")

@@ -291,6 +291,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     validate_images(images, 0)
     names = list(names) if names is not None else [f"image{i}" for i in range(len(images))]
     ref = api_ref(ref, images, names)
+    images, gray_note = gray_like_reference(images, ref)
     sink = NullSink() if sink is None else sink
     H, W = images[0].shape[:2]
     for (x, y) in probes:
@@ -301,7 +302,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
     clock = _Clock(timings, progress)
-    msgs: list[str] = []
+    msgs: list[str] = [gray_note] if gray_note else []
     srcs = [i for i in range(len(images)) if i != ref]
     keep: list[np.ndarray] = []
 
@@ -536,6 +537,42 @@ def _names(who: list[str]) -> str:
     return f"{', '.join(who[:2])} and {len(who) - 2} more"
 
 
+def is_gray(image: npt.NDArray[np.uint8], *, tol: int = 3) -> bool:
+    """Whether a (H, W, 3) uint8 BGR image is black and white: on every 7th pixel,
+    the 99.5th percentile of its largest channel difference is at most ``tol``
+    (levels of 255; a B&W JPEG keeps a level or two of chroma noise)."""
+    px = np.asarray(image).reshape(-1, 3)[::7].astype(np.int16)
+    if len(px) == 0:
+        return False
+    spread = px.max(axis=1) - px.min(axis=1)
+    return bool(np.percentile(spread, 99.5) <= tol)
+
+
+def gray_like_reference(images: Sequence[np.ndarray], ref: int
+                        ) -> tuple[list[np.ndarray], str | None]:
+    """Where the reference is black and white (``is_gray``) and some other photo is
+    not, every photo converted to gray (BGR → gray → BGR, OpenCV's weights), and
+    a note; else the images as given and None.
+
+    A colour source would otherwise fill a B&W reference with colour, and its
+    colours, which the reference cannot match, would flag static scene as
+    dynamic (a fresh-user trial: shaky_desk6 with desk4 saved as gray, a brown
+    patch where the bottle was and twice the mask)."""
+    images = list(images)
+    if not is_gray(images[ref]):
+        return images, None
+    colour = [i for i, im in enumerate(images) if i != ref and not is_gray(im)]
+    if not colour:
+        return images, None
+    for i in colour:
+        g = cv2.cvtColor(np.asarray(images[i]), cv2.COLOR_BGR2GRAY)
+        images[i] = cv2.cvtColor(g, cv2.COLOR_GRAY2BGR)
+    return images, (f"the reference is black and white: the {len(colour)} colour "
+                    f"photo{'' if len(colour) == 1 else 's'} among the others "
+                    f"{'was' if len(colour) == 1 else 'were'} used in gray, so that the "
+                    "fill matches it")
+
+
 def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
                            ) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.bool_]]:
     """The clean reference and dynamic map at the size of ``full_images``.
@@ -549,6 +586,7 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
     n = 1 + max([result.ref_index] + list(result.source_indices))
     if len(full_images) < n:
         raise InputError(f"full_images: {len(full_images)} images, the run had at least {n}")
+    full_images, _ = gray_like_reference(full_images, result.ref_index)
     ref = np.asarray(full_images[result.ref_index])
     srcs = [np.asarray(full_images[i]) for i in result.source_indices]
     h, w = result.clean.shape[:2]

@@ -337,3 +337,37 @@ def test_batch_scores_at_the_size_written(tmp_path, root, capsys):
     mask = cv2.imread(str(out / "davis" / "b" / "dynamic_mask.png"), 0) > 127
     assert mask.shape == gt.shape == (64, 80)
     assert float(row["jaccard_vs_gt"]) == pytest.approx(jaccard(mask, gt), abs=1e-4)
+
+
+def test_a_cut_batch_lists_what_finished_and_says_how_to_resume(tmp_path, root, capsys,
+                                                                monkeypatch):
+    """Ctrl-C after the first set: exit 130, summary.csv lists the finished set (and
+    summary.json says the batch was cut short), the message says how to resume, and
+    the same command again runs only the rest (a fresh-user trial: no summary and no
+    hint)."""
+    from dynremove.cli import main
+
+    real = batch.run_set
+    calls = []
+
+    def cut_after_one(bs, *a, **k):
+        calls.append(bs.name)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(bs, *a, **k)
+
+    monkeypatch.setattr(batch, "run_set", cut_after_one)
+    out = tmp_path / "out"
+    rc = main(["batch", str(root), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 130
+    assert "batch cut short: 1 of 3 sets finished" in err, err
+    assert "run the same command again to resume" in err
+    assert list(summary_rows(out)) == ["a"]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] is True and s["n_not_run"] == 2
+    monkeypatch.setattr(batch, "run_set", real)
+    assert main(["batch", str(root), "--out", str(out), "--quiet"]) == 1  # bad/ fails
+    rows = summary_rows(out)
+    assert list(rows) == ["a", "bad", "davis/b"]
+    assert rows["a"]["skipped"] in ("True", "1", "true") and rows["davis/b"]["status"] == "ok"

@@ -390,3 +390,31 @@ def test_the_api_takes_ref_and_params_as_the_cli_does():
         res = remove_dynamic(sc.images, ref="auto", params=None)
     assert any(str(m.message).startswith("--ref auto: ") for m in w)
     assert 0 <= res.ref_index < 4
+
+
+def test_a_black_and_white_reference_is_filled_in_gray():
+    """A B&W reference among colour photos: the others are used in gray (with a
+    note), so the fill adds no colour and the colours the reference cannot show do
+    not flag the static scene (a fresh-user trial: a brown patch in a B&W photo,
+    and twice the mask)."""
+    from dynremove.evaluation.metrics import jaccard
+    from dynremove.pipeline import gray_like_reference, is_gray
+
+    sc = synth.make_scene(seed=0, n_views=5, size=(180, 320), n_objects=1)
+    ref = sc.ref_index
+    gray = [cv2.cvtColor(cv2.cvtColor(im, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)
+            for im in sc.images]
+    ims = list(sc.images)
+    ims[ref] = gray[ref]
+    assert is_gray(ims[ref]) and not any(is_gray(im) for im in sc.images)
+    with pytest.warns(UserWarning, match="black and white"):
+        r = remove_dynamic(ims, ref=ref)
+    assert r.dynamic.sum() > 100
+    spread = r.clean.max(axis=2).astype(int) - r.clean.min(axis=2)
+    assert spread.max() <= 1, "colour written into the black-and-white photo"
+    all_gray = remove_dynamic(gray, ref=ref)
+    assert np.array_equal(r.dynamic, all_gray.dynamic)
+    assert jaccard(r.dynamic, sc.masks[ref]) > 0.7
+    # a colour reference, or a set already all gray, is left alone (no note)
+    assert gray_like_reference(sc.images, ref)[1] is None
+    assert gray_like_reference(gray, ref)[1] is None
