@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from dynremove.params import DEFAULT
-from dynremove.refine.morphology import clean_mask, dilate_disc
+from dynremove.refine.morphology import clean_mask, clean_mask_drops, dilate_disc
 
 
 def _square():
@@ -79,3 +79,21 @@ def test_majority_keeps_a_holed_mesh_that_hangs_on_a_solid_part():
     solid = clean_mask(_square(), DEFAULT, majority=True)
     assert not (solid & ~_square()).any()
     assert solid[24:56, 20:60].all() and solid[20:60, 24:56].all()
+
+
+def test_clean_mask_drops_tells_the_opening_from_the_small_region_rule():
+    """A holed mesh (every other pixel) is erased by the opening; a solid 9x9 block
+    survives it but is under min_region_px; a solid 30x30 block is kept. The codes
+    agree with what ``clean_mask`` keeps (the debugger's replay of it)."""
+    L = np.zeros((120, 160), bool)
+    L[10:60:2, 10:60] = True  # a mesh of 1 px rows
+    L[80:89, 20:29] = True  # 81 px
+    L[70:100, 100:130] = True  # 900 px
+    params = DEFAULT.replace(patch_size=13, min_region_px=200)
+    why = clean_mask_drops(L, params.patch_size, params.min_region_px)
+    kept = clean_mask(L, params)
+    assert (why[10:60:2, 10:60] == 1).all()
+    assert (why[81:88, 21:28] == 2).all()  # (its corners are rounded off by the disc)
+    assert (why[73:97, 103:127] == 0).all() and kept[73:97, 103:127].all()
+    assert not (kept & (why > 0)).any()  # what is dropped is not kept
+    assert (why[~L] == 0).all()

@@ -24,6 +24,7 @@ from dynremove import io
 from dynremove.errors import InputError
 from dynremove.events import (CORRESPONDENCE_UPDATE_DTYPE, REPLACEMENT_DTYPE,
                               WHY_DYNAMIC, WHY_PROBE, WHY_SAMPLE, decision_dtype)
+from dynremove.refine.morphology import clean_mask_drops
 from dynremove.refine.select import REASONS
 from viewer import paths as P
 from viewer._images import mask_sources, visit_step
@@ -644,8 +645,14 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
         H, W = L.shape
     # the per-scan maps and the selection are read for an interrupted run too
     inside = 0 <= y < H and 0 <= x < W
-    stages = {k: bool(v[y, x]) for k, v in read_stages(path, root=root).items()} \
-        if inside else {}
+    stage_maps = read_stages(path, root=root) if inside else {}
+    stages = {k: bool(v[y, x]) for k, v in stage_maps.items()}
+    clean_rule = None
+    if stages.get("scan") and stages.get("clean") is False:
+        # which step of the clean-up dropped it, replayed on the scans' map
+        why = int(clean_mask_drops(stage_maps["scan"], int(params.get("patch_size", 1)),
+                                   int(params.get("min_region_px", 0)))[y, x])
+        clean_rule = {1: "opening", 2: "small"}.get(why)
 
     def rep_dict(r: np.void) -> dict[str, Any]:
         s = int(r["src"])
@@ -701,7 +708,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
                       case=int(u["case"]), new_x=int(u["new_x"]), new_y=int(u["new_y"]),
                       new_C=float(u["new_C"])) for u in upd[(upd["x"] == x) & (upd["y"] == y)]],
         final_dynamic=bool(L[y, x]) if L is not None and inside else None,
-        stages=stages,
+        stages=stages, clean_rule=clean_rule,
+        clean_params={k: params.get(k) for k in ("patch_size", "min_region_px")},
         gt=bool(gt[y, x]) if gt is not None and inside else None,
         interrupted=_where_cut(load_store(path), root, x, y, H, W),
         photo=photo_size(info),

@@ -178,6 +178,22 @@ _STAGE_WORDS = {"clean": "the L clean-up", "votes": "the border votes",
                 "snap": "GrabCut (snap to edges)", "select": "the fill by selection"}
 
 
+def clean_rule_words(h: dict[str, Any]) -> str:
+    """" (...)": which step of the L clean-up dropped the pixel (``h["clean_rule"]``
+    from ``inspect.pixel_history``), or "" when it is not known."""
+    cp = h.get("clean_params") or {}
+    p, n = cp.get("patch_size"), cp.get("min_region_px")
+    if h.get("clean_rule") == "opening" and p:
+        return (f" (its opening, a disc of {max(1, int(p) // 4)} px radius: --patch-size "
+                f"{p} // 4, erased it: the scans' map around it is a mesh or a strip "
+                "thinner than the disc; where the set is flat, a majority filter keeps "
+                "such a mesh that hangs on a solid part, not where it is 3-D: there it "
+                "kept static 3-D structure)")
+    if h.get("clean_rule") == "small" and n:
+        return f" (its region was under --min-region-px {n} px after the opening)"
+    return ""
+
+
 def verdict_lines(h: dict[str, Any]) -> list[str]:
     """A few lines (at most five, then the static 3-D test's in the history's head), in
     words: why the pixel ended up as it did.
@@ -237,6 +253,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     if len(st) > 1:
         names = list(st)
         changes = [f"{'added' if st[b] else 'dropped'} by {_STAGE_WORDS.get(b, b)}"
+                   + (clean_rule_words(h) if b == "clean" and not st[b] else "")
                    for a, b in zip(names, names[1:]) if st[a] != st[b] and b != "select"]
         if changes:
             lines.append("after the scans: " + "; ".join(changes) +

@@ -73,6 +73,22 @@ def clean_mask(L: npt.NDArray[np.bool_], params: Params, *, majority: bool = Fal
     return m.astype(bool)
 
 
+def clean_mask_drops(L: npt.NDArray[np.bool_], patch_size: int, min_region_px: int
+                     ) -> npt.NDArray[np.uint8]:
+    """Why ``clean_mask`` (without ``majority``) drops each pixel of L (H, W) bool:
+    (H, W) uint8, 1 where the opening (a disc of ``patch_size // 4`` px) erased it,
+    2 where its region after the opening and closing is under ``min_region_px``,
+    0 where it is kept or not in L. For the debugger (``inspect --pixel``)."""
+    m = L.astype(np.uint8)
+    k = disc(max(1, patch_size // 4))
+    opened = cv2.morphologyEx(cv2.morphologyEx(m, cv2.MORPH_OPEN, k), cv2.MORPH_CLOSE, k)
+    kept = drop_small(opened, min_region_px) if min_region_px > 0 else opened
+    out = np.zeros(L.shape, np.uint8)
+    out[L & (opened == 0)] = 1
+    out[L & (opened > 0) & (kept == 0)] = 2
+    return out
+
+
 def drop_small(m: np.ndarray, min_px: int) -> np.ndarray:
     n, lab, stats, _ = cv2.connectedComponentsWithStats(m.astype(np.uint8), connectivity=8)
     keep = np.zeros(n, bool)
