@@ -223,12 +223,26 @@ def load_for_reference(inputs: Sequence[str | os.PathLike], ref: str | int | Non
     return iset, i, info, notes
 
 
+def distinct_images(images: Sequence[np.ndarray]) -> list[int]:
+    """The indices of the images that are not a pixel-for-pixel copy of an earlier
+    one, in order."""
+    seen: dict[bytes, list[int]] = {}
+    out = []
+    for i, im in enumerate(images):
+        key = hashlib.blake2b(np.ascontiguousarray(im).data, digest_size=16).digest()
+        if not any(np.array_equal(images[j], im) for j in seen.get(key, [])):
+            out.append(i)
+        seen.setdefault(key, []).append(i)
+    return out
+
+
 def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dict, list[str]]:
     """The reference index, how it was chosen (for the report) and notes.
 
     ``ref`` is an index, a file name, a path (exactly that input), ``"auto"``
-    (:func:`~dynremove.video.auto_reference`) or None (the middle image; a note
-    suggests ``--ref auto`` when it is much blurrier than the others).
+    (:func:`~dynremove.video.auto_reference`) or None (the middle one of the distinct
+    images, ``distinct_images``; a note suggests ``--ref auto`` when it is much
+    blurrier than the others).
     """
     valid = getattr(iset, "valid", None)
     if isinstance(ref, str) and ref.strip().lower() == "auto":
@@ -236,6 +250,11 @@ def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dic
         return i, {"chosen_by": "auto", **info}, [note]
     i = io.resolve_ref(ref, iset.names, paths=getattr(iset, "paths", None))
     if ref is None or ref == "":
+        # the middle of the distinct photos: a file given twice (under two names)
+        # does not move it (a fresh-user trial: desk6.jpg and DESK6.JPG made desk5
+        # the reference instead of desk4)
+        distinct = distinct_images(iset.images)
+        i = distinct[len(distinct) // 2]
         note = blurry_reference_note(iset.images, i, iset.names, valid)
         return i, {"chosen_by": "middle"}, [note] if note else []
     return i, {"chosen_by": "given"}, []

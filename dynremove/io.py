@@ -587,6 +587,7 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
     H0, W0 = (shapes[size_of] if size_of is not None and 0 <= size_of < len(shapes) else
               max(shapes, key=lambda sh: (shapes.count(sh), -shapes.index(sh))))
     conformed: list[dict | None] = [None] * len(images)
+    conform_notes: list[str] = []
     first = paths[shapes.index((H0, W0))]
     for i, (p, im) in enumerate(zip(paths, images)):
         if im.shape[:2] == (H0, W0):
@@ -596,9 +597,10 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             raise InputError(f"{p}: is {im.shape[1]}x{im.shape[0]} but {first.name} is "
                              f"{W0}x{H0}; all images must have the same size"
                              + size_hint(im.shape[:2], (H0, W0)))
-        notes.append(_conform_note(p.name, im.shape[:2], (H0, W0), op))
+        conform_notes.append(_conform_note(p.name, im.shape[:2], (H0, W0), op))
         images[i], valids[i] = conform(im, valids[i], op, (H0, W0))
         conformed[i] = op
+    notes.extend(_grouped_notes(conform_notes))  # one line for photos of one size
     if valid_mask is not None:
         given = read_valid_masks(valid_mask, paths, [(W0, H0)] * len(paths))
         valids = [g if v is None else (v if g is None else v & g)

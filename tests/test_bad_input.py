@@ -433,6 +433,13 @@ def test_a_photo_at_another_resolution_is_resized_to_the_set(tmp_path, capsys):
     assert_ok_run(rc, err, out)
     assert "resized to 128x96" in err
     assert cv2.imread(str(out / "clean.png")).shape == (96, 128, 3)
+    # two photos of that resolution: one note naming both (a fresh-user trial: one
+    # line per photo)
+    assert cv2.imwrite(str(paths[1]), cv2.resize(sc.images[1], (256, 192),
+                                                 interpolation=cv2.INTER_CUBIC))
+    notes = [n for n in io.load_image_set([d]).notes if "resized to 128x96" in n]
+    assert notes == [f"{paths[1].name}, {paths[3].name}: is 256x192, the set 128x96 (the "
+                     "same frame at another resolution): resized to 128x96"], notes
 
 
 def test_tiny_images_api():

@@ -371,3 +371,19 @@ def test_a_cut_batch_lists_what_finished_and_says_how_to_resume(tmp_path, root, 
     rows = summary_rows(out)
     assert list(rows) == ["a", "bad", "davis/b"]
     assert rows["a"]["skipped"] in ("True", "1", "true") and rows["davis/b"]["status"] == "ok"
+
+
+def test_a_photo_given_twice_does_not_move_the_middle_reference(tmp_path):
+    """Five distinct photos plus a copy of the last under another name: the
+    reference is still the middle one of the five (a fresh-user trial: desk6.jpg and
+    DESK6.JPG moved it from desk4 to desk5)."""
+    from dynremove import io
+
+    s = synth.make_scene(seed=1, n_views=5, size=(48, 64))
+    paths = write_set(tmp_path / "set", s.images)
+    (tmp_path / "set" / "zz_copy.png").write_bytes(paths[-1].read_bytes())
+    iset = io.load_image_set([tmp_path / "set"])
+    assert len(iset.images) == 6
+    assert batch.distinct_images(iset.images) == [0, 1, 2, 3, 4]
+    i, info, _ = batch.choose_reference(None, iset)
+    assert iset.names[i] == paths[2].name and info["chosen_by"] == "middle"
