@@ -80,6 +80,7 @@ from dynremove.refine.morphology import dilate_disc, drop_small, fill_holes, gro
 
 _FORBIDDEN = 1e6  # data cost of a label that may not be used
 _UNSEEN_PX = 12  # pixels no source sees, this near a replaced mover, are inpainted with it
+_UNSEEN_CORE_PX = 48  # ... and its own pixels of L that no source sees, this far in
 _DE_CAP = 40.0  # colour distances are capped here in the data cost
 # A pixel of L that this many sources explain (a geometrically valid flow match of
 # its colour) is static, however many photos there are: with 8-10 wide-baseline
@@ -376,6 +377,40 @@ def _coarse_fill(values: np.ndarray, valid: np.ndarray, scale: int = 8) -> np.nd
     coarse = num / np.maximum(wv, 1e-6)[..., None]
     coarse = interpolate_field(coarse, wv < 0.05)
     return cv2.resize(coarse, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, -1)
+
+
+def to_the_border(mask: npt.NDArray[np.bool_], px: int) -> npt.NDArray[np.bool_]:
+    """The pixels between ``mask`` (H, W) bool and the image's edge, along rows and
+    columns, where the mask comes within ``px`` of that edge (not the mask's own
+    pixels). (H, W) bool.
+
+    The scans compare p × p patches, so a mover cut by the frame's edge is flagged
+    up to a few pixels short of it (``px``: the patch size). A fresh-user trial
+    found a bottle's green edge left in a clean photo (shaky_desk6, ``--ref
+    desk6.jpg``: the last column unflagged in 230 of its 383 rows)."""
+    out = np.zeros_like(mask)
+    k = max(0, min(px, mask.shape[0], mask.shape[1]))
+    if k == 0:
+        return out
+    out[:, -k:] |= np.logical_or.accumulate(mask[:, -k:], axis=1)
+    out[:, :k] |= np.logical_or.accumulate(mask[:, :k][:, ::-1], axis=1)[:, ::-1]
+    out[-k:] |= np.logical_or.accumulate(mask[-k:], axis=0)
+    out[:k] |= np.logical_or.accumulate(mask[:k][::-1], axis=0)[::-1]
+    return out & ~mask
+
+
+def unseen_part_of_replaced(unseen: npt.NDArray[np.bool_], replaced: npt.NDArray[np.bool_],
+                            mask: npt.NDArray[np.bool_], max_px: int) -> npt.NDArray[np.bool_]:
+    """The pixels of ``unseen`` in a region of ``mask`` that ``replaced`` covers in
+    part, within ``max_px`` (chessboard distance) of a replaced pixel; all (H, W)
+    bool. A region no source replaced at all is not taken (a mover out of every
+    other frame stays as the reference shows it)."""
+    n, comp = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    hit = np.zeros(n, bool)
+    hit[np.unique(comp[replaced])] = True
+    hit[0] = False
+    near = cv2.distanceTransform((~replaced).astype(np.uint8), cv2.DIST_C, 3) <= max_px
+    return unseen & hit[comp] & near
 
 
 def min_witnesses(n_sources: int) -> int:
@@ -726,6 +761,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                       label=np.full((H, W), -1, np.int16), explained=np.zeros((H, W), bool),
                       movers=np.zeros((S, H, W), bool), no_source=np.zeros((H, W), bool),
                       seams=np.zeros((H, W), bool), parallax_px=par, consensus_mode=mode)
+    # a mover cut by the frame's edge: the scans' patches leave the last few pixels
+    # before the edge unflagged, the mask is taken to the edge
+    mask = mask | to_the_border(mask, P.patch_size)
     region = dilate_disc(mask, P.select_margin_px)
     # (an empty L still gets the minority witnesses: a mover that lingered in most
     # photos may be all the scans left unflagged)
@@ -1041,10 +1079,20 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     unseen = reg & ~usable[1:].any(0) & ~rep
     lab_b, rep_b = lab, rep  # what the sources fill and blend (then the inpainting)
     if unseen.any() and (rep & in_core).any():
-        unseen &= dilate_disc(rep & in_core, _UNSEEN_PX)
+        # and the part of a replaced mover that no source reaches, however wide (up
+        # to _UNSEEN_CORE_PX): a bottle cut by the frame's edge, in an 18 px band no
+        # source reached, kept its last 6 px columns green with the 12 px band alone
+        # (a fresh-user trial, shaky_desk6 with --ref desk6.jpg)
+        core_unseen = unseen_part_of_replaced(unseen & in_core, rep & in_core, in_core,
+                                              _UNSEEN_CORE_PX)
+        reach = _UNSEEN_PX
+        if core_unseen.any():
+            reach += int(cv2.distanceTransform((~(rep & in_core)).astype(np.uint8),
+                                               cv2.DIST_C, 3)[core_unseen].max())
+        unseen &= dilate_disc((rep & in_core) | core_unseen, _UNSEEN_PX)
         # each takes the label of the replaced pixels next to it, so that the fill
         # at full size (``upsample.full_resolution``) replaces and inpaints it too
-        near = grow_replaced(np.where(rep, lab, 0).astype(np.int16), _UNSEEN_PX)
+        near = grow_replaced(np.where(rep, lab, 0).astype(np.int16), reach)
         unseen &= near > 0
         lab = np.where(unseen, near, lab)
         rep = lab != 0
@@ -1126,4 +1174,5 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
            "Selection", "complete_regions", "median_parallax_px", "member_median", "min_witnesses",
+           "to_the_border", "unseen_part_of_replaced",
            "region_shares", "select_fill"]
