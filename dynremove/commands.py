@@ -825,7 +825,13 @@ def kernels_cached(record: bool = False) -> bool:
 
 def _note_compile(args: argparse.Namespace) -> None:
     """Say so when this run will compile the kernels (a fresh install: ~35 s, once)."""
-    if not kernels_cached(bool(getattr(args, "record", None))):
+    record = bool(getattr(args, "record", None))
+    if kernels_cached(record):
+        return
+    if record and kernels_cached(False):  # only the recorded scan's own kernels
+        _note(args, "compiling the scan kernels a recorded run adds (once per install, a "
+                    "few seconds; later recorded runs reuse numba's cache)")
+    else:
         _note(args, "compiling the scan kernels (once per install, about 30-60 s; later "
                     "runs reuse numba's cache)")
 

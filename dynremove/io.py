@@ -321,9 +321,9 @@ def read_image(path: Path) -> tuple[np.ndarray, list[str]]:
 def _depth_note(name: str, bits: int) -> str:
     """The note of a 16-bit image read as ``bits``-bit data."""
     if bits == 16:
-        return f"{name}: 16-bit image scaled to 8 bits"
+        return f"{name}: 16-bit image scaled to 8 bits (the outputs are 8-bit)"
     return (f"{name}: 16-bit image holding {bits}-bit values (at most {2 ** bits - 1}): "
-            f"scaled to 8 bits by ÷{2 ** (bits - 8)}")
+            f"scaled to 8 bits by ÷{2 ** (bits - 8)} (the outputs are 8-bit)")
 
 
 def _to_8_bits(img: np.ndarray, bits: int | None = None) -> tuple[np.ndarray, int]:

@@ -563,3 +563,23 @@ def test_a_stop_raised_inside_a_destructor_prints_no_traceback():
     finally:
         sys.unraisablehook = old
     assert [type(u.exc_value) for u in passed_on] == [ValueError]
+
+
+@pytest.mark.parametrize("cached, record, says", [
+    ({False: True, True: True}, True, None),
+    ({False: True, True: False}, True, "a recorded run adds (once per install, a few seconds"),
+    ({False: False, True: False}, True, "once per install, about 30-60 s"),
+    ({False: False, True: False}, False, "once per install, about 30-60 s")])
+def test_the_compile_note_says_what_this_run_compiles(monkeypatch, capsys, cached, record,
+                                                      says):
+    """A recorded run after plain runs compiles only the recorded scan's kernels: its
+    note does not promise 30-60 s again (a fresh-user trial)."""
+    import argparse
+
+    from dynremove import commands
+
+    monkeypatch.setattr(commands, "kernels_cached", lambda rec=False: cached[bool(rec)])
+    commands._note_compile(argparse.Namespace(record="x.rrd" if record else None,
+                                              quiet=False))
+    err = capsys.readouterr().err
+    assert (says in err) if says else err == "", err
