@@ -254,9 +254,15 @@ def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dic
         # does not move it (a fresh-user trial: desk6.jpg and DESK6.JPG made desk5
         # the reference instead of desk4)
         distinct = distinct_images(iset.images)
-        i = distinct[len(distinct) // 2]
+        n = len(distinct)
+        i = distinct[n // 2]
+        info: dict = {"chosen_by": "middle"}
+        if n < len(iset.images):
+            info["n_distinct"] = n
+        if n % 2 == 0:  # the other middle one, for the note's --ref hint
+            info["other_middle"] = distinct[n // 2 - 1]
         note = blurry_reference_note(iset.images, i, iset.names, valid)
-        return i, {"chosen_by": "middle"}, [note] if note else []
+        return i, info, [note] if note else []
     return i, {"chosen_by": "given"}, []
 
 

@@ -312,9 +312,12 @@ def _check_memory(args: argparse.Namespace, iset: io.ImageSet) -> None:
 
 def reference_note(ref_arg: str | None, ref: int, info: dict, names: list[str]) -> str:
     """One line naming the reference and how it was chosen (middle, given, auto)."""
-    middle = ("the middle image" if len(names) % 2 else
-              f"the later of the two middle images; --ref {ref - 1} for the other"
-              if len(names) > 2 else "the second; --ref 0 for the first")
+    n = int(info.get("n_distinct", len(names)))  # a photo given twice counts once
+    other = info.get("other_middle", ref - 1)
+    dup = f" of the {n} distinct ones" if n < len(names) else ""
+    middle = (f"the middle image{dup}" if n % 2 else
+              f"the later of the two middle images{dup}; --ref {other} for the other"
+              if n > 2 else f"the second{dup}; --ref {other} for the first")
     how = {"middle": middle, "auto": "chosen by --ref auto"}.get(
         info.get("chosen_by", ""), f"given by --ref {ref_arg}")
     return f"reference: {names[ref]} (index {ref} of 0..{len(names) - 1}, {how})"

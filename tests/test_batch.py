@@ -387,3 +387,14 @@ def test_a_photo_given_twice_does_not_move_the_middle_reference(tmp_path):
     assert batch.distinct_images(iset.images) == [0, 1, 2, 3, 4]
     i, info, _ = batch.choose_reference(None, iset)
     assert iset.names[i] == paths[2].name and info["chosen_by"] == "middle"
+    from dynremove.commands import reference_note
+
+    assert reference_note(None, i, info, iset.names).endswith(
+        "(index 2 of 0..5, the middle image of the 5 distinct ones)")
+    # 4 distinct photos and a copy: the later middle one, the other named by its index
+    (tmp_path / "set" / paths[0].name).unlink()
+    iset = io.load_image_set([tmp_path / "set"])
+    i, info, _ = batch.choose_reference(None, iset)
+    assert iset.names[i] == paths[3].name
+    assert reference_note(None, i, info, iset.names).endswith(
+        "the later of the two middle images of the 4 distinct ones; --ref 1 for the other)")

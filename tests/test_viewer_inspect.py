@@ -350,6 +350,19 @@ def test_noise_candidates_are_not_counted_in_the_cluster():
     text = vd.format_pixel_history(h_votes)
     assert "added by the border votes" in text and vd.VOTES_LEGEND in text, text
     assert vd.VOTES_LEGEND not in vd.format_pixel_history(h)
+    # the clean-up step that dropped it is named where no later step put it back
+    dropped = dict(h, stages={"scan": True, "clean": False, "votes": False, "snap": False},
+                   clean_rule="opening", clean_params={"patch_size": 13, "min_region_px": 64})
+    text = vd.format_pixel_history(dropped)
+    assert "dropped by the L clean-up (its opening, a disc of 3 px radius: --patch-size " \
+           "13 // 4" in text, text
+    small = dict(dropped, clean_rule="small")
+    assert "(its region was under --min-region-px 64 px after the opening)" in \
+        vd.format_pixel_history(small)
+    readded = dict(dropped, stages={"scan": True, "clean": False, "votes": False,
+                                    "snap": True})
+    text = vd.format_pixel_history(readded)
+    assert "dropped by the L clean-up; added by GrabCut" in text and "its opening" not in text
 
 
 def test_history_of_a_recorded_decision_counts_each_dbscan_label(tmp_path, capsys):
@@ -572,3 +585,18 @@ def test_what_the_cut_weighed_is_told_with_the_consensus_or_the_suspect():
     sel["data_cost"] = {"reference": 30.0}
     assert "no source may fill it" in vd.weighed_words(sel)
     assert vd.weighed_words({}) is None
+
+
+def test_a_reference_kept_against_a_cheaper_source_is_told_as_the_seams_doing():
+    """Where the reference's data cost is the higher one and the cut kept it anyway,
+    inspect does not call it "the cheapest label" (a fresh-user trial: 24.8 against
+    7.2 and "the cheapest label here"); where it is the lower, it does."""
+    h = dict(x=1, y=1, final_dynamic=False, source_names=["a", "b"],
+             selection=dict(evidence={"a": 1}, static_need=1, explained=0, ref_mover_p=0.7,
+                            source=0, completed=0,
+                            data_cost={"reference": 24.8, "best_source": 7.2},
+                            support={"reference": 0.57, "sources": 0.94}))
+    text = vd.static_test_line(h)
+    assert "cheapest label" not in text and "--select-beta" in text, text
+    h["selection"]["data_cost"] = {"reference": 3.0, "best_source": 7.2}
+    assert "it was the cheapest label here" in vd.static_test_line(h)

@@ -252,8 +252,12 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     st = h.get("stages") or {}
     if len(st) > 1:
         names = list(st)
+        # which step of the clean-up dropped it, where no later step put it back
+        later = [st[c] for c in names[names.index("clean") + 1:] if c != "select"] \
+            if "clean" in st else []
         changes = [f"{'added' if st[b] else 'dropped'} by {_STAGE_WORDS.get(b, b)}"
-                   + (clean_rule_words(h) if b == "clean" and not st[b] else "")
+                   + (clean_rule_words(h) if b == "clean" and not st[b] and not any(later)
+                      else "")
                    for a, b in zip(names, names[1:]) if st[a] != st[b] and b != "select"]
         if changes:
             lines.append("after the scans: " + "; ".join(changes) +
@@ -471,9 +475,15 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                 "photomontage took a source here, but the reference is kept with the rest "
                 "of its region of L, which the photomontage kept (--select-complete)")
     region, weighed = region_words(sel), weighed_words(sel)
+    cost = sel.get("data_cost") or {}
+    dearer = ("reference" in cost and "best_source" in cost
+              and cost["reference"] > cost["best_source"])
+    why_kept = ("though a source cost less here by itself, changing label from its kept "
+                "neighbours costs more (the seams, --select-beta)" if dearer else
+                "it was the cheapest label here")
     return ("static 3-D structure test: not passed (" + evidence + why_not + "), but the "
-            "photomontage kept the reference: it was the cheapest label here (its distance "
-            "to the sources' consensus, with the seams" + (f": {weighed}" if weighed else "")
+            f"photomontage kept the reference: {why_kept} (its distance to the sources' "
+            "consensus, with the seams" + (f": {weighed}" if weighed else "")
             + ")" + (f"; {region}" if region else ""))
 
 
