@@ -570,7 +570,8 @@ def gray_like_reference(images: Sequence[np.ndarray], ref: int
     return images, (f"the reference is black and white: the {len(colour)} colour "
                     f"photo{'' if len(colour) == 1 else 's'} among the others "
                     f"{'was' if len(colour) == 1 else 'were'} used in gray, so that the "
-                    "fill matches it")
+                    "fill matches it; without colour to go by, a mover in the scene's gray "
+                    "levels may be found only in part: look at the clean photo")
 
 
 def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
