@@ -66,6 +66,9 @@ class Result:
     # the fill by selection (default preset): per-pixel source, mover maps, seams
     selection: Selection | None = None
     source_indices: list[int] = field(default_factory=list)  # images used as sources
+    # the reference is black and white and the colour sources were used in gray
+    # (``gray_like_reference``): the full-resolution fill does the same
+    gray_sources: bool = False
 
 
 def api_params(params: Params | str | dict | None) -> Params:
@@ -523,7 +526,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "parallax_p95_px": (round(v.parallax_p95_px, 2)
                                        if np.isfinite(v.parallax_p95_px) else None)}
                   for k, v in enumerate(views)],
-        warnings=msgs, stages=stages, selection=selection, source_indices=list(srcs))
+        warnings=msgs, stages=stages, selection=selection, source_indices=list(srcs),
+        gray_sources=gray_note is not None)
     sink.finish(result)
     return result
 
@@ -587,7 +591,10 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
     n = 1 + max([result.ref_index] + list(result.source_indices))
     if len(full_images) < n:
         raise InputError(f"full_images: {len(full_images)} images, the run had at least {n}")
-    full_images, _ = gray_like_reference(full_images, result.ref_index)
+    if result.gray_sources:  # as the analysis did, whatever is_gray says at this size
+        full_images = [im if i == result.ref_index else cv2.cvtColor(
+            cv2.cvtColor(np.asarray(im), cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)
+            if np.asarray(im).ndim == 3 else im for i, im in enumerate(full_images)]
     ref = np.asarray(full_images[result.ref_index])
     srcs = [np.asarray(full_images[i]) for i in result.source_indices]
     h, w = result.clean.shape[:2]

@@ -414,6 +414,14 @@ def test_a_black_and_white_reference_is_filled_in_gray():
     assert spread.max() <= 1, "colour written into the black-and-white photo"
     all_gray = remove_dynamic(gray, ref=ref)
     assert np.array_equal(r.dynamic, all_gray.dynamic)
+    assert r.gray_sources and not all_gray.gray_sources
+    # at full resolution the sources are used in gray as well
+    from dynremove.pipeline import full_resolution_output
+
+    big = [cv2.resize(im, (640, 360), interpolation=cv2.INTER_CUBIC) for im in ims]
+    clean_full, _ = full_resolution_output(r, big)
+    assert clean_full.shape == (360, 640, 3)
+    assert (clean_full.max(axis=2).astype(int) - clean_full.min(axis=2)).max() <= 1
     assert jaccard(r.dynamic, sc.masks[ref]) > 0.7
     # a colour reference, or a set already all gray, is left alone (no note)
     assert gray_like_reference(sc.images, ref)[1] is None
