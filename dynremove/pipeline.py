@@ -552,6 +552,12 @@ def is_gray(image: npt.NDArray[np.uint8], *, tol: int = 3) -> bool:
     return bool(np.percentile(spread, 99.5) <= tol)
 
 
+def _in_gray(image: np.ndarray) -> np.ndarray:
+    """A (H, W, 3) BGR image in gray, still 3 channels (OpenCV's weights)."""
+    g = cv2.cvtColor(np.asarray(image), cv2.COLOR_BGR2GRAY)
+    return cv2.cvtColor(g, cv2.COLOR_GRAY2BGR)
+
+
 def gray_like_reference(images: Sequence[np.ndarray], ref: int
                         ) -> tuple[list[np.ndarray], str | None]:
     """Where the reference is black and white (``is_gray``) and some other photo is
@@ -569,8 +575,7 @@ def gray_like_reference(images: Sequence[np.ndarray], ref: int
     if not colour:
         return images, None
     for i in colour:
-        g = cv2.cvtColor(np.asarray(images[i]), cv2.COLOR_BGR2GRAY)
-        images[i] = cv2.cvtColor(g, cv2.COLOR_GRAY2BGR)
+        images[i] = _in_gray(images[i])
     return images, (f"the reference is black and white: the {len(colour)} colour "
                     f"photo{'' if len(colour) == 1 else 's'} among the others "
                     f"{'was' if len(colour) == 1 else 'were'} used in gray, so that the "
@@ -592,9 +597,8 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
     if len(full_images) < n:
         raise InputError(f"full_images: {len(full_images)} images, the run had at least {n}")
     if result.gray_sources:  # as the analysis did, whatever is_gray says at this size
-        full_images = [im if i == result.ref_index else cv2.cvtColor(
-            cv2.cvtColor(np.asarray(im), cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)
-            if np.asarray(im).ndim == 3 else im for i, im in enumerate(full_images)]
+        full_images = [im if i == result.ref_index or np.asarray(im).ndim != 3
+                       else _in_gray(im) for i, im in enumerate(full_images)]
     ref = np.asarray(full_images[result.ref_index])
     srcs = [np.asarray(full_images[i]) for i in result.source_indices]
     h, w = result.clean.shape[:2]

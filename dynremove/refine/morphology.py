@@ -28,6 +28,13 @@ def dilate_disc(m: np.ndarray, r: int) -> npt.NDArray[np.bool_]:
     return cv2.dilate(np.asarray(m, np.uint8), disc(r)).astype(bool)
 
 
+def _open_close(m: np.ndarray, patch_size: int) -> np.ndarray:
+    """The clean-up's opening then closing of a (H, W) uint8 map, by a disc of
+    ``patch_size // 4`` px (at least 1)."""
+    k = disc(max(1, patch_size // 4))
+    return cv2.morphologyEx(cv2.morphologyEx(m, cv2.MORPH_OPEN, k), cv2.MORPH_CLOSE, k)
+
+
 def clean_mask(L: npt.NDArray[np.bool_], params: Params, *, majority: bool = False
                ) -> npt.NDArray[np.bool_]:
     """Open, close, drop small components and fill holes of a (H, W) bool map.
@@ -48,11 +55,9 @@ def clean_mask(L: npt.NDArray[np.bool_], params: Params, *, majority: bool = Fal
     """
     m = L.astype(np.uint8)
     r = max(1, params.patch_size // 4)
-    k = disc(r)
 
     def opened(m):
-        m = cv2.morphologyEx(m, cv2.MORPH_OPEN, k)
-        m = cv2.morphologyEx(m, cv2.MORPH_CLOSE, k)
+        m = _open_close(m, params.patch_size)
         if params.min_region_px > 0:
             m = drop_small(m, params.min_region_px)
         return m
@@ -79,9 +84,7 @@ def clean_mask_drops(L: npt.NDArray[np.bool_], patch_size: int, min_region_px: i
     (H, W) uint8, 1 where the opening (a disc of ``patch_size // 4`` px) erased it,
     2 where its region after the opening and closing is under ``min_region_px``,
     0 where it is kept or not in L. For the debugger (``inspect --pixel``)."""
-    m = L.astype(np.uint8)
-    k = disc(max(1, patch_size // 4))
-    opened = cv2.morphologyEx(cv2.morphologyEx(m, cv2.MORPH_OPEN, k), cv2.MORPH_CLOSE, k)
+    opened = _open_close(L.astype(np.uint8), patch_size)
     kept = drop_small(opened, min_region_px) if min_region_px > 0 else opened
     out = np.zeros(L.shape, np.uint8)
     out[L & (opened == 0)] = 1

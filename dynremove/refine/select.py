@@ -1085,14 +1085,13 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # (a fresh-user trial, shaky_desk6 with --ref desk6.jpg)
         core_unseen = unseen_part_of_replaced(unseen & in_core, rep & in_core, in_core,
                                               _UNSEEN_CORE_PX)
-        reach = _UNSEEN_PX
-        if core_unseen.any():
-            reach += int(cv2.distanceTransform((~(rep & in_core)).astype(np.uint8),
-                                               cv2.DIST_C, 3)[core_unseen].max())
         unseen &= dilate_disc((rep & in_core) | core_unseen, _UNSEEN_PX)
         # each takes the label of the replaced pixels next to it, so that the fill
         # at full size (``upsample.full_resolution``) replaces and inpaints it too
-        near = grow_replaced(np.where(rep, lab, 0).astype(np.int16), reach)
+        # (a pixel's label is set at the step its distance is reached: more steps
+        # change none of those)
+        near = grow_replaced(np.where(rep, lab, 0).astype(np.int16), _UNSEEN_PX + (
+            _UNSEEN_CORE_PX if core_unseen.any() else 0))
         unseen &= near > 0
         lab = np.where(unseen, near, lab)
         rep = lab != 0
