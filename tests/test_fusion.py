@@ -41,6 +41,24 @@ def test_harmonic_fill_edge_cases():
     np.testing.assert_allclose(fields.harmonic_fill(np.ones((8, 8, 1), np.float32), tiny), 1.0)
 
 
+def test_the_sources_fields_solved_together_equal_one_at_a_time():
+    """``background_fields`` solves S fields as one field of 2·S channels: the
+    same values, bit for bit, as S solves (holes at the frame's edge too)."""
+    rng = np.random.default_rng(1)
+    H, W = 90, 140
+    ys, xs = np.mgrid[0:H, 0:W].astype(np.float32)
+    Nf = [np.stack([xs + 3 * k + rng.normal(size=(H, W)).astype(np.float32),
+                    ys - k + rng.normal(size=(H, W)).astype(np.float32)], -1) for k in range(5)]
+    hole = _disc_hole(H, W, 60, 45, 25) | _disc_hole(H, W, 135, 10, 15)
+    hole[85:, :30] = True
+    together = fields.background_fields(Nf, hole)
+    for f, t in zip(Nf, together):
+        one = fields.harmonic_fill(f - np.stack([xs, ys], -1), hole) + np.stack([xs, ys], -1)
+        np.testing.assert_array_equal(t, one)
+        np.testing.assert_allclose(t[~hole], f[~hole], rtol=0, atol=1e-4)  # (f - x) + x
+    assert fields.background_fields([], hole) == []
+
+
 @pytest.fixture(scope="module")
 def scene():
     return synth.make_scene(seed=1, n_views=5, size=(180, 320))

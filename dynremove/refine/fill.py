@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 from dynremove.method.correspondence import dense_correspondence
 from dynremove.refine.concurrency import for_each_source
-from dynremove.refine.fields import background_field, sample_bilinear
+from dynremove.refine.fields import background_fields, sample_bilinear
 from dynremove.refine.morphology import dilate_disc
 
 
@@ -63,7 +63,7 @@ def fuse_background(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.ui
     region = dilate_disc(mask, int(margin_px))
     # the field is interpolated over a slightly larger hole: flow at object edges bleeds
     hole = cv2.dilate(region.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
-    fields = [background_field(Nf[s], hole) for s in range(len(sources))]
+    fields = background_fields(Nf, hole)
     clean, n_valid = median_fill(reference, sources, fields, region, combine=combine)
     if realign > 0 and homographies is None:
         raise ValueError("realign needs the homographies")

@@ -71,7 +71,7 @@ from dynremove.method.geometry import TwoView, sampson_sq
 from dynremove.params import Params
 from dynremove.refine.colour import delta_e, pairwise_delta_e
 from dynremove.refine.concurrency import for_each_source
-from dynremove.refine.fields import (background_field, blurred_lab, interpolate_field,
+from dynremove.refine.fields import (background_fields, blurred_lab, interpolate_field,
                                      sample_bilinear)
 from dynremove.refine.fill import median_fill, realign_fields
 from dynremove.refine.parallax import epipolar_search, fit_parallax, sweep_fields
@@ -946,7 +946,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # 2. background candidates through the fields, re-aligned
     hole = cv2.dilate(dilate_disc(core, 2).astype(np.uint8), np.ones((7, 7), np.uint8)
                       ).astype(bool)
-    fields = for_each_source(lambda k: background_field(base[k], hole), S)
+    fields = background_fields(base, hole)
     if P.select_sweep and mode == "parallax" and core.any():
         # hidden 3-D structure: the depth at which the sources agree, not a membrane
         model = fit_parallax(base, views, ~dilate_disc(mask, 4), seed=P.seed)
