@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
+import pytest
 
 from dynremove.params import DEFAULT
+from dynremove.refine import morphology
 from dynremove.refine.morphology import clean_mask, clean_mask_drops, dilate_disc
 
 
@@ -97,3 +100,19 @@ def test_clean_mask_drops_tells_the_opening_from_the_small_region_rule():
     assert (why[73:97, 103:127] == 0).all() and kept[73:97, 103:127].all()
     assert not (kept & (why > 0)).any()  # what is dropped is not kept
     assert (why[~L] == 0).all()
+
+
+@pytest.mark.parametrize("r", [1, 7, 10, 13, 40, 80])
+def test_dilate_disc_equals_opencv_at_every_radius(r):
+    """The dilation by the disc's rows (large radii) is OpenCV's, pixel for pixel:
+    shapes, specks, pixels on the frame's edge and a mask wider than the disc."""
+    rng = np.random.default_rng(r)
+    m = np.zeros((150, 230), np.uint8)
+    cv2.circle(m, (90, 70), 30, 1, -1)
+    cv2.rectangle(m, (180, 5), (200, 140), 1, -1)
+    m[rng.random(m.shape) < 0.002] = 1
+    m[0, 3] = m[149, 229] = m[75, 0] = 1
+    want = cv2.dilate(m, morphology.disc(r)).astype(bool)
+    np.testing.assert_array_equal(morphology.dilate_disc(m.astype(bool), r), want)
+    np.testing.assert_array_equal(morphology.dilate_disc(np.zeros((9, 5), bool), r),
+                                  np.zeros((9, 5), bool))

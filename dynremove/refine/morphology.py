@@ -10,6 +10,7 @@ preset only (``Params.clean_mask``).
 from __future__ import annotations
 
 import cv2
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -22,10 +23,68 @@ def disc(r: int) -> np.ndarray:
 
 
 def dilate_disc(m: np.ndarray, r: int) -> npt.NDArray[np.bool_]:
-    """``m`` (bool) dilated by a disc of radius ``r``; a copy when ``r`` <= 0."""
+    """``m`` (H, W) bool dilated by ``disc(r)``; a copy when ``r`` <= 0.
+
+    Exactly ``cv2.dilate(m, disc(r))``. From ``_ROWS_FROM_R`` px up (the fill's
+    rings of 40-80 px), by the disc's rows: OpenCV's time grows with the disc's
+    area (130 ms at r = 80 on 854×480), the rows' with its height (8 ms).
+    """
     if r <= 0:
         return np.asarray(m, bool).copy()
-    return cv2.dilate(np.asarray(m, np.uint8), disc(r)).astype(bool)
+    if r < _ROWS_FROM_R:
+        return cv2.dilate(np.asarray(m, np.uint8), disc(r)).astype(bool)
+    half = ((disc(r).sum(1) - 1) // 2).astype(np.int32)
+    return _dilate_by_rows(np.ascontiguousarray(m, np.uint8), half).view(bool)
+
+
+_ROWS_FROM_R = 10  # px: where the rows' dilation is the faster (measured: equal at 8)
+
+
+@numba.njit(cache=True, nogil=True)
+def _dilate_by_rows(m, half):
+    """Dilation of ``m`` (H, W) uint8 by a symmetric element whose row ``i`` spans
+    ``half[i]`` px either side of the centre column (``half`` (2r+1,) int32).
+
+    Each row's distance to its nearest set pixel (two passes); a pixel is set
+    when, for some row offset dy, the row dy away has a set pixel within
+    ``half[dy + r]`` (pixels outside the image count as unset, as OpenCV's
+    default border for dilation). Returns (H, W) uint8 0/1.
+    """
+    H, W = m.shape
+    r = (half.shape[0] - 1) // 2
+    far = W + 1
+    dist = np.empty((H, W), np.int32)
+    has = np.zeros(H, np.bool_)
+    for y in range(H):
+        d = far
+        for x in range(W):
+            if m[y, x]:
+                d = 0
+                has[y] = True
+            elif d < far:
+                d += 1
+            dist[y, x] = d
+        d = far
+        for x in range(W - 1, -1, -1):
+            if m[y, x]:
+                d = 0
+            elif d < far:
+                d += 1
+            if d < dist[y, x]:
+                dist[y, x] = d
+    out = np.zeros((H, W), np.uint8)
+    for yy in range(H):
+        if has[yy]:
+            for y in range(max(yy - r, 0), min(yy + r + 1, H)):
+                _or_within(dist[yy], half[yy - y + r], out[y])
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _or_within(dist, w, out):
+    """out |= dist <= w, on one row (a function of its own: the loop vectorises)."""
+    for x in range(dist.shape[0]):
+        out[x] |= dist[x] <= w
 
 
 def _open_close(m: np.ndarray, patch_size: int) -> np.ndarray:
