@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import platform
+from concurrent.futures import ThreadPoolExecutor
 import time
 import warnings
 from importlib.metadata import PackageNotFoundError, version
@@ -186,45 +187,55 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
     srcs = [i for i in range(len(images)) if i != ref]
     clock.start("features")
     grays = [features.to_gray(im) for im in images]
-    labs = [features.to_lab(im) for im in images]
-    fc = [features.patch_mean(lab, patch_size=p) for lab in labs]  # f_c from the Lab once computed
-    # f_g written straight into the scan's arrays (the reference's, and the sources'
-    # stacked): a stack of the per-photo arrays cost 0.9 s of copying at 7 × 854×480
-    H, W = grays[ref].shape
-    fg_r = np.empty((H, W, 128), np.uint8)
-    fg_s = np.empty((len(srcs), H, W, 128), np.uint8)
-    fg = [fg_r if i == ref else fg_s[srcs.index(i)] for i in range(len(images))]
-    for i, g in enumerate(grays):
-        features.dense_sift(g, patch_size=p, out=fg[i])
-        clock.tick((i + 1) / len(grays))
-    unit = features.sift_unit(fg, sift_scale=params.sift_scale)
-    # the scan's inputs, stacked per source
-    packed = dict(
-        img=images[ref].copy(), lab=labs[ref].copy(), gray=grays[ref].copy(),
-        fc_r=fc[ref].copy(), fg_r=fg_r,
-        src_img=np.ascontiguousarray(np.stack([images[s] for s in srcs])),
-        src_lab=np.ascontiguousarray(np.stack([labs[s] for s in srcs])),
-        src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
-        fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
-        fg_s=fg_s)
-
-    clock.start("geometry")
     g8 = [np.clip(g + 0.5, 0, 255).astype(np.uint8) for g in grays]
-    views = geometry.geometry_for_sources(g8[ref], [g8[s] for s in srcs], seed=params.seed)
-    if on_geometry is not None:
-        on_geometry(views)
-
-    clock.start("correspondence")
-    # the ungated homography + flow matches, kept for the fill by selection
+    # the geometry and the flow need only the gray photos: they run on a thread of
+    # their own while the dense SIFT is computed (OpenCV releases the GIL; the
+    # results do not depend on it: the estimation seeds its own thread's RNG)
     flows = (np.empty((len(srcs),) + g8[ref].shape + (2,), np.float32)
              if params.correspondence in ("homography+flow", "gated") else None)
-    Ns = for_each_source(lambda k: correspondence.dense_correspondence(
-        g8[ref], g8[srcs[k]], views[k].H, method=params.correspondence,
-        flow_preset=params.flow_preset,
-        gate_px=params.flow_gate * max(g8[ref].shape),
-        F=views[k].F, epipolar_px=params.flow_gate_epipolar_px,
-        flow_out=None if flows is None else flows[k]),
-        len(srcs), on_done=lambda k: clock.tick((k + 1) / len(srcs)))
+
+    def match_sources():
+        views = geometry.geometry_for_sources(g8[ref], [g8[s] for s in srcs],
+                                              seed=params.seed)
+        Ns = for_each_source(lambda k: correspondence.dense_correspondence(
+            g8[ref], g8[srcs[k]], views[k].H, method=params.correspondence,
+            flow_preset=params.flow_preset,
+            gate_px=params.flow_gate * max(g8[ref].shape),
+            F=views[k].F, epipolar_px=params.flow_gate_epipolar_px,
+            flow_out=None if flows is None else flows[k]), len(srcs))
+        return views, Ns
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        matching = pool.submit(match_sources)
+        labs = [features.to_lab(im) for im in images]
+        fc = [features.patch_mean(lab, patch_size=p) for lab in labs]  # f_c from the Lab
+        # f_g written straight into the scan's arrays (the reference's, and the
+        # sources' stacked): a stack of the per-photo arrays cost 0.9 s of copying at
+        # 7 × 854×480
+        H, W = grays[ref].shape
+        fg_r = np.empty((H, W, 128), np.uint8)
+        fg_s = np.empty((len(srcs), H, W, 128), np.uint8)
+        fg = [fg_r if i == ref else fg_s[srcs.index(i)] for i in range(len(images))]
+        for i, g in enumerate(grays):
+            features.dense_sift(g, patch_size=p, out=fg[i])
+            clock.tick((i + 1) / len(grays))
+        unit = features.sift_unit(fg, sift_scale=params.sift_scale)
+        # the scan's inputs, stacked per source
+        packed = dict(
+            img=images[ref].copy(), lab=labs[ref].copy(), gray=grays[ref].copy(),
+            fc_r=fc[ref].copy(), fg_r=fg_r,
+            src_img=np.ascontiguousarray(np.stack([images[s] for s in srcs])),
+            src_lab=np.ascontiguousarray(np.stack([labs[s] for s in srcs])),
+            src_gray=np.ascontiguousarray(np.stack([grays[s] for s in srcs])),
+            fc_s=np.ascontiguousarray(np.stack([fc[s] for s in srcs])),
+            fg_s=fg_s)
+        # (the stages' seconds: "geometry" and "correspondence" are what is left of
+        # the matching when the features are done)
+        clock.start("geometry")
+        views, Ns = matching.result()
+    if on_geometry is not None:
+        on_geometry(views)
+    clock.start("correspondence")
     Nf = np.ascontiguousarray(np.stack(Ns))
     N = correspondence.round_matches(Nf)
 

@@ -86,6 +86,9 @@ def snap_to_edges(image: np.ndarray, mask: npt.NDArray[np.bool_], params: Params
     n, lab, stats, _ = cv2.connectedComponentsWithStats(outer.astype(np.uint8), connectivity=8)
     out = mask.copy()
     margin = params.snap_outer_px + 8
+    # GrabCut's colour models start from k-means, which draws from OpenCV's RNG of
+    # the calling thread: seeded here, the cut does not depend on what ran before
+    cv2.setRNGSeed(int(params.seed))
     for i in range(1, n):
         x, y, w, h = stats[i, :4]
         x0, y0 = max(x - margin, 0), max(y - margin, 0)
