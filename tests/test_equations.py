@@ -176,3 +176,24 @@ def test_hog_is_rotation_invariant():
     kn._hog_finish(g, nb, 1.0)
     npt.assert_allclose(h, g)
     assert h[0] == pytest.approx(2 / math.sqrt(5))
+
+
+def test_sampson_compiled_equals_its_numpy_form(rng):
+    """``geometry.sampson_sq`` (compiled) against the formula written in NumPy, bit for
+    bit, on a float32 grid of (H, W, 2) pairs as the fill passes them, and broadcast."""
+    F = rng.normal(size=(3, 3))
+    xr = rng.uniform(-10, 900, size=(30, 40, 2)).astype(np.float32)
+    xs = (xr + rng.normal(scale=4.0, size=xr.shape)).astype(np.float32)
+    r, s = xr.astype(np.float64), xs.astype(np.float64)
+    a = F[0, 0] * r[..., 0] + F[0, 1] * r[..., 1] + F[0, 2]
+    b = F[1, 0] * r[..., 0] + F[1, 1] * r[..., 1] + F[1, 2]
+    c = F[2, 0] * r[..., 0] + F[2, 1] * r[..., 1] + F[2, 2]
+    ta = F[0, 0] * s[..., 0] + F[1, 0] * s[..., 1] + F[2, 0]
+    tb = F[0, 1] * s[..., 0] + F[1, 1] * s[..., 1] + F[2, 1]
+    e = s[..., 0] * a + s[..., 1] * b + c
+    want = e * e / np.maximum(a * a + b * b + ta * ta + tb * tb, 1e-300)
+    npt.assert_array_equal(geometry.sampson_sq(F, xr, xs), want)
+    one = np.repeat(np.repeat(xr[:1, :1], 30, 0), 40, 1)  # one point against every x_s
+    npt.assert_array_equal(geometry.sampson_sq(F, xr[0, 0], xs),
+                           geometry.sampson_sq(F, one, xs))
+    assert geometry.sampson_sq(F, xr, xs).shape == (30, 40)

@@ -275,3 +275,39 @@ def test_adaptive_support_finds_a_thin_post_that_the_box_window_misses():
     assert np.median(weighted[inner]) < 8.0, np.median(weighted[inner])
     assert np.median(np.abs(mu[inner] - 18.0)) <= 1.5, np.median(mu[inner])
     assert np.median(box[core]) > 12.0 and np.median(weighted[core]) > 12.0
+
+
+def test_the_compiled_projection_of_the_search_steps_equals_project():
+    """``_project_steps`` (the epipolar search's k steps at n cells) is ``project``
+    on broadcast arrays, bit for bit (a plane through the origin's column too:
+    the guard against a zero third coordinate)."""
+    rng = np.random.default_rng(4)
+    Hm = np.eye(3) + rng.normal(0, [[0.05, 0.05, 8], [0.05, 0.05, 8], [1e-4, 1e-4, 0.01]])
+    e = rng.normal(size=3)
+    e /= np.linalg.norm(e)
+    mu = np.linspace(-40.0, 55.0, 33)
+    gx, gy = rng.uniform(-5, 860, 500), rng.uniform(-5, 485, 500)
+    fx, fy = px._project_steps(Hm, e, mu, gx, gy)
+    wx, wy = px.project(Hm, e, mu[:, None], gx[None], gy[None])
+    np.testing.assert_array_equal(fx, wx)
+    np.testing.assert_array_equal(fy, wy)
+
+
+def test_the_support_weights_equal_their_first_writing():
+    """``_support_weights`` (adaptive support weights of the search's windows), its
+    ΔE compiled: the same values, bit for bit, as the column-by-column NumPy form it
+    replaced (query cells on the crop's edge too)."""
+    from dynremove.refine.colour import delta_e
+    rng = np.random.default_rng(5)
+    ref = rng.uniform(-60, 90, (40, 57, 3)).astype(np.float32)
+    qy = np.r_[rng.integers(0, 40, 300), 0, 39, 0]
+    qx = np.r_[rng.integers(0, 57, 300), 0, 56, 56]
+    for box, support_de in ((5, 5.0), (3, 2.5)):
+        r = box // 2
+        pad = np.pad(ref, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
+        want = np.empty((len(qy), box * box), np.float32)
+        for i, (dy, dx) in enumerate((dy, dx) for dy in range(box) for dx in range(box)):
+            d = delta_e(pad[qy + dy, qx + dx], ref[qy, qx])
+            want[:, i] = np.where(np.isfinite(d), np.exp(-d / support_de), 0.0)
+        want = want / np.maximum(want.sum(1, keepdims=True), 1e-12)
+        np.testing.assert_array_equal(px._support_weights(ref, qy, qx, box, support_de), want)

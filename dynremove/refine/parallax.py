@@ -68,6 +68,30 @@ def project(Hm, e, mu, gx, gy):
     return (px / pw).astype(np.float32), (py / pw).astype(np.float32)
 
 
+@numba.njit(cache=True, nogil=True)
+def _project_steps(Hm, e, mu, gx, gy):
+    """``project(Hm, e, mu[:, None], gx[None], gy[None])`` compiled: (k, n) float32
+    x and y for k values of μ (float64) at n points (float64), the same arithmetic
+    in the same order (bit for bit: ``test_parallax``), without its (k, n)
+    float64 temporaries."""
+    k, n = mu.shape[0], gx.shape[0]
+    fx = np.empty((k, n), np.float32)
+    fy = np.empty((k, n), np.float32)
+    for j in range(n):
+        bx = Hm[0, 0] * gx[j] + Hm[0, 1] * gy[j] + Hm[0, 2]
+        by = Hm[1, 0] * gx[j] + Hm[1, 1] * gy[j] + Hm[1, 2]
+        bw = Hm[2, 0] * gx[j] + Hm[2, 1] * gy[j] + Hm[2, 2]
+        for i in range(k):
+            px = bx + mu[i] * e[0]
+            py = by + mu[i] * e[1]
+            pw = bw + mu[i] * e[2]
+            if abs(pw) < 1e-9:
+                pw = 1e-9
+            fx[i, j] = np.float32(px / pw)
+            fy[i, j] = np.float32(py / pw)
+    return fx, fy
+
+
 def _mu_of(Hm, e, gx, gy, xs, ys):
     """μ with x̃_s × (H x̃ + μ ẽ) = 0 in the least-squares sense (closed form)."""
     p = np.stack([Hm[0, 0] * gx + Hm[0, 1] * gy + Hm[0, 2],
@@ -394,7 +418,7 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     for i0 in range(0, n_steps, chunk):
         gs = steps[i0:i0 + chunk]
         k = len(gs)
-        fx, fy = project(view.H, e, gs[:, None], CX[None], CY[None])  # (k, n)
+        fx, fy = _project_steps(view.H, e, gs, CX, CY)  # (k, n)
         smp = remap_points(lab_s, fx.ravel(), fy.ravel(),
                            borderMode=cv2.BORDER_REPLICATE).reshape(k, n, 3)
         inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
@@ -430,14 +454,33 @@ def _support_weights(ref: np.ndarray, qy: np.ndarray, qx: np.ndarray, box: int,
     each cell of its box × box window (row-major offsets), 0 for window cells
     outside the crop, normalised to sum 1.
     """
-    r = box // 2
-    pad = np.pad(ref, ((r, r), (r, r), (0, 0)), constant_values=np.nan)
-    centre = ref[qy, qx]
-    w = np.empty((len(qy), box * box), np.float32)
-    for i, (dy, dx) in enumerate((dy, dx) for dy in range(box) for dx in range(box)):
-        d = delta_e(pad[qy + dy, qx + dx], centre)
-        w[:, i] = np.where(np.isfinite(d), np.exp(-d / support_de), 0.0)
+    d = _window_delta_e(np.ascontiguousarray(ref, np.float32), qy, qx, box)
+    w = np.where(np.isfinite(d), np.exp(-d / support_de), 0.0).astype(np.float32)
     return w / np.maximum(w.sum(1, keepdims=True), 1e-12)
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_delta_e(ref, qy, qx, box):
+    """(n, box²) float32: CIE76 ΔE between each query cell of ``ref`` (h, w, 3)
+    float32 and each cell of its box × box window (row-major offsets), as
+    ``colour.delta_e`` computes it; NaN for window cells outside ``ref``."""
+    h, w = ref.shape[:2]
+    r = box // 2
+    n = qy.shape[0]
+    out = np.empty((n, box * box), np.float32)
+    for q in range(n):
+        cy, cx = qy[q], qx[q]
+        for i in range(box * box):
+            y = cy + i // box - r
+            x = cx + i % box - r
+            if y < 0 or y >= h or x < 0 or x >= w:
+                out[q, i] = np.nan
+                continue
+            a = ref[y, x, 0] - ref[cy, cx, 0]
+            b = ref[y, x, 1] - ref[cy, cx, 1]
+            c = ref[y, x, 2] - ref[cy, cx, 2]
+            out[q, i] = np.sqrt((a * a + b * b) + c * c)
+    return out
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
