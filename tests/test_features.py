@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 import pytest
@@ -72,3 +74,22 @@ def test_lab_mean_is_the_patch_average():
     fc = features.lab_mean(img, patch_size=3)
     np.testing.assert_allclose(fc[4, 4], (2 * lab[4, 0] + lab[4, 8]) / 3, atol=1e-3)
     np.testing.assert_allclose(fc[4, 1], lab[4, 0], atol=1e-4)
+
+
+def test_orientation_planes_equal_their_numpy_form(rng):
+    """The compiled split of the gradient between its two orientation bins equals
+    the NumPy form first written, bit for bit (angles of exactly 0 and 2π too)."""
+    gray = rng.uniform(0, 255, (60, 90)).astype(np.float32)
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=1) * 0.5
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=1) * 0.5
+    mag, ang = cv2.cartToPolar(gx, gy)
+    ang[0, :3] = (0.0, np.float32(2 * np.pi), np.nextafter(np.float32(2 * np.pi), 0))
+    o = ang * (8.0 / (2.0 * math.pi))
+    o0 = np.floor(o)
+    w1 = o - o0
+    o0 = o0.astype(np.int32) % 8
+    lo, hi = mag * (1.0 - w1), mag * w1
+    o1 = (o0 + 1) % 8
+    want = np.stack([np.where(o0 == k, lo, 0.0) + np.where(o1 == k, hi, 0.0)
+                     for k in range(8)]).astype(np.float32)
+    np.testing.assert_array_equal(features._orientation_planes(mag, ang), want)

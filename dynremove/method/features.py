@@ -92,17 +92,9 @@ def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int,
     # triangular pooling window of half-width b (VLFeat's bilinear spatial binning)
     tri = np.array([b - abs(i) for i in range(-b + 1, b)], np.float32)
     tri /= tri.sum()
-    o = ang * (8.0 / (2.0 * math.pi))
-    o0 = np.floor(o)
-    w1 = o - o0
-    o0 = o0.astype(np.int32) % 8
-    lo, hi = mag * (1.0 - w1), mag * w1  # the two bins' shares, the same for every k
-    o1 = (o0 + 1) % 8
-    pooled = np.empty((8,) + gray.shape, np.float32)
+    pooled = _orientation_planes(mag, ang)
     for k in range(8):
-        m = np.where(o0 == k, lo, 0.0) + np.where(o1 == k, hi, 0.0)
-        pooled[k] = cv2.sepFilter2D(m.astype(np.float32), -1, tri, tri,
-                                    borderType=cv2.BORDER_REFLECT_101)
+        pooled[k] = cv2.sepFilter2D(pooled[k], -1, tri, tri, borderType=cv2.BORDER_REFLECT_101)
     offs = np.array([int(math.floor((i - 1.5) * b + 0.5)) for i in range(4)], np.int64)
     sigma = 2.0 * b  # Gaussian over cells: half the descriptor width, as in SIFT
     cw = np.exp(-((offs[:, None] ** 2 + offs[None, :] ** 2) / (2.0 * sigma * sigma)))
@@ -112,6 +104,28 @@ def dense_sift(gray: npt.NDArray[np.float32], *, patch_size: int,
         raise ValueError(f"out must be a C-contiguous uint8 array of shape "
                          f"{gray.shape + (128,)}, got {out.dtype} {out.shape}")
     _assemble_sift(pooled, offs, cw.astype(np.float32), out)
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _orientation_planes(mag, ang):
+    """The gradient's magnitude split between its two nearest of 8 orientation
+    bins (linear in the angle): (8, H, W) float32 from mag, ang (H, W) float32
+    (``cv2.cartToPolar``, radians). Bin o = ⌊8·ang / 2π⌋ mod 8 takes mag·(1 − w),
+    bin o + 1 (mod 8) takes mag·w, w the fraction; in float32, as the NumPy
+    form first written (``test_features``)."""
+    H, W = mag.shape
+    out = np.zeros((8, H, W), np.float32)
+    scale = np.float32(8.0 / (2.0 * math.pi))
+    one = np.float32(1.0)
+    for y in range(H):
+        for x in range(W):
+            o = ang[y, x] * scale
+            f = np.floor(o)
+            w1 = o - f
+            o0 = int(f) % 8
+            out[o0, y, x] = mag[y, x] * (one - w1)
+            out[(o0 + 1) % 8, y, x] = mag[y, x] * w1
     return out
 
 
