@@ -40,7 +40,10 @@ def add_param_flags(ap: argparse.ArgumentParser, *, listed: bool = True) -> None
     so that the command's own options are not lost under sixty method flags."""
     title = "method parameters (default: the chosen preset's values)"
     if listed:
-        g = ap.add_argument_group(title)
+        g = ap.add_argument_group(title, description=(
+            "lengths are in analysis px: pixels of the photos as analysed, their "
+            "longer side scaled down to --max-side when larger (on a 4032 px photo "
+            "at --max-side 1280, 1 analysis px is about 3 photo px)"))
     else:
         g = ap.add_argument_group(title, description=(
             "every method flag of 'dynremove run' is taken here too (--patch-size, "

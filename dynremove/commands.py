@@ -251,8 +251,17 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     bar.close()
     score = (f"J {report['jaccard_vs_gt']:.3f} against the given mask, "
              if "jaccard_vs_gt" in report else "")
+    rrd_mb = _file_mib(args.record) if args.record else None
+    if rrd_mb is not None and rrd_mb > _BIG_RECORDING_MIB:
+        share = f"{100 * res.dynamic.mean():.1f} %" + (
+            f", the compare run's {100 * res_b.dynamic.mean():.1f} %" if compare is not None
+            else "")
+        _note(args, f"the recording is {rrd_mb:.0f} MiB: its events grow with the pixels "
+              f"the scans call dynamic ({share} of the reference, in every scan) and with "
+              "the snapshots (--record-every-rows N: fewer with a larger N)", None)
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
-         + (f" and {args.record}" if args.record else "")
+         + (f" and {args.record} ({rrd_mb:.0f} MiB)" if rrd_mb is not None else
+            f" and {args.record}" if args.record else "")
          + f"  ({100 * res.dynamic.mean():.1f} % of the reference dynamic, {score}"
          f"{time.perf_counter() - t0:.1f} s from reading to writing)")
     return EXIT_OK
@@ -678,14 +687,18 @@ def cmd_inspect(args: argparse.Namespace) -> int:
                 print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis "
                       f"image = photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos")
         hist = ins.pixel_history(path, x, y, root=args.root)
-        print(vd.format_pixel_history(hist))
         if size is not None and hist.get("final_dynamic") is False:
+            # (before the verdict, whose "not in the final mask" is the analysis
+            # image's: a fresh-user trial read it as the photo's, at a border pixel
+            # that dynamic_mask.png holds)
             L = ins.read_final_dynamic(path, root=ins.resolve_root(path, args.root))
             if L is not None and L[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].any():
-                print("  NOTE: this is the analysis image's verdict. At full size the fill "
-                      "reaches about one analysis pixel beyond L (and places its seams "
-                      "there), so this photo pixel may have been recomputed: "
-                      "dynamic_mask.png holds it if it changed by ΔE 10 or more")
+                print("NOTE: within 2 analysis pixels of the final mask's border. The verdict "
+                      "below is the analysis image's; at full size the mask is refined on the "
+                      "photo's edges and the fill reaches about one analysis pixel beyond it, "
+                      "so this photo pixel may be in dynamic_mask.png and changed in clean.png "
+                      "(it is there if it changed by ΔE 10 or more)")
+        print(vd.format_pixel_history(hist))
     if args.failures:
         print(vd.format_failures(ins.failures(path, top=args.top, root=args.root)))
     return EXIT_OK
@@ -704,6 +717,17 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 # --- sinks and messages -------------------------------------------------------------------
+_BIG_RECORDING_MIB = 100  # a recording above this gets a note saying what makes it large
+
+
+def _file_mib(path) -> float | None:
+    """The size of ``path`` in MiB, None if it cannot be read."""
+    try:
+        return Path(path).stat().st_size / 2 ** 20
+    except OSError:
+        return None
+
+
 def parse_compare(spec: str, base: Params) -> Params:
     """``--compare``: a preset name, or ``field=value,...`` changes to the run's params."""
     if spec in PRESETS:

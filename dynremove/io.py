@@ -90,6 +90,10 @@ def is_heif(head: bytes) -> bool:
     return bool(b & HEIF_BRANDS) and not (b & AVIF_BRANDS) and head[8:12] not in AVIF_BRANDS
 
 
+VIDEO_SUFFIXES = {".mp4", ".m4v", ".mov", ".3gp", ".avi", ".mkv", ".webm", ".ts", ".mts",
+                  ".m2ts", ".mpg", ".mpeg", ".flv"}
+
+
 def is_video_file(path: Path) -> bool:
     """A video container by content: MP4/MOV/3GP, AVI, Matroska/WebM, MPEG-TS/PS, FLV."""
     head = _head(path, 64)
@@ -208,6 +212,9 @@ def size_hint(shape: tuple[int, int], first: tuple[int, int]) -> str:
     return " (cropped or from another camera: crop or resize the photos to one size)"
 
 
+_NOT_FRAMES = ("masks", "mask", "gt", "annotations")  # subfolders of a set that hold no photos
+
+
 def _subfolder_hint(args: Sequence[str | os.PathLike]) -> str:
     """For a folder given without images of its own: the subfolders that hold
     some (a set's ``frames/``), as a hint to give them instead; else ""."""
@@ -218,18 +225,37 @@ def _subfolder_hint(args: Sequence[str | os.PathLike]) -> str:
             continue
         try:
             subs = sorted((q for q in p.iterdir() if q.is_dir()
-                           and q.name.lower() not in ("masks", "mask", "gt", "annotations")),
+                           and q.name.lower() not in _NOT_FRAMES),
                           key=natural_key)
         except OSError:
             continue
         for q in subs:
-            try:
-                n = sum(1 for f in q.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_EXTS)
-            except OSError:
-                continue
+            n = _n_images(q)
             if n >= 2:
                 found.append(f"{q} ({n} images)")
+        if not found:
+            # a folder of sets (DAVIS's layout: <set>/frames/): one level further down
+            sets = []
+            for q in subs:
+                try:
+                    inner = sorted((r for r in q.iterdir() if r.is_dir()
+                                    and r.name.lower() not in _NOT_FRAMES), key=natural_key)
+                except OSError:
+                    continue
+                sets += [f"{r} ({n} images)" for r in inner if (n := _n_images(r)) >= 2]
+            if sets:
+                return (f"; it holds sets of images one level down, such as "
+                        f"{_listing(sets, 3)}: give one of them, or run them all with "
+                        f"'dynremove batch {a} --out DIR'")
     return f"; give a folder of images, such as {_listing(found, 3)}" if found else ""
+
+
+def _n_images(folder: Path) -> int:
+    """How many files with an image suffix ``folder`` holds (0 if it cannot be listed)."""
+    try:
+        return sum(1 for f in folder.iterdir() if f.is_file() and f.suffix.lower() in IMAGE_EXTS)
+    except OSError:
+        return 0
 
 
 def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
@@ -559,6 +585,11 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
         valids = [content_mask(im) for im in images]
         video = {"path": str(vp), "frames": idx, "pick": pick}
     else:
+        if (len(args) == 1 and Path(args[0]).is_file()
+                and Path(args[0]).suffix.lower() in VIDEO_SUFFIXES):
+            raise InputError(f"{args[0]}: named as a video, but its content is not a video "
+                             "container this tool reads (MP4/MOV, AVI, Matroska/WebM, "
+                             "MPEG-TS/PS, FLV)")
         if frames is not None or span is not None:
             raise InputError("--frames and --span take frames from a video; the inputs are "
                              "images")

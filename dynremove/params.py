@@ -39,7 +39,7 @@ class Params:
     """
 
     # --- features (Sec. 3.1) -------------------------------------------------
-    patch_size: int = 13  # p      : patch side in px (odd) for f_c, f_g and removal (the paper gives no value; paper preset 9)
+    patch_size: int = 13  # p      : patch side in analysis px (odd) for f_c, f_g and removal (the paper gives no value; paper preset 9)
     sift_scale: float = 0.2  # SIFT / set-max is multiplied by this (unit of σ_g; measured)
     hog_bins: int = 8  # bins of the rotation-invariant HoG g_h
     hog_scale: float = 10.0  # unit-L2 HoG is multiplied by this (unit of σ_h)
@@ -80,34 +80,34 @@ class Params:
 
     # --- engineered steps (dynremove.refine; all off in the paper preset) ---
     clean_mask: bool = True  # morphological clean-up of L (open/close, holes)
-    min_region_px: int = 64  # drop dynamic components smaller than this (paper preset 0)
+    min_region_px: int = 64  # drop dynamic components smaller than this many analysis px (paper preset 0)
     clean_majority: bool = True  # where the set is flat (median parallax ≤ --select-parallax-px), the clean-up also keeps the regions of a majority filter of L (binary median, the opening's window) that hold part of what the opening alone keeps: a slow mover's holed scan map is kept
     refine_tau: float = 16.0  # pixel votes at L's border (refine.mask.refine_mask): a source agrees with the reference under this CIE76 ΔE; 0 = off
     refine_shrink_frac: float = 0.8  # drop a rim pixel when this share of sources agree
-    refine_rim_px: int = 3  # width of the inner rim that may be dropped
-    refine_ring_px: int = 6  # width of the outer ring that may be added (no source agrees)
+    refine_rim_px: int = 3  # width (analysis px) of the inner rim that may be dropped
+    refine_ring_px: int = 6  # width (analysis px) of the outer ring that may be added (no source agrees)
     refine_iters: int = 2  # refinement passes
     snap: bool = True  # GrabCut the map's border onto colour edges (refine.mask.snap_to_edges)
-    snap_inner_px: int = 6  # deeper than this inside the map: sure object
-    snap_outer_px: int = 12  # ring of probable background around the map
+    snap_inner_px: int = 6  # deeper than this (analysis px) inside the map: sure object
+    snap_outer_px: int = 12  # ring of probable background around the map, this wide (analysis px)
     snap_iters: int = 3  # GrabCut iterations
     snap_veto: bool = True  # in a set whose median parallax exceeds --select-parallax-px, GrabCut may not add a pixel where --refine-shrink-frac of the sources agree with the reference (ΔE under --refine-tau; refine.mask.veto_agreed)
     fuse: bool = True  # refill L after the scans, as --fill says (selection or median); off: keep the scans' patch writes (paper)
-    fuse_margin_px: int = 2  # the fused region is L dilated by this
+    fuse_margin_px: int = 2  # the fused region is L dilated by this (analysis px)
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
     fuse_realign: int = 2  # passes re-measuring the matches from the cleaned reference (paper preset 0)
-    fuse_realign_max_px: float = 32.0  # a re-measured match may move at most this far (px)
+    fuse_realign_max_px: float = 32.0  # a re-measured match may move at most this far (analysis px)
     near_copy_agree: float = 0.99  # drop sources agreeing with the reference on this share of pixels (0 = off)
     fill: str = "select"  # "select": one free source per region (refine.select); "median": of all
     select_tau: float = 10.0  # CIE76 ΔE under which two candidates agree
-    select_margin_px: int = 8  # the fill may change pixels within this of L
+    select_margin_px: int = 8  # the fill may change pixels within this of L (analysis px)
     select_kappa: float = 6.0  # data cost (ΔE) of taking a source instead of the reference
     select_ref_cost: float = 30.0  # data cost (ΔE) of keeping the reference inside L
     select_beta: float = 0.3  # weight of the photomontage seam cost (ΔE)
     select_gamma: float = 20.0  # data cost (ΔE) of a candidate with mover colours, × P(mover)
-    select_epipolar_px: float = 2.0  # a flow match explaining the reference is this near its line
+    select_epipolar_px: float = 2.0  # a flow match explaining the reference is this near its line (analysis px)
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
-    select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (0 = off)
+    select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (analysis px; 0 = off)
     select_grow_alone: bool = True  # L also grows where no source agrees with the reference (at least two see it, even if they disagree among themselves) and the reference shows the colours of L's movers
     select_parallax_px: float = 8.0  # the set's median measured parallax (analysis px) above which it is treated as 3-D: colour consensus may keep the reference in L, the epipolar search and --snap-veto run
     select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px, weighted: see --select-search-support-de) is under this (0 = off)

@@ -78,6 +78,9 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
         raise InputError(f"--frames {n_want}: need at least 2")
     if pick not in ("sharpest", "even"):
         raise InputError(f"--pick {pick}: expected 'sharpest' or 'even'")
+    # FFmpeg's own messages ("moov atom not found") would reach the terminal before
+    # the one-line error below says the same; the user may still ask for them
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")  # AV_LOG_QUIET
     cap = cv2.VideoCapture(str(p))
     try:
         if not cap.isOpened():

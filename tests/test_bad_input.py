@@ -138,6 +138,20 @@ def test_no_images(tmp_path, capsys):
         remove_dynamic([])
 
 
+def test_a_folder_of_sets_points_at_its_sets_and_at_batch(tmp_path, capsys, scene):
+    """A folder whose images are two levels down (DAVIS's <set>/frames/): the
+    error names the sets' frame folders (not their masks) and 'dynremove batch'."""
+    root = tmp_path / "sets"
+    for name in ("alpha", "beta"):
+        write_set(root / name / "frames", scene.images[:2])
+        write_set(root / name / "masks", scene.images[:2])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, root, "--out", out)
+    assert_input_error(rc, err, "found 0", str(root / "alpha" / "frames"),
+                       str(root / "beta" / "frames"), f"dynremove batch {root}", out=out)
+    assert "masks" not in err
+
+
 def test_one_image(tmp_path, capsys, scene):
     (p,) = write_set(tmp_path / "one", scene.images[:1])
     out = tmp_path / "out"

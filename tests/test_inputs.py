@@ -181,6 +181,38 @@ def test_damaged_video_is_an_input_error(tmp_path, capsys, scene):
     one_error_line(err, "c.avi")
 
 
+def test_a_file_named_as_a_video_that_is_none_says_so(tmp_path, capsys):
+    """A fresh-user trial: a text file named fake.mp4 got "need at least 2 images,
+    found 1"; the error now says the file is not a video it can read."""
+    fake = tmp_path / "fake.mp4"
+    fake.write_text("not a video\n")
+    rc, _, err = run_cli(capsys, "run", fake, "--out", tmp_path / "o", *FAST)
+    assert rc == 2
+    one_error_line(err, "fake.mp4", "named as a video", "MP4/MOV")
+
+
+def test_a_damaged_mp4_gives_one_line_without_ffmpegs_own(tmp_path, scene):
+    """FFmpeg printed "[mov,mp4,...] moov atom not found" straight to the terminal
+    before the one-line error (a fresh-user trial): a whole process, whose stderr
+    holds FFmpeg's C-level output too, now prints the error alone."""
+    import subprocess
+    clip = tmp_path / "c.mp4"
+    H, W = scene.images[0].shape[:2]
+    vw = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"mp4v"), 10, (W, H))
+    if not vw.isOpened():
+        pytest.skip("this OpenCV build writes no MP4")
+    for im in scene.images:
+        vw.write(im)
+    vw.release()
+    clip.write_bytes(clip.read_bytes()[:3000])  # the moov atom (at the end) is gone
+    p = subprocess.run([sys.executable, "-m", "dynremove", "run", str(clip), "--out",
+                        str(tmp_path / "o")], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 2
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("dynremove: error:"), p.stderr
+    assert "moov" not in p.stderr
+
+
 def test_frames_with_images_is_an_input_error(tmp_path, capsys, scene):
     d = tmp_path / "s"
     write_set(d, scene.images[:3])

@@ -129,6 +129,25 @@ def test_the_compare_runs_notes_are_labelled(scene, tmp_path, capsys):
     assert notes[1].startswith("dynremove: note: compare run: only 2 photos")
 
 
+def test_a_large_recording_says_its_size_and_why(scene, tmp_path, capsys, monkeypatch):
+    """A fresh-user trial: --compare paper wrote a 470 MB recording without a word.
+    The last line gives the recording's size; above the threshold (lowered here to
+    0 MiB) a note says what makes it large, for both runs."""
+    from dynremove import commands
+    synth.write_scene(scene, tmp_path / "set")
+    rec = tmp_path / "cmp.rrd"
+    monkeypatch.setattr(commands, "_BIG_RECORDING_MIB", 0)
+    assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o"),
+                 "--record", str(rec), "--compare", "paper"]) == 0
+    cap = capsys.readouterr()
+    err = cap.err
+    size = rec.stat().st_size / 2 ** 20
+    assert f"and {rec} ({size:.0f} MiB)" in cap.out + err
+    note = next(ln for ln in err.splitlines() if "the recording is" in ln)
+    assert f"{size:.0f} MiB" in note and "the compare run's" in note
+    assert "--record-every-rows" in note
+
+
 def _rows_by_entity(path) -> dict[str, int]:
     """Rows per step-indexed entity, read back with the dataframe API."""
     from rerun.chunk import RrdReader

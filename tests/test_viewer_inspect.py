@@ -512,11 +512,13 @@ def test_a_kept_pixel_next_to_L_says_the_full_size_fill_may_reach_it(downscaled,
     assert L is not None and L.any() and not L.all()
     near = cv2.dilate(L.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~L
     far = ~cv2.dilate(L.astype(np.uint8), np.ones((7, 7), np.uint8)).astype(bool)
-    line = "At full size the fill reaches about one analysis pixel beyond L"
+    line = "the fill reaches about one analysis pixel beyond it"
     for where, want in ((near, True), (far, False)):
         ys, xs = np.nonzero(where)
         rc, out, err = _inspect(capsys, downscaled, "--pixel", f"{xs[0]},{ys[0]}")
         assert rc == 0 and (line in out) == want, (where is near, out)
+        if want:  # before the verdict that it qualifies (a second trial read past it)
+            assert out.index(line) < out.index("not in the final mask"), out
     rc, out, _ = _inspect(capsys, downscaled, "--pixel", f"{np.nonzero(L)[1][0]},"
                                                          f"{np.nonzero(L)[0][0]}")
     assert rc == 0 and line not in out  # in L: removed, explained as such
@@ -600,3 +602,28 @@ def test_a_reference_kept_against_a_cheaper_source_is_told_as_the_seams_doing():
     assert "cheapest label" not in text and "--select-beta" in text, text
     h["selection"]["data_cost"] = {"reference": 3.0, "best_source": 7.2}
     assert "it was the cheapest label here" in vd.static_test_line(h)
+
+
+def test_a_pixel_the_fill_put_back_says_so():
+    """A fresh-user trial read "dropped by GrabCut (snap to edges); in the final mask:
+    yes" as a contradiction: the fill by selection had put the pixel back. The line
+    now names that step, and the lingering mover when it was one."""
+    h = {"final_dynamic": True, "source_names": ["a.png", "b.png"], "replacements": [],
+         "gt": None, "x": 1, "y": 1, "t_r": 0.3, "decisions": [],
+         "stages": {"scan": True, "clean": True, "votes": True, "snap": False,
+                    "select": True},
+         "selection": {"source": 1, "inpainted": 0}}
+    line = next(ln for ln in vd.verdict_lines(h) if ln.startswith("after the scans"))
+    assert "dropped by GrabCut" in line and "added back by the fill by selection" in line
+    assert "--select-grow-px" in line and line.endswith("in the final mask: yes"), line
+    h["selection"]["lingering"] = 1
+    line = next(ln for ln in vd.verdict_lines(h) if ln.startswith("after the scans"))
+    assert "lingered" in line and "--select-grow-px" not in line, line
+    h.update(final_dynamic=False, stages={"scan": True, "clean": True, "votes": True,
+                                          "snap": True, "select": False},
+             selection={"source": 0, "inpainted": 0})
+    line = next(ln for ln in vd.verdict_lines(h) if ln.startswith("after the scans"))
+    assert "left out by the fill by selection" in line and line.endswith("no"), line
+    h["stages"] = {"scan": True, "clean": True, "votes": True, "snap": True, "select": True}
+    line = next(ln for ln in vd.verdict_lines(h) if ln.startswith("after the scans"))
+    assert "fill by selection" not in line, line  # unchanged by the fill: not named

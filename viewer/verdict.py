@@ -259,6 +259,21 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                    + (clean_rule_words(h) if b == "clean" and not st[b] and not any(later)
                       else "")
                    for a, b in zip(names, names[1:]) if st[a] != st[b] and b != "select"]
+        if names[-1] == "select" and len(names) > 2 and st["select"] != st[names[-2]]:
+            # the fill changed L itself: say so, or "dropped by GrabCut; in the final
+            # mask: yes" reads as a contradiction (a fresh-user trial)
+            sel_ = h.get("selection") or {}
+            if not st["select"]:
+                changes.append("left out by the fill by selection (it kept the reference)")
+            elif sel_.get("lingering"):
+                changes.append("added back by the fill by selection: a mover that lingered "
+                               "(--select-minority: the sources that saw the background "
+                               "agree against the reference)")
+            else:
+                changes.append("added back by the fill by selection: where the sources "
+                               "agree with one another and the reference alone differs "
+                               "(--select-grow-px), where its region of L was replaced "
+                               "almost whole (--select-complete), or at the frame's edge")
         if changes:
             lines.append("after the scans: " + "; ".join(changes) +
                          f"; in the final mask: {'yes' if st[names[-1]] else 'no'}")
