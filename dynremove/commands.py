@@ -140,6 +140,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         out = io.prepare_out_dir(args.out, args.images)
         if args.record:
             io.check_out_file(args.record, "--record")
+        if (out / "report.json").is_file():
+            # (replaced only when this run writes: a run that fails leaves them)
+            _note(args, f"{out} holds an earlier run's outputs (its report.json): this run "
+                  "replaces them")
         return _run(args, params, out)
     except BaseException:
         if created:  # bad input or interrupted: leave no empty folder behind
