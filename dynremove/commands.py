@@ -126,6 +126,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.probe and not args.record:
         raise InputError("--probe needs --record FILE.rrd (a probe's decisions are recorded "
                          "there, for the viewer and `dynremove inspect --pixel`)")
+    if args.compare and not args.record:
+        raise InputError("--compare needs --record FILE.rrd (the two runs go into one "
+                         "recording)")
+    if args.compare:
+        parse_compare(args.compare, params)  # a bad spec fails before the photos are read
     if args.out is None:
         args.out = str(io.default_out_dir(args.images))
     # nothing a run writes may replace what it reads, or another of its outputs
@@ -135,7 +140,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         writes.insert(0, (f"--record {args.record}", Path(args.record)))
     io.check_writes(writes, io.run_reads(args.images, gt=args.gt,
                                          valid_mask=getattr(args, "valid_mask", None)))
-    created = not Path(args.out).exists()
+    # the folders this run creates (the default out/<name> may create out/ too)
+    created = [q for q in (Path(args.out), *Path(args.out).parents) if not q.exists()]
     try:
         out = io.prepare_out_dir(args.out, args.images)
         if args.record:
@@ -144,13 +150,19 @@ def cmd_run(args: argparse.Namespace) -> int:
             # (replaced only when this run writes: a run that fails leaves them)
             _note(args, f"{out} holds an earlier run's outputs (its report.json): this run "
                   "replaces them")
+        else:
+            there = [n for n in (*io.RUN_OUTPUTS, "report.json") if (out / n).is_file()]
+            if there:
+                _note(args, f"{out} holds {', '.join(there)}, not from a dynremove run (no "
+                      "report.json beside): this run replaces "
+                      + ("it" if len(there) == 1 else "them"))
         return _run(args, params, out)
     except BaseException:
-        if created:  # bad input or interrupted: leave no empty folder behind
+        for q in created:  # bad input or interrupted: leave no empty folder behind
             try:
-                Path(args.out).rmdir()  # only if still empty
+                q.rmdir()  # only if still empty
             except OSError:
-                pass
+                break
         raise
 
 
@@ -189,9 +201,6 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             gt = _resized_mask(gt_full, iset.images[0].shape[:2])  # the analysis size
         probes = _probes_at_analysis_size(args, iset)
         compare = parse_compare(args.compare, params) if args.compare else None
-        if compare is not None and not args.record:
-            raise InputError("--compare needs --record FILE.rrd (the two runs go into one "
-                             "recording)")
         if args.record:
             where.stage = "while opening the recording"
         if compare is not None:
@@ -212,6 +221,9 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                  valid_masks=iset.valid_masks)
             if compare is not None:
                 sink_b = _make_sink(args, iset, gt, rec=rec, root="runs/compare")
+                # its stage lines follow the main run's: say whose they are
+                _line(args, f"compare run (--compare {args.compare}), into the same "
+                      "recording:", where.bar)
                 where.stage = "during features"
                 # the compare run's notes are told apart from the main run's
                 warnings.showwarning = lambda message, *a, **k: _note(
@@ -221,9 +233,10 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                        sample_static=args.sample_static, names=iset.names,
                                        preset_name="compare", progress=where,
                                        valid_masks=iset.valid_masks)
-                _say(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic at the "
-                     "analysis size "
-                     f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}")
+                _line(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic at the "
+                      "analysis size "
+                      f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}",
+                      where.bar)
     except BaseException as e:
         stop = interruption(e)
         if stop is None:
@@ -233,7 +246,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             raise
         raise stop from e
     finally:
-        where.close()
+        where.close(failed=sys.exc_info()[0] is not None)
         if hasattr(sink, "close"):
             sink.close()
         if rec is not None:
@@ -257,12 +270,16 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
              if "jaccard_vs_gt" in report else "")
     rrd_mb = _file_mib(args.record) if args.record else None
     if rrd_mb is not None and rrd_mb > _BIG_RECORDING_MIB:
-        share = f"{100 * res.dynamic.mean():.1f} %" + (
-            f", the compare run's {100 * res_b.dynamic.mean():.1f} %" if compare is not None
-            else "")
+        if compare is not None:
+            a, b = 100 * res.dynamic.mean(), 100 * res_b.dynamic.mean()
+            big = "the compare run" if b > a else "the main run"
+            share = (f"the main run {a:.1f} % of the reference, the compare run {b:.1f} %: "
+                     f"{big} makes most of it")
+        else:
+            share = f"{100 * res.dynamic.mean():.1f} % of the reference"
         _note(args, f"the recording is {rrd_mb:.0f} MiB: its events grow with the pixels "
-              f"the scans call dynamic ({share} of the reference, in every scan) and with "
-              "the snapshots (--record-every-rows N: fewer with a larger N)", None)
+              f"the scans call dynamic, in every scan ({share}), and with the snapshots "
+              "(--record-every-rows N: fewer with a larger N)", None)
     _say(args, f"wrote {out}/clean.png, dynamic_mask.png, coverage.png, report.json"
          + (f" and {args.record} ({rrd_mb:.0f} MiB)" if rrd_mb is not None else
             f" and {args.record}" if args.record else "")
@@ -411,8 +428,8 @@ class _Where:
         self.stage = f"during {label}" if frac < 1.0 else f"after {label}"
         self.bar(stage, frac)
 
-    def close(self) -> None:
-        self.bar.close()
+    def close(self, *, failed: bool = False) -> None:
+        self.bar.close(failed=failed)
 
 
 def _record_interruption(args: argparse.Namespace, stage: str, iset: io.ImageSet | None,
@@ -696,8 +713,10 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             # image's: a fresh-user trial read it as the photo's, at a border pixel
             # that dynamic_mask.png holds)
             L = ins.read_final_dynamic(path, root=ins.resolve_root(path, args.root))
-            if L is not None and L[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].any():
-                print("NOTE: within 2 analysis pixels of the final mask's border. The verdict "
+            # (3 px: the full-size refinement adds specks that far out: a trial's
+            # speck 3 analysis px from the border had no note)
+            if L is not None and L[max(y - 3, 0):y + 4, max(x - 3, 0):x + 4].any():
+                print("NOTE: within 3 analysis pixels of the final mask's border. The verdict "
                       "below is the analysis image's; at full size the mask is refined on the "
                       "photo's edges and the fill reaches about one analysis pixel beyond it, "
                       "so this photo pixel may be in dynamic_mask.png and changed in clean.png "
@@ -865,6 +884,17 @@ def _note_compile(args: argparse.Namespace) -> None:
     else:
         _note(args, "compiling the scan kernels (once per install, about 30-60 s; later "
                     "runs reuse numba's cache)")
+
+
+def _line(args: argparse.Namespace, msg: str, bar: ProgressBar | None) -> None:
+    """``msg`` as a line of its own (not with --quiet): between the bar's stage lines
+    on a terminal (a line printed on stdout was glued to the bar's), else on stdout."""
+    if getattr(args, "quiet", False):
+        return
+    if bar is not None and bar.enabled:
+        bar.note(msg)
+    else:
+        print(msg)
 
 
 def _say(args: argparse.Namespace, msg: str) -> None:

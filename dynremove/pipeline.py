@@ -506,8 +506,9 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                        f"and it was filled from {_names([names[srcs[k]] for k in used])}"))
             msgs.append(
                 f"{n_lg} px show a mover that most photos show in place; {said}"
-                + (f" (with {selection.parallax_px:.0f} px of parallax between the photos, "
-                   "an edge it hides may come out misplaced)"
+                + (f" (the keypoint matches depart {selection.parallax_px:.0f} px from one "
+                   "plane between the photos, the movers' own matches included: as 3-D "
+                   "parallax, an edge the mover hides may come out misplaced)"
                    if selection.consensus_mode == "parallax" else "")
                 + "; --select-minority 0 keeps the majority's view")
             warnings.warn(msgs[-1], stacklevel=2)

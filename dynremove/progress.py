@@ -89,7 +89,14 @@ class ProgressBar:
             self.stream.flush()
             self.open = False
 
-    def close(self) -> None:
+    def close(self, *, failed: bool = False) -> None:
+        """End the bar. ``failed`` (the command stops on an error): a stage line still
+        being drawn at 0 % is erased, not ended, so that the error is the last word
+        (a trial saw "load [----] 0.0 %" above every input error)."""
         if self.enabled:
+            if failed and self.open and self.tty and self.t_done is None:
+                self.stream.write("\r\033[K")
+                self.stream.flush()
+                self.open = False
             self._end_line()
         self.stage, self.t_done = None, None

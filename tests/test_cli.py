@@ -595,3 +595,63 @@ def test_a_run_into_an_earlier_runs_folder_says_it_replaces_it(folder, tmp_path,
     assert rc == 0
     assert f"note: {out} holds an earlier run's outputs (its report.json): this run " \
            "replaces them" in err
+
+
+def test_a_failing_command_erases_its_unfinished_bar_line():
+    """On a terminal, an input error left "load [----] 0.0 %" above it (a trial); the
+    unfinished stage's line is now erased. A finished stage's line stays."""
+    class Tty(_pyio.StringIO):
+        def isatty(self):
+            return True
+    stream = Tty()
+    bar = ProgressBar(stream=stream)
+    bar("load", 1.0)
+    bar("features", 0.0)
+    bar.close(failed=True)
+    text = stream.getvalue()
+    assert text.endswith("\r\033[K") and "load" in text.split("\n")[0]
+    stream = Tty()
+    bar = ProgressBar(stream=stream)
+    bar("load", 0.0)
+    bar.close()  # a run that ends well ends the line, as before
+    assert stream.getvalue().endswith("\n")
+
+
+def test_compare_is_checked_before_the_photos_are_read(tmp_path, capsys, monkeypatch):
+    """--compare without --record, or with an unknown field, failed only after the
+    photos were loaded (a trial): both are refused before any reading."""
+    from dynremove import commands
+    monkeypatch.setattr(commands, "load_for_reference",
+                        lambda *a, **k: pytest.fail("the photos were read"))
+    d = tmp_path / "never"
+    for argv, words in ((["--compare", "paper"], "--compare needs --record"),
+                        (["--compare", "t_r=0.5,foo=1", "--record", str(tmp_path / "r.rrd")],
+                         "foo")):
+        rc, _, err = run_cli(capsys, d, "--out", tmp_path / "o", *argv)
+        assert rc == 2 and words in err, err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_failed_run_leaves_no_empty_default_out_folder(tmp_path, capsys, monkeypatch):
+    """With the default --out, a run that fails left an empty out/ (a trial): the
+    folders the run created are removed again, out/ included, not the ones it found."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "scene").mkdir()
+    rc, _, err = run_cli(capsys, tmp_path / "scene")  # no images: exit 2
+    assert rc == 2 and not (tmp_path / "out").exists(), err
+    (tmp_path / "out").mkdir()
+    rc, _, _ = run_cli(capsys, tmp_path / "scene")
+    assert rc == 2 and (tmp_path / "out").is_dir() and not (tmp_path / "out" / "scene").exists()
+
+
+def test_a_users_file_named_as_an_output_is_noted_before_it_is_replaced(folder, tmp_path,
+                                                                        capsys):
+    """A trial's own clean.png in --out (no report.json beside it) was replaced in
+    silence; the run now says which of its files it replaces."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    cv2.imwrite(str(out / "clean.png"), np.zeros((4, 4, 3), np.uint8))
+    rc, _, err = run_cli(capsys, folder, "--out", out)
+    assert rc == 0
+    assert f"{out} holds clean.png, not from a dynremove run (no report.json beside): " \
+           "this run replaces it" in err
