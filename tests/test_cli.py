@@ -597,26 +597,6 @@ def test_a_run_into_an_earlier_runs_folder_says_it_replaces_it(folder, tmp_path,
            "replaces them" in err
 
 
-def test_a_failing_command_erases_its_unfinished_bar_line():
-    """On a terminal, an input error left "load [----] 0.0 %" above it (a trial); the
-    unfinished stage's line is now erased. A finished stage's line stays."""
-    class Tty(_pyio.StringIO):
-        def isatty(self):
-            return True
-    stream = Tty()
-    bar = ProgressBar(stream=stream)
-    bar("load", 1.0)
-    bar("features", 0.0)
-    bar.close(failed=True)
-    text = stream.getvalue()
-    assert text.endswith("\r\033[K") and "load" in text.split("\n")[0]
-    stream = Tty()
-    bar = ProgressBar(stream=stream)
-    bar("load", 0.0)
-    bar.close()  # a run that ends well ends the line, as before
-    assert stream.getvalue().endswith("\n")
-
-
 def test_compare_is_checked_before_the_photos_are_read(tmp_path, capsys, monkeypatch):
     """--compare without --record, or with an unknown field, failed only after the
     photos were loaded (a trial): both are refused before any reading."""

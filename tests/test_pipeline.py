@@ -299,12 +299,32 @@ def test_progress_clock_starts_with_the_stage(monkeypatch):
     assert secs == [("a", 2.0), ("b", 4.0), ("c", 1.0)]
 
 
-def test_progress_note_ends_the_bar_line():
-    class Tty(_pyio.StringIO):
-        def isatty(self):
-            return True
+class _Tty(_pyio.StringIO):
+    """A stream that says it is a terminal (the bar then redraws one line)."""
 
-    stream = Tty()
+    def isatty(self):
+        return True
+
+
+def test_a_failing_command_erases_its_unfinished_bar_line():
+    """On a terminal, an input error left "load [----] 0.0 %" above it (a trial); the
+    unfinished stage's line is now erased. A finished stage's line stays."""
+    stream = _Tty()
+    bar = ProgressBar(stream=stream)
+    bar("load", 1.0)
+    bar("features", 0.0)
+    bar.close(failed=True)
+    text = stream.getvalue()
+    assert text.endswith("\r\033[K") and "load" in text.split("\n")[0]
+    stream = _Tty()
+    bar = ProgressBar(stream=stream)
+    bar("load", 0.0)
+    bar.close()  # a run that ends well ends the line, as before
+    assert stream.getvalue().endswith("\n")
+
+
+def test_progress_note_ends_the_bar_line():
+    stream = _Tty()
     bar = ProgressBar(stream=stream)
     bar("features", 0.5)
     bar.note("dynremove: note: something")
