@@ -25,11 +25,12 @@ class ProgressBar:
     ``labels`` renames stages on screen (e.g. the pipeline's "fusion" as the fill
     that runs); other stages are shown by their own name.
 
-    A stage's clock starts at its first call, or, when the stage before it
-    reached 100 %, at that moment: consecutive stages (the scans, whose first
-    call comes after their first rows) then take the whole time between them,
-    and the lines add up. Call ``(stage, 0.0)`` when a stage starts for its
-    clock to start there. Not on a terminal, a stage gets one line, when it
+    A stage's clock starts at its ``(stage, 0.0)`` call; a stage whose first call
+    comes later (the scans, after their first rows) starts where the stage before
+    it reached 100 %. The pipeline's stages follow one another, so their lines
+    add up to its run and equal its ``timings`` (report.json's ``seconds``); work
+    between two stages that are not consecutive (a recording's logging) is in no
+    line. Not on a terminal, a stage gets one line, when it
     first reaches 100 %.
     """
 
@@ -55,8 +56,12 @@ class ProgressBar:
             return
         now = time.perf_counter()
         if stage != self.stage:
-            # a stage following one that completed starts where that one ended
-            start = self.t_done if self.t_done is not None else now
+            # a stage starts at its (stage, 0.0) call; one whose first call comes later
+            # (the scans: after their first rows) where the stage before it ended.
+            # (Work between a stage's end and the next one's start, as a recording's,
+            # is in no line, as in report.json's seconds: a trial saw "coverage 0.4 s"
+            # printed against 0.04 s in report.json with --record)
+            start = now if frac <= 0.0 or self.t_done is None else self.t_done
             self._end_line()
             self.stage, self.t_stage, self.t_done, self.t_draw = stage, start, None, 0.0
         if frac >= 1.0:

@@ -297,6 +297,13 @@ def test_progress_clock_starts_with_the_stage(monkeypatch):
     secs = [(ln.split("[")[0].strip(), float(ln.split()[-2]))
             for ln in stream.getvalue().splitlines()]
     assert secs == [("a", 2.0), ("b", 4.0), ("c", 1.0)]
+    # a stage that says it starts (0.0) after a gap is timed from then, as report.json
+    # times it: the gap (a recording's logging between two stages) is in no line
+    clock.t = 15
+    bar("d", 0.0)
+    clock.t = 16.5
+    bar("d", 1.0)
+    assert stream.getvalue().splitlines()[-1].split()[-2] == "1.5"
 
 
 class _Tty(_pyio.StringIO):
