@@ -223,31 +223,30 @@ def _subfolder_hint(args: Sequence[str | os.PathLike]) -> str:
         p = Path(a)
         if not p.is_dir():
             continue
-        try:
-            subs = sorted((q for q in p.iterdir() if q.is_dir()
-                           and q.name.lower() not in _NOT_FRAMES),
-                          key=natural_key)
-        except OSError:
-            continue
+        subs = _photo_subfolders(p)
         for q in subs:
             n = _n_images(q)
             if n >= 2:
                 found.append(f"{q} ({n} images)")
         if not found:
             # a folder of sets (DAVIS's layout: <set>/frames/): one level further down
-            sets = []
-            for q in subs:
-                try:
-                    inner = sorted((r for r in q.iterdir() if r.is_dir()
-                                    and r.name.lower() not in _NOT_FRAMES), key=natural_key)
-                except OSError:
-                    continue
-                sets += [f"{r} ({n} images)" for r in inner if (n := _n_images(r)) >= 2]
+            sets = [f"{r} ({n} images)" for q in subs for r in _photo_subfolders(q)
+                    if (n := _n_images(r)) >= 2]
             if sets:
                 return (f"; it holds sets of images one level down, such as "
                         f"{_listing(sets, 3)}: give one of them, or run them all with "
                         f"'dynremove batch {a} --out DIR'")
     return f"; give a folder of images, such as {_listing(found, 3)}" if found else ""
+
+
+def _photo_subfolders(folder: Path) -> list[Path]:
+    """The subfolders of ``folder`` that may hold photos (not ``_NOT_FRAMES``), in
+    natural order ([] if it cannot be listed)."""
+    try:
+        return sorted((q for q in folder.iterdir() if q.is_dir()
+                       and q.name.lower() not in _NOT_FRAMES), key=natural_key)
+    except OSError:
+        return []
 
 
 def _n_images(folder: Path) -> int:

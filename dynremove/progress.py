@@ -95,9 +95,10 @@ class ProgressBar:
             self.open = False
 
     def close(self, *, failed: bool = False) -> None:
-        """End the bar. ``failed`` (the command stops on an error): a stage line still
-        being drawn at 0 % is erased, not ended, so that the error is the last word
-        (a trial saw "load [----] 0.0 %" above every input error)."""
+        """End the bar. ``failed`` (the command stops on an error): on a terminal, the
+        line of a stage that has not reached 100 % is erased, not ended, so that the
+        error is the last word (a trial saw "load [----] 0.0 %" above every input
+        error)."""
         if self.enabled:
             if failed and self.open and self.tty and self.t_done is None:
                 self.stream.write("\r\033[K")
