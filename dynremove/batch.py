@@ -438,6 +438,22 @@ def _previous_rows(out: Path) -> dict[str, dict]:
         return {}
 
 
+def _earlier_row(out: Path, p: dict | None) -> dict | None:
+    """The previous summary's row ``p`` of a set that this batch did not reach, when
+    ``out`` (the set's folder) still holds the outputs of the run it describes (the
+    same batch key, ``ok``); marked as not re-checked. None otherwise."""
+    if not p or p.get("status") != "ok" or not p.get("batch_key"):
+        return None
+    try:
+        if json.loads((out / "report.json").read_text()).get("batch_key") != p["batch_key"]:
+            return None
+    except (OSError, ValueError, AttributeError):
+        return None
+    note = ("from the earlier run: this batch was cut short before the set (its inputs "
+            "were not checked for changes)")
+    return {**p, "skipped": True, "notes": [*(p.get("notes") or []), note]}
+
+
 def _keep_earlier(row: dict, prev: dict[str, dict]) -> dict:
     """A skipped row with the seconds of the previous summary's row of the same set,
     when that row is the run that made the outputs (same batch key, ``ok``)."""
@@ -498,8 +514,14 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
         # that finished (each set's own outputs are already whole on disk), and says
         # how many did not run; the same command again resumes
         done = [results[bs.name] for bs in sets if bs.name in results]
-        _write_summary(out, summary_of(done, None, interrupted=True,
-                                       n_not_run=len(sets) - len(done)))
+        n_not_run = len(sets) - len(done)
+        # a set this run did not reach keeps the earlier summary's row while its
+        # outputs are still that run's (an interrupted batch wiped the rows of the
+        # sets finished before: a fresh-user trial)
+        rows = [results.get(bs.name) or _earlier_row(out / bs.name, prev.get(bs.name))
+                for bs in sets]
+        _write_summary(out, summary_of([r for r in rows if r is not None], None,
+                                       interrupted=True, n_not_run=n_not_run))
         raise
     summary = summary_of(rows, workers)
     _write_summary(out, summary)

@@ -157,12 +157,16 @@ def cmd_run(args: argparse.Namespace) -> int:
                       "report.json beside): this run replaces "
                       + ("it" if len(there) == 1 else "them"))
         return _run(args, params, out)
-    except BaseException:
+    except BaseException as e:
         for q in created:  # bad input or interrupted: leave no empty folder behind
             try:
                 q.rmdir()  # only if still empty
             except OSError:
                 break
+        if interruption(e) is not None and not getattr(args, "_wrote", False):
+            _note(args, f"nothing was written to {args.out}"
+                  + (" (its earlier outputs are as they were)"
+                     if (Path(args.out) / "report.json").is_file() else ""))
         raise
 
 
@@ -262,6 +266,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         gt = _resized_mask(gt_full, res.dynamic.shape)  # the output's size
     check_stop()  # a Ctrl-C lost in the last stage: nothing is written
     bar("writing", 0.0)
+    args._wrote = True  # (an interruption from here on may have written some outputs)
     report = write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
                            record=args.record, reference=ref_info)
     bar("writing", 1.0)
@@ -462,6 +467,9 @@ def _record_interruption(args: argparse.Namespace, stage: str, iset: io.ImageSet
                 if kept is not None:
                     print(f"dynremove: note: {args.record} from before is kept; this run's "
                           f"recording, cut short, is {kept}", file=sys.stderr)
+                elif s is live[0]:
+                    _note(args, f"the recording, cut short, is {args.record} "
+                          "('dynremove inspect' reads it)")
     except Exception as e:  # noqa: BLE001 - e.g. disk full: exit as interrupted anyway
         print(f"dynremove: note: {args.record}: could not record the interruption "
               f"({type(e).__name__}: {' '.join(str(e).split())})", file=sys.stderr)

@@ -11,7 +11,9 @@ import contextlib
 import json
 import os
 import re
+import sys
 import tempfile
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator, Sequence
@@ -429,6 +431,34 @@ def read_alpha(path: str | os.PathLike) -> np.ndarray | None:
     return alpha
 
 
+# libjpeg's warnings after which part of the picture is grey or garbage (a file whose
+# entropy-coded data was damaged or cut); others ("N extraneous bytes before marker")
+# leave the picture whole and are only noted
+_JPEG_DATA_LOST = ("premature end", "Huffman", "Invalid", "Bogus", "must be", "Unsupported")
+_STDERR_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _stderr_captured():
+    """Capture what C code writes to file descriptor 2 (libjpeg's warnings reach the
+    terminal there, naming no file). Yields a function returning the text."""
+    text = [""]
+    with _STDERR_LOCK, tempfile.TemporaryFile() as buf:
+        try:
+            sys.stderr.flush()
+        except (AttributeError, ValueError):
+            pass
+        saved = os.dup(2)
+        try:
+            os.dup2(buf.fileno(), 2)
+            yield lambda: text[0]
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            buf.seek(0)
+            text[0] = buf.read().decode("utf-8", "replace")
+
+
 def _decode(path: Path, depth16: int | None
             ) -> tuple[np.ndarray, np.ndarray | None, list[str], int]:
     """An image file as (H, W, 3) uint8 BGR, upright; its alpha channel (H, W) uint8
@@ -446,8 +476,19 @@ def _decode(path: Path, depth16: int | None
     if data.size == 0:
         raise InputError(f"{path}: empty file")
     head = data[:64].tobytes()
-    img = None if is_heif(head) else cv2.imdecode(
-        data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    if head[:2] == b"\xff\xd8":  # JPEG: libjpeg's warnings say what it could not decode
+        with _stderr_captured() as said:
+            img = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+        warned = [ln.strip() for ln in said().splitlines() if "JPEG" in ln]
+        lost = [ln for ln in warned if any(w in ln for w in _JPEG_DATA_LOST)]
+        if img is not None and lost:
+            raise InputError(f"{path}: corrupt JPEG, part of the picture could not be decoded "
+                             f"(libjpeg: {lost[0]}): leave it out or export it again")
+        notes.extend(f"{path.name}: {ln} (libjpeg; it decoded: check that the picture "
+                     "is whole)" for ln in warned)
+    else:
+        img = None if is_heif(head) else cv2.imdecode(
+            data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     if img is not None and img.ndim == 3 and img.shape[2] == 3 and _png_has_alpha(data):
         oriented = img  # (ANYCOLOR applied the EXIF orientation and dropped the alpha)
         img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)  # the alpha, stored orientation

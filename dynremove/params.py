@@ -97,6 +97,7 @@ class Params:
     fuse_combine: str = "median"  # "median" (per channel) or "medoid" of the sources' samples
     fuse_realign: int = 2  # passes re-measuring the matches from the cleaned reference (paper preset 0)
     fuse_realign_max_px: float = 32.0  # a re-measured match may move at most this far (analysis px)
+    exposure_match: float = 0.10  # scale a source's channels to the reference's exposure where a gain departs from 1 by this fraction or more (method.exposure; 0 = off)
     near_copy_agree: float = 0.99  # drop sources agreeing with the reference on this share of pixels (0 = off)
     fill: str = "select"  # "select": one free source per region (refine.select); "median": of all
     select_tau: float = 10.0  # CIE76 ΔE under which two candidates agree
@@ -148,6 +149,8 @@ class Params:
             raise ValueError(f"write must be one of {WRITE_MODES}, got {self.write!r}")
         if self.flow_preset not in ("fast", "medium", "ultrafast"):
             raise ValueError(f"flow_preset must be fast/medium/ultrafast, got {self.flow_preset!r}")
+        if not 0.0 <= self.exposure_match < 1.0:
+            raise ValueError(f"exposure_match must be in [0, 1), got {self.exposure_match}")
         if not 0.0 <= self.near_copy_agree <= 1.0:
             raise ValueError(f"near_copy_agree must be in [0, 1], got {self.near_copy_agree}")
         if self.fill not in FILL_MODES:
@@ -205,7 +208,7 @@ DEFAULT = Params()
 # t_r 0.4, and none of the engineered steps of dynremove.refine.
 PAPER = Params(patch_size=9, t_r=0.4, correspondence="homography+flow", max_scans=4,
                clean_mask=False, clean_majority=False, min_region_px=0, refine_tau=0.0, snap=False,
-               fuse=False, fuse_realign=0, candidate_set=True, near_copy_agree=0.0)
+               fuse=False, fuse_realign=0, candidate_set=True, near_copy_agree=0.0, exposure_match=0.0)
 
 PRESETS: dict[str, Params] = {"default": DEFAULT, "paper": PAPER}
 

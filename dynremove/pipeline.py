@@ -22,7 +22,7 @@ import numpy.typing as npt
 
 from dynremove.errors import InputError
 from dynremove.events import EventSink, NullSink, RunInfo
-from dynremove.method import correspondence, features, geometry
+from dynremove.method import correspondence, exposure, features, geometry
 from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
 from dynremove.io import resolve_ref, size_hint
@@ -70,6 +70,10 @@ class Result:
     # the reference is black and white and the colour sources were used in gray
     # (``gray_like_reference``): the full-resolution fill does the same
     gray_sources: bool = False
+    # per source (as ``source_indices``): the (3, 256) uint8 B, G, R tone curves that
+    # matched its exposure to the reference's (``method.exposure``; the identity where
+    # not changed); the full-size fill maps the full-size sources through them too
+    source_curves: list[np.ndarray] = field(default_factory=list)
 
 
 def api_params(params: Params | str | dict | None) -> Params:
@@ -233,6 +237,20 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
         # the matching when the features are done)
         clock.start("geometry")
         views, Ns = matching.result()
+        # a source shot brighter or darker than the reference: mapped to its levels
+        # (its colours only: the SIFT descriptors are normalised, the flow uses the
+        # patches' mean-normalised intensities)
+        curves = np.tile(np.arange(256, dtype=np.uint8), (len(srcs), 3, 1))
+        if params.exposure_match > 0 and srcs:
+            curves = exposure.exposure_curves(images[ref], [images[s] for s in srcs], Ns,
+                                              min_change=params.exposure_match)
+            for k in np.flatnonzero((curves != np.arange(256)).any((1, 2))):
+                im = exposure.apply_curves(images[srcs[k]], curves[k])
+                lab_k = features.to_lab(im)
+                packed["src_img"][k] = im
+                packed["src_lab"][k] = lab_k
+                packed["src_gray"][k] = features.to_gray(im)
+                packed["fc_s"][k] = features.patch_mean(lab_k, patch_size=p)
     if on_geometry is not None:
         on_geometry(views)
     clock.start("correspondence")
@@ -247,7 +265,7 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
             F[k], hasF[k] = v.F, True
     clock.start("similarity")
     st = ScanInputs(**packed, N=N, C=np.zeros(N.shape[:3], np.float32), F=F, hasF=hasF,
-                    sift_unit=unit, Nf=Nf, Nf_flow=flows)
+                    sift_unit=unit, Nf=Nf, Nf_flow=flows, curves=curves)
     pf, pi = pack_params(params, sift_unit=unit)
     st.C = kn._similarity_map(st.N, st.fc_r, st.fg_r, st.fc_s, st.fg_s, st.F, st.hasF, pf, pi)
     return st, views
@@ -396,6 +414,19 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     if keep:  # near-copies dropped (the notes said so)
         st = _keep_sources(st, keep[0])
         views = [views[k] for k in keep[0]]
+    scaled = [k for k in range(len(srcs)) if st.curves is not None
+              and (st.curves[k] != np.arange(256)).any()]
+    if scaled:
+        def level(k):
+            g = exposure.mean_gain(st.curves[k], images[srcs[k]])
+            m = float(np.exp(np.log(g).mean()))
+            return (f"{names[srcs[k]]} {'darker' if m > 1 else 'brighter'} (×{m:.2f}"
+                    + ("" if np.ptp(g) < 0.03 else
+                       ", B/G/R ×" + "/".join(f"{v:.2f}" for v in g)) + ")")
+        msgs.append("photos exposed differently from the reference, their colours mapped to "
+                    "its levels before comparing: " + ", ".join(level(k) for k in scaled)
+                    + " (--exposure-match 0 turns this off)")
+        warnings.warn(msgs[-1], stacklevel=2)
     probe = np.zeros((H, W), np.bool_)
     for (x, y) in probes:
         probe[y, x] = True
@@ -536,9 +567,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "parallax_px": (round(v.parallax_px, 2) if np.isfinite(v.parallax_px)
                                    else None),
                    "parallax_p95_px": (round(v.parallax_p95_px, 2)
-                                       if np.isfinite(v.parallax_p95_px) else None)}
+                                       if np.isfinite(v.parallax_p95_px) else None),
+                   "exposure_gain_bgr": ([round(float(g), 3) for g in exposure.mean_gain(
+                       st.curves[k], images[srcs[k]])] if st.curves is not None else [1.0] * 3)}
                   for k, v in enumerate(views)],
         warnings=msgs, stages=stages, selection=selection, source_indices=list(srcs),
+        source_curves=([c for c in st.curves] if st.curves is not None else []),
         gray_sources=gray_note is not None)
     sink.finish(result)
     return result
@@ -613,6 +647,9 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
                        else _in_gray(im) for i, im in enumerate(full_images)]
     ref = np.asarray(full_images[result.ref_index])
     srcs = [np.asarray(full_images[i]) for i in result.source_indices]
+    if result.source_curves:  # exposure matched as the analysis did
+        srcs = [exposure.apply_curves(im, c) if im.dtype == np.uint8 and im.ndim == 3 else im
+                for im, c in zip(srcs, result.source_curves)]
     h, w = result.clean.shape[:2]
     for im in [ref] + srcs:
         if im.dtype != np.uint8 or im.ndim != 3 or im.shape[2] != 3 or im.shape != ref.shape:
@@ -629,7 +666,7 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
 def _keep_sources(st: ScanInputs, keep: np.ndarray) -> ScanInputs:
     """``st`` restricted to the sources ``keep`` (indices along the S axis)."""
     per_source = ("src_img", "src_lab", "src_gray", "fc_s", "fg_s", "N", "C", "F", "hasF", "Nf",
-                  "Nf_flow")
+                  "Nf_flow", "curves")
     return dataclasses.replace(st, **{
         k: np.ascontiguousarray(getattr(st, k)[keep]) for k in per_source
         if getattr(st, k) is not None})

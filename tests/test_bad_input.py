@@ -282,21 +282,25 @@ def test_unreadable_file_in_the_set(tmp_path, capsys, scene, kind):
     assert_input_error(rc, err, "bad.jpg", problem, out=out)
 
 
-def test_corrupt_jpeg_body_does_not_crash(tmp_path, capsys, scene):
-    """Damage inside the entropy-coded data decodes (libjpeg fills in); no traceback.
-
-    The file decodes, so it is an image like any other: accepted (exit 0), the run
-    goes on (a damaged view may get a note, e.g. too few keypoint matches)."""
+def test_corrupt_jpeg_body_is_refused_by_name(tmp_path, capsys, scene):
+    """Damage inside the entropy-coded data: libjpeg decodes what it can and fills
+    the rest with grey, warning on stderr without naming the file. Such a photo is
+    refused (exit 2, naming it and libjpeg's reason): a fresh-user trial's zeroed
+    bytes made a grey-banded, shifted reference that the run cleaned with exit 0."""
     paths = write_set(tmp_path / "s", scene.images[:3])
-    b = bytearray(jpeg_bytes(scene.images[3]))
+    # (a larger picture, so that the zeroed run lies inside its entropy-coded data)
+    b = bytearray(jpeg_bytes(cv2.resize(scene.images[3], (640, 480))))
     mid = len(b) // 2
-    b[mid:mid + 40] = b"\x00" * 40
+    b[mid:mid + 2000] = b"\x00" * 2000
     bad = tmp_path / "s" / "corrupt.jpg"
     bad.write_bytes(bytes(b))
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, *paths, bad, "--out", out, *FAST)
-    assert "Traceback" not in err
-    assert_ok_run(rc, err, out)
+    msg = assert_input_error(rc, err, str(bad), "corrupt JPEG", out=out)
+    assert "libjpeg" in msg and "Corrupt JPEG data" not in err.replace(msg, "")
+    with pytest.raises(InputError, match="corrupt JPEG"):
+        io.read_image(bad)
+    io.read_image(paths[0])  # and the capture leaves the others' reading alone
 
 
 def test_folder_in_a_list_of_files(tmp_path, capsys, scene):

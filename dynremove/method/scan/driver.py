@@ -56,6 +56,7 @@ class ScanInputs:
     sift_unit: float
     Nf: np.ndarray | None = None  # (S, H, W, 2) float32 sub-pixel initial matches (not scanned)
     Nf_flow: np.ndarray | None = None  # (S, H, W, 2) float32 the same before the gate (the fill's)
+    curves: np.ndarray | None = None  # (S, 3, 256) uint8 B, G, R tone curves applied to the sources
 
     @property
     def shape(self) -> tuple[int, int]:
