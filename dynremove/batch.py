@@ -68,12 +68,14 @@ def at_output_size(res: Any, iset: Any, output_size: str = "full") -> Any:
     """
     if output_size != "full" or iset.scale >= 1.0 or getattr(iset, "video", None):
         return res
+    # (timed from the reading of the originals, as the terminal's "full-size output"
+    # line is: a trial read 7.0 s there against 5.5 s in report.json)
+    t = time.perf_counter()
     full = [io.read_image(p)[0] for p in iset.paths]
     W0, H0 = iset.original_size
     for i, op in enumerate(getattr(iset, "conformed", None) or []):
         if op is not None:  # brought to the set's size when read: the same here
             full[i], _ = io.conform(full[i], None, op, (H0, W0))
-    t = time.perf_counter()
     clean, dyn = full_resolution_output(res, full)
     Hf, Wf = clean.shape[:2]
     cov = cv2.resize(res.coverage, (Wf, Hf), interpolation=cv2.INTER_NEAREST)
