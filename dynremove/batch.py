@@ -446,10 +446,7 @@ def _earlier_row(out: Path, p: dict | None) -> dict | None:
     same batch key, ``ok``); marked as not re-checked. None otherwise."""
     if not p or p.get("status") != "ok" or not p.get("batch_key"):
         return None
-    try:
-        if json.loads((out / "report.json").read_text()).get("batch_key") != p["batch_key"]:
-            return None
-    except (OSError, ValueError, AttributeError):
+    if _is_done(out, p["batch_key"]) is None:
         return None
     note = ("from the earlier run: this batch was cut short before the set (its inputs "
             "were not checked for changes)")

@@ -244,7 +244,7 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
         if params.exposure_match > 0 and srcs:
             curves = exposure.exposure_curves(images[ref], [images[s] for s in srcs], Ns,
                                               min_change=params.exposure_match)
-            for k in np.flatnonzero((curves != np.arange(256)).any((1, 2))):
+            for k in np.flatnonzero(exposure.changed(curves)):
                 im = exposure.apply_curves(images[srcs[k]], curves[k])
                 lab_k = features.to_lab(im)
                 packed["src_img"][k] = im
@@ -414,8 +414,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     if keep:  # near-copies dropped (the notes said so)
         st = _keep_sources(st, keep[0])
         views = [views[k] for k in keep[0]]
-    scaled = [k for k in range(len(srcs)) if st.curves is not None
-              and (st.curves[k] != np.arange(256)).any()]
+    scaled = [] if st.curves is None else list(np.flatnonzero(exposure.changed(st.curves)))
     if scaled:
         def level(k):
             g = exposure.mean_gain(st.curves[k], images[srcs[k]])

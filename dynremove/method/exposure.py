@@ -39,7 +39,7 @@ _LO, _HI = 8, 247
 def exposure_curves(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[np.uint8]],
                     fields: list[npt.NDArray[np.float32] | None], *,
                     min_change: float = 0.10, min_px: int = 2000,
-                    min_per_level: int = 8) -> npt.NDArray[np.uint8]:
+                    min_clipped: int = 8) -> npt.NDArray[np.uint8]:
     """Per-channel tone curves that bring each source to the reference's exposure.
 
     Parameters
@@ -56,20 +56,22 @@ def exposure_curves(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
         its matched pixels of |curve(v) − v| / v is this fraction or more (a
         gain of 1.1 or 0.9 at the default); otherwise all three are the identity.
     min_px : int
-        At least this many matched pixels, or the curves are the identity.
-    min_per_level : int
-        A source level with fewer matched pixels takes the curve's value
-        interpolated from its neighbours.
+        At least this many matched pixels unclipped in both photos, or the curves
+        are the identity.
+    min_clipped : int
+        The clipped highlights' rule needs at least this many matched pixels
+        clipped in the source.
 
     Returns
     -------
     curves : (S, 3, 256) uint8 ndarray
         B, G, R look-up tables: ``curves[s, c][source]`` has the reference's
-        level. For each source level, the median of the reference's values at the
-        pixels whose match shows it (on a grid of about 320 px on the long side),
-        smoothed over ±4 levels and made non-decreasing: a gain where the photos
-        differ by exposure, and also right where one of them is clipped (a sky at
-        255 in the brighter photo) or its tone curve differs.
+        level. Each is the gain ``exp(median(log ref − log source))`` over the
+        matched pixels where neither photo is clipped (levels 8–247 in all three
+        channels; on a grid of about 320 px on the long side). Where the gain
+        darkens, the levels from 247 up ramp to the reference's median level at
+        the source's clipped pixels, when that is higher (a sky at 255 in the
+        brighter photo stays sky, not grey).
     """
     H, W = reference.shape[:2]
     step = max(1, int(np.ceil(max(H, W) / _SIDE)))
@@ -103,25 +105,31 @@ def exposure_curves(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
             # higher (a sky at 255 in the brighter photo stays sky, not grey), the
             # levels from _HI up ramping to it
             top = sw[:, c] > _HI
-            if gain[c] < 1.0 and top.sum() >= min_per_level:
+            if gain[c] < 1.0 and top.sum() >= min_clipped:
                 m = float(np.median(rw[top, c]))
                 if m > curve[255]:
                     t = (levels[_HI:] - _HI) / (255 - _HI)
                     curve[_HI:] = np.maximum(curve[_HI:], curve[_HI] + t * (m - curve[_HI]))
             curve = np.clip(curve, 0, 255)
             cur[c] = np.round(curve).astype(np.uint8)
-            sv = warped[..., c][inside].astype(np.intp)
+            sv = sw[:, c].astype(np.intp)
             change = max(change, float(np.median(np.abs(curve[sv] - sv) / np.maximum(sv, 1))))
         if change >= min_change:
             curves[k] = cur
     return curves
 
 
+def changed(curves: npt.ArrayLike) -> npt.NDArray[np.bool_]:
+    """Which of the (..., 3, 256) ``curves`` change a level: (...) bool, False where
+    all three channels are the identity."""
+    return (np.asarray(curves) != np.arange(256)).any((-2, -1))
+
+
 def apply_curves(image: npt.NDArray[np.uint8], curves: npt.ArrayLike) -> npt.NDArray[np.uint8]:
     """``image`` (H, W, 3) uint8 BGR through the per-channel look-up tables ``curves``
     (3, 256) uint8 (``cv2.LUT``); the image itself when they are the identity."""
     lut = np.asarray(curves, np.uint8)
-    if (lut == np.arange(256, dtype=np.uint8)).all():
+    if not changed(lut):
         return image
     return cv2.LUT(image, np.ascontiguousarray(lut.T.reshape(256, 1, 3)))
 
@@ -134,4 +142,4 @@ def mean_gain(curves: npt.ArrayLike, image: npt.NDArray[np.uint8]) -> npt.NDArra
     return np.array([lut[c, med[c]] / med[c] for c in range(3)])
 
 
-__all__ = ["apply_curves", "exposure_curves", "mean_gain"]
+__all__ = ["apply_curves", "changed", "exposure_curves", "mean_gain"]
