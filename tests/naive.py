@@ -16,6 +16,7 @@ from dynremove.refine.fields import blurred_lab
 from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, component_offsets,
                                       consistent_departures)
 from dynremove.refine.morphology import dilate_disc
+from dynremove.refine.select import mixture_detail
 from dynremove.refine.upsample import grow_replaced
 
 
@@ -200,7 +201,9 @@ def full_resolution(reference, sources, clean_working, dynamic, selection, tau=1
     chosen = lab[py, px]
     member = members[:, py, px] & usable[1:, py, px]
     member[chosen - 1, np.arange(len(py))] = True
-    cand[chosen, py, px] = member_median(cand[1:, py, px], member)
+    cand[chosen, py, px] = mixture_detail(cand[chosen, py, px],
+                                          member_median(cand[1:, py, px], member), rep_roi,
+                                          LIGHT_SIGMA_PX * max(sx, sy))
     labs = np.stack([blurred_lab(c, max(sx, sy)) for c in cand])
     scale = max(sx, sy)  # the fade's distances are full-size pixels
     out = offset_blend(reference[roi], cand, lab, rep_roi, usable, labs, ring_px=ring_px,

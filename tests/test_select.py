@@ -645,6 +645,58 @@ def test_near_the_border_the_sources_that_see_a_pixel_decide():
     assert (_de(sel.clean, bg)[inner] < 5).mean() > 0.95
 
 
+def test_mixture_detail_keeps_the_fine_difference_not_the_level():
+    """A level the median adds (20 here) is taken out, even at the region's edge
+    (normalised convolution); a fine difference (a one-pixel checkerboard, what
+    the median averages out) is kept."""
+    from dynremove.refine.select import mixture_detail
+
+    rng = np.random.default_rng(0)
+    rep = np.zeros((60, 80), bool)
+    rep[10:50, 15:70] = True
+    ys, xs = np.nonzero(rep)
+    chosen = rng.integers(80, 120, (len(ys), 3)).astype(np.uint8)
+    checker = np.where((ys + xs) % 2 == 0, 6, -6)[:, None]
+    mixture = (chosen.astype(int) + 20 + checker).astype(np.uint8)
+    out = mixture_detail(chosen, mixture, rep, 4.0).astype(int)
+    inner = (ys >= 14) & (ys < 46) & (xs >= 19) & (xs < 66)
+    assert np.abs(out - chosen - checker)[inner].max() <= 1
+    assert np.abs((out - chosen - checker).mean()) < 0.5  # at the edge too, on average
+
+
+def test_the_median_of_the_combined_sources_keeps_the_chosen_ones_level():
+    """The fill writes the median of the sources combined at a pixel, and the blend
+    corrects it by an offset measured on the ring around the replaced region, where
+    the chosen source alone is seen. With the median's own level, the others'
+    difference went through uncorrected: on ``bursts/sanitizer`` a bottle-shaped
+    shade, ΔE ~7 darker than the table (``select.mixture_detail``). Here one source
+    is at the reference's level and two are 14 levels brighter (under the
+    consensus' ΔE 10, so all three are combined): the fill must be at the
+    reference's level, not 14 levels off."""
+    from dynremove.method.geometry import TwoView
+    from dynremove.refine.select import select_fill
+
+    rng = np.random.default_rng(3)
+    H, W = 96, 160
+    bg = cv2.GaussianBlur(rng.integers(70, 170, (H, W, 3)).astype(np.uint8), (0, 0), 2.0)
+    ref = bg.copy()
+    ref[30:70, 50:100] = (30, 30, 220)  # the mover
+    mask = np.zeros((H, W), bool)
+    mask[30:70, 50:100] = True
+    srcs = np.stack([bg, bg + 14, bg + 14])
+    S = len(srcs)
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    flows = np.repeat(np.stack([gx, gy], -1)[None], S, 0)
+    views = [TwoView(F=None, H=np.eye(3), n_matches=100, n_inliers_F=0, n_inliers_H=100,
+                     parallax_px=1.0) for _ in range(S)]
+    sel = select_fill(ref, srcs, views, mask, preset("default"), flows=flows)
+    inner = np.zeros((H, W), bool)
+    inner[34:66, 54:96] = True
+    assert sel.members[:, inner].all()  # the three combined everywhere
+    d = sel.clean[inner].astype(float) - bg[inner].astype(float)
+    assert abs(d.mean()) < 2.0 and np.median(np.abs(d)) <= 2
+
+
 def test_near_copies_among_the_sources_count_once():
     """Two sources that are near-copies of each other (a burst that paused between two
     shots) are the same evidence twice: the later one is dropped with a note, and the

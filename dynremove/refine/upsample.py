@@ -9,8 +9,9 @@ photos are 12 MP. Only the replaced pixels are computed again at full size:
   coordinates, ``x_full = (x_work + 0.5) · s − 0.5``, and the *full-resolution*
   source is sampled through it, so the fill has the sources' own detail;
 * each replaced pixel takes the per-channel median of the sources the
-  selection combined there (``Selection.members``, upsampled), then the
-  exposure-matching offset of ``montage.offset_blend`` at full size;
+  selection combined there (``Selection.members``, upsampled), at the chosen
+  source's level (``select.mixture_detail``), then the exposure-matching offset
+  of ``montage.offset_blend`` at full size;
 * every other pixel is the input's, byte for byte.
 
 Without a selection (the paper preset, or ``fill="median"``), the working-size
@@ -38,7 +39,7 @@ from dynremove.refine.fields import mask_boxes, remap_points
 from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, add_offset,
                                       component_offsets, ring_agrees, ring_offset)
 from dynremove.refine.morphology import dilate_disc, grow_replaced
-from dynremove.refine.select import Selection, member_median
+from dynremove.refine.select import Selection, member_median, mixture_detail
 
 # offset_blend's max_de: ring pixels departing farther (CIE76) from the ring's
 # median difference do not set the offset
@@ -135,7 +136,9 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     chosen = lab[qy, qx].astype(np.intp)
     member = members & usable[1:, rep_i]
     member[chosen - 1, np.arange(len(qy))] = True
-    cand[chosen, rep_i] = member_median(cand[1:, rep_i], member)
+    cand[chosen, rep_i] = mixture_detail(cand[chosen, rep_i],
+                                         member_median(cand[1:, rep_i], member), rep,
+                                         LIGHT_SIGMA_PX * blur)
     del members, member
     diff = _ring_difference(reference[y0:y1, x0:x1], cand, (py, px), ring, blur)
     # each source plus its offset to the reference, measured on the ring
