@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import warnings
 from pathlib import Path
@@ -512,6 +513,41 @@ def test_the_static_test_is_told(method_run):
     assert told >= 1
     off = np.nonzero(~L)
     assert vd.static_test_line(vi.pixel_history(path, int(off[1][0]), int(off[0][0]))) is None
+
+
+def test_inspect_says_where_on_the_epipolar_line_the_match_lies(tmp_path):
+    """Where the set is 3-D, the static test searches each source's epipolar line;
+    inspect gives the best match's ΔE and where it lies in the source, so that the
+    user can look there. Recorded as computed (to 1/8 px), on the source's
+    epipolar line of the pixel, and told in the verdict. (The synthetic scene is
+    flat: --select-parallax-px 0 treats it as 3-D; ``test_parallax`` checks that
+    the point is the true match's.)"""
+    sc = synth.make_scene(seed=2, n_views=5, size=(96, 128), n_objects=1)
+    params = dataclasses.replace(preset("default"), select_parallax_px=0.0)
+    path = tmp_path / "run.rrd"
+    rsink = RerunSink(path, gt_mask=sc.masks[sc.ref_index])
+    res = remove_dynamic(sc.images, ref=sc.ref_index, params=params, sink=rsink)
+    sel = res.selection
+    assert sel.consensus_mode == "parallax" and sel.line_xy is not None
+    rec = vi.read_selection(path)
+    names = list(rec["line_de"])
+    told = 0
+    for k, n in enumerate(names):
+        xy = sel.line_xy[k]
+        have = np.isfinite(xy).all(-1)
+        got = np.stack([rec["line_x"][n], rec["line_y"][n]], -1).astype(np.float64)
+        kept = (got != P.DE_NONE).all(-1)
+        assert (kept == have & (xy >= 0).all(-1)).all()
+        np.testing.assert_allclose(got[kept] / P.XY_SCALE, xy[kept], atol=1 / P.XY_SCALE)
+        ys, xs = np.nonzero(kept)
+        assert len(ys)
+        y, x = int(ys[len(ys) // 2]), int(xs[len(xs) // 2])
+        line = vd.static_test_line(vi.pixel_history(path, x, y))
+        if line is not None and sel.static_evidence[k, y, x] in (2, 3, 5):
+            gx, gy = got[y, x] / P.XY_SCALE  # (as recorded: to 1/8 px)
+            assert f"{n} (ΔE {sel.line_de[k, y, x]:.1f} at ({gx:.0f}, {gy:.0f}) in it)" in line
+            told += 1
+    assert told >= 1
 
 
 def test_the_followed_movers_are_recorded(method_run):

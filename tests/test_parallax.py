@@ -199,6 +199,10 @@ def test_epipolar_search_finds_static_structure_and_not_a_mover():
         p1 = px.project(views[k].H, e, mu[block].astype(np.float64), gx_, gy_)
         p0 = px.project(views[k].H, e, true_mu, gx_, gy_)
         assert np.median(np.hypot(p1[0] - p0[0], p1[1] - p0[1])) < 2.0
+        # where inspect says the match lies: the source's pixel of the true match
+        at = px.line_points(views[k], mu)
+        assert np.isnan(at[~region]).all() and np.isfinite(at[region]).all()
+        assert np.median(np.hypot(*(at[block] - fields[k][block]).T)) < 2.0
 
 
 def test_the_anchor_is_the_source_of_widest_parallax_not_the_noisiest():

@@ -509,7 +509,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     replaced almost whole; 2: the reverse), ``region_share`` (uint16: the share of
     the pixel's region of L the graph cut replaced × P_SCALE, DE_NONE outside; with
     ``region_rule``, the run's --select-complete and --select-complete-px),
-    ``data_cost`` and ``support`` (dicts of uint16 maps × DE_SCALE: what the graph
+    ``line_de``, ``line_x``, ``line_y`` (per source, uint16: the epipolar search's
+    best ΔE × DE_SCALE and where it lies in the source × XY_SCALE, DE_NONE where not
+    searched), ``data_cost`` and ``support`` (dicts of uint16 maps × DE_SCALE: what the graph
     cut weighed, ``Selection.data_cost`` and ``Selection.support``),
     ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
     its own frame: where the flow followed the reference's mover into it); absent
@@ -529,6 +531,8 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
             ("reasons", p(P.RESULT_REASONS), "", "SegmentationImage"),
             ("evidence", p(P.RESULT_EVIDENCE), "", "SegmentationImage"),
             ("line_de", p(P.RESULT_LINE_DE), "", "DepthImage"),
+            ("line_x", p(P.RESULT_LINE_MATCH), "/x", "DepthImage"),
+            ("line_y", p(P.RESULT_LINE_MATCH), "/y", "DepthImage"),
             ("followed", p(P.SOURCES), "/" + P.FOLLOWED_MOVER, "SegmentationImage")):
         per_source = {}
         prefix = head.strip("/") + "/"
@@ -686,6 +690,9 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             sel[k] = {n: int(a[y, x]) for n, a in v.items() if int(a[y, x]) > 0}
         elif k == "line_de":  # per source: the best ΔE on its epipolar line
             sel[k] = {n: float(a[y, x]) / P.DE_SCALE for n, a in v.items()
+                      if int(a[y, x]) != P.DE_NONE}
+        elif k in ("line_x", "line_y"):  # per source: where on the line (source px)
+            sel[k] = {n: float(a[y, x]) / P.XY_SCALE for n, a in v.items()
                       if int(a[y, x]) != P.DE_NONE}
         elif k == "followed":  # in the sources' frames: told at (x, y) by the reasons
             continue

@@ -140,6 +140,11 @@ RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV 
 # the reference's P(mover colour) (uint16, round(P · P_SCALE), DE_NONE outside L)
 RESULT_EVIDENCE = "result/selection/static_evidence"
 RESULT_LINE_DE = "result/selection/line_de"
+# ... and where on the line that best match lies, in the source's pixels: per source
+# line_match/<source>/x and /y (uint16, round(px · XY_SCALE), DE_NONE where not
+# searched or outside the source)
+RESULT_LINE_MATCH = "result/selection/line_match"
+XY_SCALE = 8
 RESULT_STATIC_NEED = "result/selection/static_need"
 RESULT_REF_MOVER_P = "result/selection/ref_mover_p"
 DE_SCALE = 100

@@ -497,6 +497,14 @@ class RerunSink(StepColumns):
                         _quantised(sel.line_de[k], P.DE_SCALE), meter=float(P.DE_SCALE),
                         colormap="viridis", depth_range=(0.0, 30.0 * P.DE_SCALE)),
                         static=True)
+                if getattr(sel, "line_xy", None) is not None:
+                    xy = sel.line_xy[k]
+                    inside = np.all((xy >= 0) & (xy * P.XY_SCALE < P.DE_NONE - 1), -1)
+                    for c, axis in enumerate("xy"):
+                        self.rec.log(self.p(f"{P.RESULT_LINE_MATCH}/{name}/{axis}"),
+                                     rr.DepthImage(_quantised(np.where(inside, xy[..., c], np.nan),
+                                                              P.XY_SCALE),
+                                                   meter=float(P.XY_SCALE)), static=True)
             if getattr(sel, "static_need", None) is not None:
                 self.rec.log(self.p(P.RESULT_STATIC_NEED),
                              rr.SegmentationImage(np.asarray(sel.static_need, np.uint8)),

@@ -431,7 +431,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     """The fill's static 3-D structure test at a pixel of L, in words (None outside
     L or for a run without it): how many sources had to show the reference's content
     as static, which did and how (the flow match, or the epipolar search's best
-    CIE76 ΔE against --select-search-de), why the others did not, grouped, and
+    CIE76 ΔE against --select-search-de, and where on the source's epipolar line
+    that best match lies, in the source's pixels), why the others did not, grouped, and
     whether the reference's colour, being a mover's, decided it anyway
     (``select.EVIDENCE``)."""
     sel = h.get("selection") or {}
@@ -439,10 +440,15 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     if not ev or not need:
         return None
     de = sel.get("line_de") or {}
+    lx, ly = sel.get("line_x") or {}, sel.get("line_y") or {}
     search_de = (sel.get("thresholds") or {}).get("select_search_de")
 
+    def on_line(n: str) -> str:
+        at = f" at ({lx[n]:.0f}, {ly[n]:.0f}) in it" if n in lx and n in ly else ""
+        return f" (ΔE {de[n]:.1f}{at})"
+
     def named(code: int) -> list[str]:
-        return [n + (f" (ΔE {de[n]:.1f})" if code in (2, 3, 5) and n in de else "")
+        return [n + (on_line(n) if code in (2, 3, 5) and n in de else "")
                 for n, c in ev.items() if c == code]
 
     groups = [(1, "its match shows it"),

@@ -68,6 +68,32 @@ def project(Hm, e, mu, gx, gy):
     return (px / pw).astype(np.float32), (py / pw).astype(np.float32)
 
 
+def line_points(view: TwoView, mu: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """Where ``epipolar_search``'s best μ lands in the source: x_s = π(H x̃ + μ ẽ).
+
+    Parameters
+    ----------
+    view : TwoView
+        With F (the epipole ẽ) and H; without F every point is NaN.
+    mu : (H, W) float32 ndarray
+        ``epipolar_search``'s μ (NaN where not searched).
+
+    Returns
+    -------
+    (H, W, 2) float32 ndarray
+        (x, y) in the source's pixels, NaN where ``mu`` is.
+    """
+    out = np.full(mu.shape + (2,), np.nan, np.float32)
+    ok = np.isfinite(mu)
+    if view.F is None or not ok.any():
+        return out
+    ys, xs = np.nonzero(ok)
+    px, py = project(view.H, epipole(view.F), mu[ok].astype(np.float64),
+                     xs.astype(np.float64), ys.astype(np.float64))
+    out[ys, xs, 0], out[ys, xs, 1] = px, py
+    return out
+
+
 @numba.njit(cache=True, nogil=True)
 def _project_steps(Hm, e, mu, gx, gy):
     """``project(Hm, e, mu[:, None], gx[None], gy[None])`` compiled: (k, n) float32
@@ -508,5 +534,5 @@ def _weighted_window(buf: np.ndarray, qy: np.ndarray, qx: np.ndarray, weights: n
     return out
 
 
-__all__ = ["ParallaxModel", "epipolar_search", "epipole", "fit_parallax", "project", "sgm",
-           "sweep_fields"]
+__all__ = ["ParallaxModel", "epipolar_search", "epipole", "fit_parallax", "line_points",
+           "project", "sgm", "sweep_fields"]

@@ -74,7 +74,7 @@ from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.fields import (background_fields, blurred_lab, interpolate_field,
                                      sample_bilinear)
 from dynremove.refine.fill import median_fill, realign_fields
-from dynremove.refine.parallax import epipolar_search, fit_parallax, sweep_fields
+from dynremove.refine.parallax import epipolar_search, fit_parallax, line_points, sweep_fields
 from dynremove.refine.montage import (LIGHT_SIGMA_PX, expansion_labels, offset_blend,
                                       pairwise_distance)
 from dynremove.refine.morphology import dilate_disc, drop_small, fill_holes, grow_replaced
@@ -147,6 +147,9 @@ class Selection:
     # reference's P(mover colour) (H, W) float32 (NaN outside L)
     static_evidence: npt.NDArray[np.uint8] | None = None
     line_de: npt.NDArray[np.float32] | None = None
+    # where on that line the best match lies, in the source's pixels (S, H, W, 2)
+    # float32 (x, y; NaN where not searched); None where the search did not run
+    line_xy: npt.NDArray[np.float32] | None = None
     static_need: npt.NDArray[np.uint8] | None = None
     ref_mover_p: npt.NDArray[np.float32] | None = None
     # (S, H, W) bool, in each *source's* own frame: where the flow followed the
@@ -837,6 +840,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     matched = np.zeros((S, H, W), bool)  # the flow match on its line, the reference's colour
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
     line_de = np.full((S, H, W), np.nan, np.float32)  # best ΔE on the line, where searched
+    line_xy = (np.full((S, H, W, 2), np.nan, np.float32)  # ... and where it lies
+               if mode == "parallax" and P.select_search_de > 0 else None)
     seen = np.zeros((S, H, W), bool)  # the flow match inside the source's content
     base: list = [None] * S
     lab_s: list = [None] * S  # the sources' blurred Lab, exposure matched, where computed
@@ -898,10 +903,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
             lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
-            cost, _ = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok,
-                                      support_de=P.select_search_support_de)
+            cost, mu = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4),
+                                       mask & ~ok, support_de=P.select_search_support_de)
             searched[k] = cost < P.select_search_de
             line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
+            line_xy[k] = line_points(v, np.where(np.isfinite(cost), mu, np.nan))
         matched[k] = ok
         if track:
             followed[k] = _followed_mover(nf, mask & near_w & ~geo, regions)
@@ -1219,7 +1225,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      lingering=lingering, completed=completed, region_share=region_share,
                      data_cost=data_cost, support=sup,
                      static_evidence=evidence,
-                     line_de=line_de,
+                     line_de=line_de, line_xy=line_xy,
                      static_need=np.where(mask, np.minimum(need, 255), 0).astype(np.uint8),
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
                      followed=np.stack([np.zeros((H, W), bool) if f is None else f
