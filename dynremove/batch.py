@@ -361,9 +361,10 @@ def _is_done(out: Path, key: str) -> dict | None:
     return report
 
 
-def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool = False
-            ) -> dict:
-    """Run one set into ``out_root/<set>``; never raises (errors go into the row)."""
+def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool = False,
+            progress: Callable[[str, float], None] | None = None) -> dict:
+    """Run one set into ``out_root/<set>``; never raises (errors go into the row).
+    ``progress``: given to the pipeline (stage, fraction done), as ``run``'s bar."""
     if single_thread:
         one_thread_per_worker()  # in a worker: parallelism comes from joblib
     t0 = time.perf_counter()
@@ -388,7 +389,8 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
         with warnings.catch_warnings():  # the run's warnings are in res.warnings
             warnings.simplefilter("ignore")
             res = remove_dynamic(iset.images, ref=ref, params=params, names=iset.names,
-                                 preset_name=options["preset"], valid_masks=iset.valid_masks)
+                                 preset_name=options["preset"], valid_masks=iset.valid_masks,
+                                 progress=progress)
             res = at_output_size(res, iset, options.get("output_size", "full"))
         gt = None
         if bs.gt is not None:
@@ -469,8 +471,16 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
               ref: str | None = None, frames: int | None = None, span: str | None = None,
               pick: str = "sharpest", scheduler: str | None = None,
               on_done: Callable[[int, int, dict], None] | None = None,
-              on_note: Callable[[str], None] | None = None) -> dict:
+              on_note: Callable[[str], None] | None = None,
+              on_start: Callable[[int, int, BatchSet], Callable[[str, float], None] | None]
+              | None = None) -> dict:
     """Run every set below ``root`` into ``out``; write and return the summary.
+
+    ``on_done(k, n, row)``: as each set finishes (k of n, in finishing order).
+    ``on_start(k, n, set)``: before each set runs, when they run one at a time
+    (``jobs`` 1); it may return a progress callable (stage, fraction) for that
+    set's pipeline. With ``jobs`` > 1 or a scheduler the sets start in workers:
+    ``on_note`` says how many run at a time.
 
     Returns ``{"root", "out", "sets": [row, ...], "n_ok", "n_skipped", "n_failed",
     "wall_s", "jobs", "scheduler", "notes"}``; rows in set-name order (see
@@ -507,7 +517,8 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
 
     try:
         rows, workers = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler,
-                                 on_done=on_done, prev=prev, results=results)
+                                 on_done=on_done, prev=prev, results=results,
+                                 on_start=on_start, on_note=on_note)
     except BaseException:
         # interrupted (Ctrl-C, SIGTERM) or failed: the summary still lists the sets
         # that finished (each set's own outputs are already whole on disk), and says
@@ -544,7 +555,10 @@ def _write_summary(out: Path, summary: dict) -> None:
 def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
              scheduler: str | None, on_done: Callable[[int, int, dict], None] | None,
              prev: dict[str, dict] | None = None,
-             results: dict[str, dict] | None = None) -> tuple[list[dict], int]:
+             results: dict[str, dict] | None = None,
+             on_start: Callable[[int, int, BatchSet], Callable[[str, float], None] | None]
+             | None = None,
+             on_note: Callable[[str], None] | None = None) -> tuple[list[dict], int]:
     """The rows in set order, and the number of workers (joblib's, or the Dask
     cluster's when ``scheduler``). ``prev``: the previous summary's rows by set
     (:func:`_keep_earlier`). ``results``: filled with each row by set name as it
@@ -555,8 +569,14 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
     on_done = _with_earlier(on_done, prev or {})
     if not scheduler:
         if jobs == 1:
-            _collect((run_set(bs, out, options) for bs in sets), sets, on_done, results)
+            def one(k: int, bs: BatchSet) -> dict:
+                progress = on_start(k, len(sets), bs) if on_start else None
+                return run_set(bs, out, options, progress=progress)
+            _collect((one(k, bs) for k, bs in enumerate(sets, 1)), sets, on_done, results)
         else:
+            n = min(effective_n_jobs(jobs), len(sets))
+            if on_note is not None:
+                on_note(f"{len(sets)} sets, {n} at a time: a line as each one finishes")
             _collect(Parallel(n_jobs=jobs, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)
@@ -580,6 +600,9 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
                 raise InputError(f"--scheduler {scheduler}: no worker joined within "
                                  f"{DASK_CONNECT_TIMEOUT_S} s") from None
         workers = len(client.nthreads())
+        if on_note is not None:
+            on_note(f"{len(sets)} sets on the cluster's {sum(client.nthreads().values())} "
+                    "worker threads: a line as each one finishes")
         with parallel_config(backend="dask"):  # joblib's backend: the default client
             _collect(Parallel(n_jobs=-1, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),

@@ -35,7 +35,7 @@ from dynremove.evaluation.evaluate import format_ablation, format_table, run_abl
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 from dynremove.params import PRESETS, Params, preset
 from dynremove.pipeline import remove_dynamic
-from dynremove.progress import ProgressBar, stage_labels
+from dynremove.progress import ProgressBar, SetProgress, stage_labels
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
 
@@ -614,9 +614,18 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
     params = params_from_args(args)
     finished = [0, 0]  # sets finished, sets in all
+    running: list[SetProgress] = []  # the set running now (one at a time: --jobs 1)
+
+    def on_start(k: int, n: int, bs) -> SetProgress | None:
+        if args.quiet:
+            return None
+        running[:] = [SetProgress(f"[{k}/{n}] {bs.name}:", labels=stage_labels(params))]
+        return running[0]
 
     def on_done(k: int, n: int, row: dict) -> None:
         finished[:] = [k, n]
+        for bar in running:
+            bar.clear()
         if not args.quiet:
             stderr_progress(k, n, row)
 
@@ -625,8 +634,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
                       jobs=args.jobs, max_side=args.max_side, ref=args.ref,
                       frames=args.frames, span=args.span, pick=args.pick,
                       scheduler=args.scheduler, on_done=on_done,
-                      on_note=lambda n: _note(args, n))
+                      on_note=lambda n: _note(args, n), on_start=on_start)
     except BaseException as e:
+        for bar in running:
+            bar.clear()
         if interruption(e) is not None and (Path(args.out) / "summary.csv").is_file():
             k, n = finished
             done = (f"{k} of {n} sets finished ({args.out}/summary.csv lists "

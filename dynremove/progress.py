@@ -106,3 +106,47 @@ class ProgressBar:
                 self.open = False
             self._end_line()
         self.stage, self.t_done = None, None
+
+
+class SetProgress:
+    """The set a batch is running, on one line: ``"[k/n] NAME: stage NN % (T s)"``.
+
+    On a terminal the line is redrawn at most every 0.1 s and erased by
+    ``clear`` (before the set's own line, when it finishes); elsewhere (a log)
+    one line says that the set is running, at its pipeline's first step (a set
+    skipped as done before gets none). A batch ran for minutes with nothing on
+    the screen between two sets' lines (a fresh-user trial).
+    """
+
+    def __init__(self, prefix: str, *, stream: TextIO | None = None,
+                 labels: Mapping[str, str] | None = None):
+        self.prefix = prefix
+        self.stream = stream or sys.stderr
+        self.labels = dict(labels or {})
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.t0, self.t_draw = time.perf_counter(), 0.0
+        self.drawn = False
+        self.said = False  # (not on a terminal) its one line is written
+
+    def __call__(self, stage: str, frac: float) -> None:
+        if not self.tty:
+            if not self.said:
+                self.stream.write(f"{self.prefix} running\n")
+                self.stream.flush()
+                self.said = True
+            return
+        now = time.perf_counter()
+        if now - self.t_draw < 0.1 and frac < 1.0:
+            return
+        self.t_draw = now
+        self.stream.write(f"\r\033[K{self.prefix} {self.labels.get(stage, stage)} "
+                          f"{100 * min(max(frac, 0.0), 1.0):3.0f} %  ({now - self.t0:.0f} s)")
+        self.stream.flush()
+        self.drawn = True
+
+    def clear(self) -> None:
+        """Erase the line (on a terminal), so that the next line takes its place."""
+        if self.drawn:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+            self.drawn = False

@@ -426,3 +426,47 @@ def test_a_photo_given_twice_does_not_move_the_middle_reference(tmp_path):
     assert iset.names[i] == paths[3].name
     assert reference_note(None, i, info, iset.names).endswith(
         "the later of the two middle images of the 4 distinct ones; --ref 1 for the other)")
+
+
+def test_a_line_says_which_set_is_running(tmp_path, root, capsys):
+    """A batch ran for minutes with nothing on the screen between two sets' lines (a
+    fresh-user trial). One at a time, a line names the set as its pipeline starts
+    (not on a terminal: once, just before the set's own line; a set skipped as done
+    before gets none); with --jobs 2, one line says how many run at a time."""
+    out = tmp_path / "out"
+    main(["batch", str(root), "--out", str(out), "--max-scans", "1"])
+    lines = capsys.readouterr().err.splitlines()
+    for k, name in ((1, "a"), (3, "davis/b")):
+        at = lines.index(f"[{k}/3] {name}: running")
+        assert lines[at + 1].startswith(f"[{k}/3] {name}: ok"), lines
+    assert not any(ln.startswith("[2/3] bad: running") for ln in lines)  # failed reading
+    main(["batch", str(root), "--out", str(out), "--max-scans", "1"])
+    assert ": running" not in capsys.readouterr().err  # skipped: done before
+    main(["batch", str(root), "--out", str(tmp_path / "j2"), "--max-scans", "1",
+          "--jobs", "2"])
+    err = capsys.readouterr().err
+    assert "3 sets, 2 at a time: a line as each one finishes" in err
+    assert ": running" not in err  # (the workers' pipelines report to no one)
+
+
+def test_the_running_set_is_one_line_redrawn_on_a_terminal():
+    """SetProgress on a terminal: one line, redrawn (carriage return, erase), with the
+    set, the stage's label and its share; ``clear`` erases it for the set's own line."""
+    import io as _io
+
+    from dynremove.progress import SetProgress
+
+    class Tty(_io.StringIO):
+        def isatty(self):
+            return True
+
+    out = Tty()
+    bar = SetProgress("[2/5] tim6:", stream=out, labels={"fusion": "fill by selection"})
+    bar("features", 0.0)
+    bar("fusion", 1.0)  # a stage's end is always drawn
+    text = out.getvalue()
+    assert "\n" not in text and text.count("\r\033[K") == 2
+    assert text.endswith("[2/5] tim6: fill by selection 100 %  (0 s)")
+    bar.clear()
+    assert out.getvalue().endswith("\r\033[K") and not bar.drawn
+
