@@ -419,9 +419,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         def level(k):
             g = exposure.mean_gain(st.curves[k], images[srcs[k]])
             m = float(np.exp(np.log(g).mean()))
+            bgr = "B/G/R ×" + "/".join(f"{v:.2f}" for v in g)
+            if np.abs(np.log(g) - np.log(m)).max() > abs(np.log(m)):
+                # the channels part more than the whole moves: a colour cast (a
+                # trial read "darker (×1.03, B/G/R ×1.22/1.02/0.88)" of a warm photo)
+                tint = "warmer" if g[0] > g[2] else "cooler"
+                return f"{names[srcs[k]]} {tint} in colour ({bgr})"
             return (f"{names[srcs[k]]} {'darker' if m > 1 else 'brighter'} (×{m:.2f}"
-                    + ("" if np.ptp(g) < 0.03 else
-                       ", B/G/R ×" + "/".join(f"{v:.2f}" for v in g)) + ")")
+                    + ("" if np.ptp(g) < 0.03 else f", {bgr}") + ")")
         msgs.append("photos exposed differently from the reference, their colours mapped to "
                     "its levels before comparing: " + ", ".join(level(k) for k in scaled)
                     + " (--exposure-match 0 turns this off)")

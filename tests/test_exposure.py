@@ -79,3 +79,19 @@ def test_a_darker_reference_is_found_and_filled_as_at_its_own_exposure():
     bg = sc.background.astype(np.float64) * 0.65
     inside = gt & r.dynamic
     assert np.median(np.abs(r.clean[inside].astype(float) - bg[inside])) <= 6
+
+
+def test_a_colour_cast_is_named_as_one():
+    """A source shot warmer (red up, blue down) is mapped channel by channel; the
+    note calls it warmer in colour, not "darker (×1.03, B/G/R ×1.22/1.02/0.88)" (a
+    fresh-user trial's reading of a warm photo), and gives the channels' factors."""
+    sc = synth.make_scene(seed=1, n_views=4, size=(240, 432))
+    ref = sc.ref_index
+    imgs = [im.copy() for im in sc.images]
+    k = (ref + 1) % len(imgs)
+    imgs[k] = np.clip(imgs[k] * np.array([0.8, 1.0, 1.2]), 0, 255).round().astype(np.uint8)
+    with pytest.warns(UserWarning, match="exposed differently") as rec:
+        remove_dynamic(imgs, ref=ref)
+    note = next(str(w.message) for w in rec if "exposed differently" in str(w.message))
+    assert f"image{k} warmer in colour (B/G/R ×1.25/1.00/0.83)" in note, note
+    assert "darker" not in note and "brighter" not in note
