@@ -10,6 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 from dynremove.events import CASE_BOTH_IN_CLUSTER, CASE_GEOMETRY, CASE_ONE_IN_CLUSTER
+from dynremove.refine.parallax import SEARCH_CAP_DE as _LINE_CAP
+
 
 def _label(v: bool | None) -> str:
     return "?" if v is None else ("dynamic" if v else "static")
@@ -445,7 +447,10 @@ def static_test_line(h: dict[str, Any]) -> str | None:
 
     def on_line(n: str) -> str:
         at = f" at ({lx[n]:.0f}, {ly[n]:.0f}) in it" if n in lx and n in ly else ""
-        return f" (ΔE {de[n]:.1f}{at})"
+        # the search caps each cell's distance at 30 (``parallax._CAP``): "30.0" is
+        # "nothing alike", not a measured 30 (a trial read it as a figure)
+        return (f" (ΔE ≥ {_LINE_CAP:.0f}, nothing alike{at})" if de[n] >= _LINE_CAP - 0.05
+                else f" (ΔE {de[n]:.1f}{at})")
 
     def named(code: int) -> list[str]:
         return [n + (on_line(n) if code in (2, 3, 5) and n in de else "")

@@ -40,6 +40,7 @@ from dynremove.refine.colour import delta_e
 from dynremove.refine.fields import remap_points
 
 _CAP = 30.0  # ΔE cap of one source's distance to the median in the sweep cost
+SEARCH_CAP_DE = _CAP  # ... and of ``epipolar_search``'s cost: "nothing alike"
 
 
 @dataclass(frozen=True)
@@ -534,5 +535,5 @@ def _weighted_window(buf: np.ndarray, qy: np.ndarray, qx: np.ndarray, weights: n
     return out
 
 
-__all__ = ["ParallaxModel", "epipolar_search", "epipole", "fit_parallax", "line_points",
-           "project", "sgm", "sweep_fields"]
+__all__ = ["SEARCH_CAP_DE", "ParallaxModel", "epipolar_search", "epipole", "fit_parallax",
+           "line_points", "project", "sgm", "sweep_fields"]
