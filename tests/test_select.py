@@ -611,31 +611,39 @@ def test_lab_offset_is_the_exposure_difference_despite_movers():
     np.testing.assert_array_equal(_lab_offset(lab_r, lab_w, few), 0.0)
 
 
+def _flat_case(seed, lo, hi, blur, box, S, H=96, W=160):
+    """A textured background (``lo``–``hi`` levels, Gaussian ``blur``), the reference
+    with a red mover in ``box`` (rows, cols slices) and L on it, and ``S`` sources
+    aligned by the identity (flows, flat views): (bg, ref, mask, flows, views)."""
+    from dynremove.method.geometry import TwoView
+
+    rng = np.random.default_rng(seed)
+    bg = cv2.GaussianBlur(rng.integers(lo, hi, (H, W, 3)).astype(np.uint8), (0, 0), blur)
+    ref = bg.copy()
+    ref[box] = (30, 30, 220)  # the mover
+    mask = np.zeros((H, W), bool)
+    mask[box] = True
+    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    flows = np.repeat(np.stack([gx, gy], -1)[None], S, 0)
+    views = [TwoView(F=None, H=np.eye(3), n_matches=100, n_inliers_F=0, n_inliers_H=100,
+                     parallax_px=1.0) for _ in range(S)]
+    return bg, ref, mask, flows, views
+
+
 def test_near_the_border_the_sources_that_see_a_pixel_decide():
     """Six sources of a static scene; L holds a red mover and a strip of static
     scene at the right border, where only two sources reach (the others' frames
     end before it). Both show the strip as the reference does: it is explained
     (kept), though two is no majority of all six. The mover is filled from them."""
-    from dynremove.method.geometry import TwoView
     from dynremove.refine.select import select_fill
 
-    rng = np.random.default_rng(1)
-    H, W = 96, 160
-    bg = cv2.GaussianBlur(rng.integers(60, 200, (H, W, 3)).astype(np.uint8), (0, 0), 1.5)
-    ref = bg.copy()
-    ref[30:80, 40:90] = (30, 30, 220)  # the mover
-    mask = np.zeros((H, W), bool)
-    mask[30:80, 40:90] = True
+    S, H, W = 6, 96, 160
+    bg, ref, mask, flows, views = _flat_case(1, 60, 200, 1.5, np.s_[30:80, 40:90], S)
     strip = np.zeros((H, W), bool)
     strip[10:30, 146:160] = True  # static, flagged by mistake
     mask |= strip
-    S = 6
     valid = np.ones((S, H, W), bool)
     valid[2:, :, 130:] = False  # four sources end 30 px before the right border
-    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
-    flows = np.repeat(np.stack([gx, gy], -1)[None], S, 0)
-    views = [TwoView(F=None, H=np.eye(3), n_matches=100, n_inliers_F=0, n_inliers_H=100,
-                     parallax_px=1.0) for _ in range(S)]
     sel = select_fill(ref, np.repeat(bg[None], S, 0), views, mask, preset("default"),
                       valid=valid, flows=flows)
     assert sel.explained[strip].mean() > 0.9
@@ -673,24 +681,12 @@ def test_the_median_of_the_combined_sources_keeps_the_chosen_ones_level():
     is at the reference's level and two are 14 levels brighter (under the
     consensus' ΔE 10, so all three are combined): the fill must be at the
     reference's level, not 14 levels off."""
-    from dynremove.method.geometry import TwoView
     from dynremove.refine.select import select_fill
 
-    rng = np.random.default_rng(3)
-    H, W = 96, 160
-    bg = cv2.GaussianBlur(rng.integers(70, 170, (H, W, 3)).astype(np.uint8), (0, 0), 2.0)
-    ref = bg.copy()
-    ref[30:70, 50:100] = (30, 30, 220)  # the mover
-    mask = np.zeros((H, W), bool)
-    mask[30:70, 50:100] = True
+    bg, ref, mask, flows, views = _flat_case(3, 70, 170, 2.0, np.s_[30:70, 50:100], 3)
     srcs = np.stack([bg, bg + 14, bg + 14])
-    S = len(srcs)
-    gx, gy = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
-    flows = np.repeat(np.stack([gx, gy], -1)[None], S, 0)
-    views = [TwoView(F=None, H=np.eye(3), n_matches=100, n_inliers_F=0, n_inliers_H=100,
-                     parallax_px=1.0) for _ in range(S)]
     sel = select_fill(ref, srcs, views, mask, preset("default"), flows=flows)
-    inner = np.zeros((H, W), bool)
+    inner = np.zeros(mask.shape, bool)
     inner[34:66, 54:96] = True
     assert sel.members[:, inner].all()  # the three combined everywhere
     d = sel.clean[inner].astype(float) - bg[inner].astype(float)
