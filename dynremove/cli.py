@@ -241,9 +241,15 @@ def build_parser() -> argparse.ArgumentParser:
     ap.subcommands = sub.choices  # name -> its parser, for ``_Parser.parse_args``
 
     r = sub.add_parser("run", help="remove dynamic objects from a reference image",
+                       usage="dynremove run [-h] [--ref REF] [--out OUT] [--max-side PX] "
+                             "[--record FILE.rrd]\n"
+                             "                     [OPTION ...] [METHOD PARAMETER ...] "
+                             "images [images ...]",
                        description="Remove the moving objects from the reference image of a "
                                    "multi-view set. Writes clean.png, dynamic_mask.png, "
-                                   "coverage.png and report.json to --out.")
+                                   "coverage.png and report.json to --out. Most runs need "
+                                   "only the photos, --ref and --out; the method parameters "
+                                   "(the last group below) are for experiments.")
     r.add_argument("images", nargs="+",
                    help="a folder of images (in name order, numbers by value: f8 before "
                         "f10), image files, or one video")

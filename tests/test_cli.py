@@ -635,3 +635,19 @@ def test_a_users_file_named_as_an_output_is_noted_before_it_is_replaced(folder, 
     assert rc == 0
     assert f"{out} holds clean.png, not from a dynremove run (no report.json beside): " \
            "this run replaces it" in err
+
+
+def test_run_help_opens_with_the_few_flags_that_matter(capsys):
+    """``run --help`` opened with a 50-line synopsis of every method flag (a fresh-user
+    trial could not find --ref, --out or --max-side). Its usage is two lines naming
+    those, and the description says the method parameters are the last group."""
+    with pytest.raises(SystemExit) as e:
+        main(["run", "--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    usage = text.split("\n\n")[0]
+    assert usage.startswith("usage: dynremove run [-h] [--ref REF] [--out OUT] [--max-side PX]")
+    assert len(usage.splitlines()) == 2 and "--patch-size" not in usage
+    groups = [ln for ln in text.splitlines() if ln and not ln.startswith(" ") and ln.endswith(":")]
+    assert groups[-1].startswith("method parameters")  # the last group, as the text says
+    assert "the method parameters (the last group below)" in " ".join(text.split())
