@@ -414,10 +414,13 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     if keep:  # near-copies dropped (the notes said so)
         st = _keep_sources(st, keep[0])
         views = [views[k] for k in keep[0]]
+    # each source's B, G, R gain at its median level (the note, report.json)
+    gains = ([exposure.mean_gain(st.curves[k], images[srcs[k]]) for k in range(len(srcs))]
+             if st.curves is not None else [np.ones(3)] * len(srcs))
     scaled = [] if st.curves is None else list(np.flatnonzero(exposure.changed(st.curves)))
     if scaled:
         def level(k):
-            g = exposure.mean_gain(st.curves[k], images[srcs[k]])
+            g = gains[k]
             m = float(np.exp(np.log(g).mean()))
             bgr = "B/G/R ×" + "/".join(f"{v:.2f}" for v in g)
             if np.abs(np.log(g) - np.log(m)).max() > abs(np.log(m)):
@@ -572,8 +575,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                                    else None),
                    "parallax_p95_px": (round(v.parallax_p95_px, 2)
                                        if np.isfinite(v.parallax_p95_px) else None),
-                   "exposure_gain_bgr": ([round(float(g), 3) for g in exposure.mean_gain(
-                       st.curves[k], images[srcs[k]])] if st.curves is not None else [1.0] * 3)}
+                   "exposure_gain_bgr": [round(float(g), 3) for g in gains[k]]}
                   for k, v in enumerate(views)],
         warnings=msgs, stages=stages, selection=selection, source_indices=list(srcs),
         source_curves=([c for c in st.curves] if st.curves is not None else []),

@@ -447,7 +447,7 @@ def static_test_line(h: dict[str, Any]) -> str | None:
 
     def on_line(n: str) -> str:
         at = f" at ({lx[n]:.0f}, {ly[n]:.0f}) in it" if n in lx and n in ly else ""
-        # the search caps each cell's distance at 30 (``parallax._CAP``): "30.0" is
+        # the search caps each cell's distance (``parallax.SEARCH_CAP_DE``): "30.0" is
         # "nothing alike", not a measured 30 (a trial read it as a figure)
         return (f" (ΔE ≥ {_LINE_CAP:.0f}, nothing alike{at})" if de[n] >= _LINE_CAP - 0.05
                 else f" (ΔE {de[n]:.1f}{at})")

@@ -907,7 +907,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                                        mask & ~ok, support_de=P.select_search_support_de)
             searched[k] = cost < P.select_search_de
             line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
-            line_xy[k] = line_points(v, np.where(np.isfinite(cost), mu, np.nan))
+            line_xy[k] = line_points(v, mu)  # (NaN where not searched)
         matched[k] = ok
         if track:
             followed[k] = _followed_mover(nf, mask & near_w & ~geo, regions)
