@@ -433,6 +433,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write N sets under DIR (one per static set x objects), "
                         "STATIC_DIR being a folder of static sets (default 0: one set "
                         "from STATIC_DIR itself)")
+    c.add_argument("--light", action="store_true",
+                   help="relight every view but the reference, as hand-held photos are: "
+                        "exposure x0.85-1.15, white balance +-6 %% per channel, and 1-3 "
+                        "smooth blobs of light or shade (-30 to +35 %%, sigma 8-25 %% of "
+                        "the longer side); the reference stays the truth (default off)")
     c.set_defaults(fn=cmd_composite)
 
     v = sub.add_parser("view", help="open a recording in the Rerun viewer (with its layout)",

@@ -594,14 +594,15 @@ def cmd_composite(args: argparse.Namespace) -> int:
     if args.n_sets:
         outs = composite.make_composites(args.static_dir, args.objects_dir, args.out,
                                          n_sets=args.n_sets, seed=args.seed,
-                                         n_views=args.n_views, n_objects=args.objects)
+                                         n_views=args.n_views, n_objects=args.objects,
+                                         light=args.light)
         for o in outs:
             print(o)
         print(f"wrote {len(outs)} composite sets under {args.out}")
     else:
         info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
                                         seed=args.seed, n_views=args.n_views,
-                                        n_objects=args.objects)
+                                        n_objects=args.objects, light=args.light)
         print(f"wrote {args.out}: {info['n_views']} views {info['size'][0]}x"
               f"{info['size'][1]}, objects "
               + ", ".join(o["set"] for o in info["objects"])

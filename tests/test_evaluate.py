@@ -213,6 +213,40 @@ def test_composite_masks_are_the_pasted_alpha(tmp_path):
     assert any(not np.array_equal(a, b) for a, b in zip(comp.images, other.images))
 
 
+def test_relit_composite_keeps_the_reference_and_the_objects(tmp_path):
+    """``light``: the other views relit (their light departs smoothly and differently
+    in each), the reference and everything drawn for the objects unchanged."""
+    from dynremove.evaluation.evaluate import find_sets
+
+    _static_set(tmp_path / "static")
+    synth.write_scene(synth.make_scene(seed=4, n_views=5, size=(120, 160), n_objects=1),
+                      tmp_path / "objects" / "walker")
+    statics = [cv2.imread(str(p)) for p in sorted((tmp_path / "static").iterdir())]
+    objs = find_sets(tmp_path / "objects")
+    names = [f"{i:04d}" for i in range(5)]
+    plain = composite.compose(statics, names, objs, seed=3)
+    lit = composite.compose(statics, names, objs, seed=3, light=True)
+    np.testing.assert_array_equal(lit.images[2], plain.images[2])
+    assert lit.info["light"][2] is None
+    for k in (0, 1, 3, 4):
+        np.testing.assert_array_equal(lit.masks[k], plain.masks[k])
+        assert lit.info["objects"] == plain.info["objects"]
+        # the view is the plain one × the recorded gains × the recorded blobs' field
+        light = lit.info["light"][k]
+        blobs = light["blobs"]
+        assert 1 <= len(blobs) <= 3
+        yy, xx = np.mgrid[0:200, 0:280].astype(np.float64)
+        field = 1.0 + sum(b["gain"] * np.exp(-((xx - b["center"][0]) ** 2
+                                               + (yy - b["center"][1]) ** 2)
+                                             / (2 * b["sigma_px"] ** 2)) for b in blobs)
+        want = plain.images[k] * field[..., None] * np.array(light["gain_bgr"])
+        inside = want.max(2) < 250  # not clipped
+        np.testing.assert_allclose(lit.images[k][inside], want[inside], atol=1.0)
+        assert 0.85 * 0.94 - 1e-3 <= min(light["gain_bgr"])
+        assert max(light["gain_bgr"]) <= 1.15 * 1.06 + 1e-3
+    assert lit.info["light"][0] != lit.info["light"][1]
+
+
 def test_eval_full_size_and_ablation_skips_unknown_fields(data, tmp_path, monkeypatch, capsys):
     from dynremove.evaluation import evaluate
 

@@ -20,6 +20,16 @@ the true mask written is ``alpha >= 0.5`` (union over objects, later objects on
 top). Everything is drawn from ``numpy.random.default_rng(seed)``: the same
 seed gives byte-identical files.
 
+With ``light``, every view but the reference is also *relit*, as hand-held photos
+are by auto-exposure, white balance and light that depends on the viewpoint (a
+glare on a glossy table, vignetting): the view is multiplied by a per-channel
+gain (exposure × white balance, ``LIGHT_EXPOSURE`` and ``LIGHT_WB``) and by a
+smooth gain field, 1 plus one to three broad Gaussian blobs (amplitude
+``LIGHT_BLOB_GAIN``, σ ``LIGHT_BLOB_SIGMA`` × the longer side) at random
+places. The reference is not relit, so its static view stays the truth. The
+draws come from a generator of their own (``(seed, 1)``): a set built with and
+without ``light`` has the same objects on the same paths.
+
 Output (the layout ``dynremove eval`` reads)::
 
     DIR/frames/NN_<static stem>.png   composited views
@@ -54,6 +64,12 @@ MAX_ANGLE_DEG = 25.0  # path direction within this of the horizontal
 FEATHER_PX = 2.0  # width of the alpha ramp (Gaussian sigma = FEATHER_PX / 2)
 MIN_OBJECT_FRACTION = 0.003  # object frames with less mask than this are ignored
 _ATTEMPTS = 30
+# ``light``: the relighting of the other views (``relight``)
+LIGHT_EXPOSURE = (0.85, 1.15)  # a view's gain, common to the three channels
+LIGHT_WB = 0.06  # and each channel's, 1 ± this (white balance)
+LIGHT_BLOBS = (1, 3)  # how many smooth blobs of light or shade, inclusive
+LIGHT_BLOB_GAIN = (-0.3, 0.35)  # each blob's gain at its centre, added to 1
+LIGHT_BLOB_SIGMA = (0.08, 0.25)  # each blob's σ, fraction of the longer side
 
 
 @dataclass
@@ -235,10 +251,11 @@ def free_map(masks: Sequence[np.ndarray], Hs: Sequence[np.ndarray], ref: int) ->
 # --------------------------------------------------------------------------- compose
 def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_sets: Sequence,
             *, seed: int = 0, n_objects: int = 1, feather_px: float = FEATHER_PX,
-            area_range: tuple[float, float] = AREA_RANGE) -> Composite:
+            area_range: tuple[float, float] = AREA_RANGE, light: bool = False) -> Composite:
     """Paste ``n_objects`` objects from ``object_sets`` (EvalSet, with masks) into ``statics``.
 
     The reference is the middle view (``len(statics) // 2``). Deterministic in ``seed``.
+    With ``light`` the other views are relit (``relight``; the module's docstring).
     """
 
     if n_objects < 1:
@@ -329,6 +346,12 @@ def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_s
             break
     ok, (images, alphas, masks, meta, covered, attempt) = best
     free = free_map(masks, Hs, ref)
+    lights: list = [None] * V
+    if light:
+        lrng = np.random.default_rng([seed, 1])
+        for k in range(V):
+            if k != ref:
+                images[k], lights[k] = relight(images[k], lrng)
     names = [f"{k:02d}_{n}.png" for k, n in enumerate(static_names)]
     info = {
         "seed": int(seed), "n_views": V, "ref": names[ref], "size": [Ww, Hh],
@@ -341,9 +364,38 @@ def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_s
         "ref_mask_recoverable": round(float(free[masks[ref]].mean()), 4)
         if masks[ref].any() else None,
     }
+    if light:
+        info["light"] = lights
     return Composite(images=images, masks=masks, alphas=alphas,
                      background=statics[ref].copy(), statics=list(statics), ref_index=ref,
                      names=names, info=info, free=free)
+
+
+def relight(img: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, dict]:
+    """``img`` (H, W, 3) uint8 BGR under other light: × a per-channel gain and × a
+    smooth gain field (1 + Σ Gaussian blobs), rounded and clipped to uint8.
+
+    Draws from ``rng``: the exposure (``LIGHT_EXPOSURE``), each channel's white
+    balance (1 ± ``LIGHT_WB``), and ``LIGHT_BLOBS`` blobs (centre anywhere in the
+    image, gain ``LIGHT_BLOB_GAIN``, σ ``LIGHT_BLOB_SIGMA`` × the longer side).
+    Returns the relit image and what was drawn (gains, blobs in pixels).
+    """
+    H, W = img.shape[:2]
+    exposure = float(rng.uniform(*LIGHT_EXPOSURE))
+    gain = exposure * (1.0 + rng.uniform(-LIGHT_WB, LIGHT_WB, 3))
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    field = np.ones((H, W), np.float32)
+    blobs = []
+    for _ in range(int(rng.integers(LIGHT_BLOBS[0], LIGHT_BLOBS[1] + 1))):
+        cx, cy = float(rng.uniform(0, W)), float(rng.uniform(0, H))
+        amp = float(rng.uniform(*LIGHT_BLOB_GAIN))
+        sigma = float(rng.uniform(*LIGHT_BLOB_SIGMA)) * max(H, W)
+        field += amp * np.exp(-((xx - cx) ** 2 + (yy - cy) ** 2) / (2 * sigma * sigma))
+        blobs.append({"center": [round(cx, 1), round(cy, 1)], "gain": round(amp, 4),
+                      "sigma_px": round(sigma, 1)})
+    out = img.astype(np.float32) * field[..., None] * gain.astype(np.float32)
+    out = np.clip(out + 0.5, 0, 255).astype(np.uint8)
+    return out, {"gain_bgr": [round(float(g), 4) for g in gain], "blobs": blobs}
 
 
 def write_composite(comp: Composite, out_dir: str | os.PathLike) -> Path:
@@ -378,7 +430,7 @@ def write_composite(comp: Composite, out_dir: str | os.PathLike) -> Path:
 def make_composite(static_dir: str | os.PathLike, objects_dir: str | os.PathLike,
                    out_dir: str | os.PathLike, *, seed: int = 0, n_views: int = 6,
                    n_objects: int = 1, max_side: int = MAX_SIDE,
-                   object_sets: Sequence | None = None) -> dict:
+                   object_sets: Sequence | None = None, light: bool = False) -> dict:
     """One composite set from a static folder and a DAVIS-style objects folder.
 
     ``object_sets`` restricts the objects to these sets (EvalSet) of ``objects_dir``.
@@ -389,7 +441,7 @@ def make_composite(static_dir: str | os.PathLike, objects_dir: str | os.PathLike
         raise InputError(f"--n-views must be >= 2, got {n_views}")
     statics, stems, paths = _read_static(static_dir, n_views, max_side)
     sets = list(object_sets) if object_sets is not None else _object_sets(objects_dir)
-    comp = compose(statics, stems, sets, seed=seed, n_objects=n_objects)
+    comp = compose(statics, stems, sets, seed=seed, n_objects=n_objects, light=light)
     comp.info["static_dir"] = str(static_dir)
     comp.info["objects_dir"] = str(objects_dir)
     write_composite(comp, out_dir)
@@ -403,8 +455,8 @@ def _static_sets(static_root: Path, n_views: int) -> list[Path]:
 
 def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathLike,
                     out_root: str | os.PathLike, *, n_sets: int = 6, seed: int = 0,
-                    n_views: int = 6, n_objects: int = 1, max_side: int = MAX_SIDE
-                    ) -> list[Path]:
+                    n_views: int = 6, n_objects: int = 1, max_side: int = MAX_SIDE,
+                    light: bool = False) -> list[Path]:
     """``n_sets`` composites under ``out_root``: static sets in turn × distinct objects.
 
     Set ``i`` uses static set ``i mod (number of static sets)`` and the next
@@ -430,10 +482,11 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
         set_seed = int(np.random.default_rng([seed, i]).integers(2**31 - 1))
         out = Path(out_root) / name
         make_composite(st, objects_root, out, seed=set_seed, n_views=n_views,
-                       n_objects=n_objects, max_side=max_side, object_sets=chosen)
+                       n_objects=n_objects, max_side=max_side, object_sets=chosen,
+                       light=light)
         outs.append(out)
     return outs
 
 
 __all__ = ["Composite", "compose", "free_map", "write_composite", "make_composite",
-           "make_composites", "MAX_SIDE", "AREA_RANGE", "FEATHER_PX"]
+           "make_composites", "relight", "MAX_SIDE", "AREA_RANGE", "FEATHER_PX"]
