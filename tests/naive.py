@@ -13,8 +13,10 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.fields import blurred_lab
-from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, component_offsets,
-                                      consistent_departures)
+from dynremove.refine.montage import (BAND_AGREE, BAND_PX, BAND_SIGMA_PX, DECAY_PX,
+                                      LIGHT_DECAY_PX, LIGHT_SCALE_PX, LIGHT_SIGMA_PX, PLATEAU_PX,
+                                      band_light, component_offsets, consistent_departures,
+                                      gaussian_mean_at)
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.select import mixture_detail
 from dynremove.refine.upsample import grow_replaced
@@ -110,10 +112,14 @@ def _distance(known):
 
 def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
                  ring_px=3, max_de=15.0, plateau_px=PLATEAU_PX, decay_px=DECAY_PX,
-                 light_sigma_px=LIGHT_SIGMA_PX):
+                 light_sigma_px=LIGHT_SIGMA_PX, light_scale_px=LIGHT_SCALE_PX,
+                 light_decay_px=LIGHT_DECAY_PX, band_px=BAND_PX, band_sigma_px=BAND_SIGMA_PX):
     """``montage.offset_blend`` on whole images."""
     out = reference.astype(np.float32)
     ring = dilate_disc(replaced, ring_px) & ~replaced
+    band = dilate_disc(replaced, band_px[1]) & ~dilate_disc(replaced, band_px[0])
+    by, bx = np.nonzero(band)
+    ry, rx = np.nonzero(ring)
     for lbl in np.unique(labels[replaced]):
         if lbl == 0:
             continue
@@ -122,7 +128,13 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
         diff = labs[0] - labs[lbl]
         on = ring & usable[lbl]
         med = np.median(diff[on], axis=0) if on.any() else np.zeros(3, np.float32)
-        good = on & (np.linalg.norm(diff - med, axis=-1) < max_de)
+        # the light measured in the band beyond the ring, at the ring's pixels
+        local = np.full(diff.shape, np.nan, np.float32)
+        local[ry, rx] = band_light(diff[by, bx], usable[lbl][by, bx], (by, bx), (ry, rx),
+                                   band_sigma_px, max_de)
+        with np.errstate(invalid="ignore"):
+            good = on & ((np.linalg.norm(diff - med, axis=-1) < max_de)
+                         | (np.linalg.norm(diff - local, axis=-1) < BAND_AGREE * max_de))
         sel = replaced & (labels == lbl)
         if good.sum() < 20:
             off = np.zeros_like(d)
@@ -132,20 +144,28 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
             m = np.median(d[good], axis=0)
             gy, gx = np.nonzero(good)
             ok = consistent_departures(gy, gx, (d - m)[gy, gx], light_sigma_px)
+            gy, gx = gy[ok], gx[ok]
             good = np.zeros_like(good)
-            good[gy[ok], gx[ok]] = True
-            dep = harmonic_fill(np.where(good[..., None], d - m, 0).astype(np.float32), ~good)
-            dist = _distance(good).astype(np.float32)
-            fade = np.exp(-np.maximum(dist - plateau_px, 0.0) / decay_px).astype(np.float32)
-            off = m + dep * fade[..., None]
+            good[gy, gx] = True
+            # the departure's light part (its mean along the ring) and the rest
+            dep = (d - m)[gy, gx]
+            light = gaussian_mean_at(gy, gx, dep, gy, gx, light_scale_px)
+            field = np.zeros(d.shape[:2] + (6,), np.float32)
+            field[gy, gx, :3] = light
+            field[gy, gx, 3:] = dep - light
+            f = harmonic_fill(field, ~good)
+            beyond = np.maximum(_distance(good).astype(np.float32) - plateau_px, 0.0)
+            fade_light = np.exp(-beyond / light_decay_px).astype(np.float32)
+            fade = np.exp(-beyond / decay_px).astype(np.float32)
+            off = m + f[..., :3] * fade_light[..., None] + f[..., 3:] * fade[..., None]
         out[sel] = src[sel] + off[sel]
         # the small regions' own offsets: the same function as the fast code's
         # (its ring pixels handed over densely, row-major)
-        ry, rx = np.nonzero(ring)
         for cy, cx, coff in component_offsets(
                 reference[ry, rx], candidates[lbl][ry, rx], diff[ry, rx], usable[lbl][ry, rx],
                 ring, sel, replaced, ring_px=ring_px, max_de=max_de,
-                plateau_px=plateau_px, decay_px=decay_px, light_sigma_px=light_sigma_px):
+                plateau_px=plateau_px, decay_px=decay_px, light_sigma_px=light_sigma_px,
+                light_scale_px=light_scale_px, light_decay_px=light_decay_px):
             out[cy, cx] = src[cy, cx] + coff
     return np.clip(out + 0.5, 0, 255).astype(np.uint8)
 
@@ -169,7 +189,8 @@ def full_resolution(reference, sources, clean_working, dynamic, selection, tau=1
                           math.ceil(max(Wf / w, Hf / h))).astype(np.intp)
     rep = label >= 1
     ring_px = max(3, int(round(3 * max(sx, sy))))
-    ys, xs = np.nonzero(dilate_disc(rep, ring_px + 1))
+    band_px = (int(round(BAND_PX[0] * max(sx, sy))), int(round(BAND_PX[1] * max(sx, sy))))
+    ys, xs = np.nonzero(dilate_disc(rep, max(ring_px, band_px[1]) + 1))
     y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
     roi = (slice(y0, y1), slice(x0, x1))
     gx, gy = np.meshgrid(np.arange(x0, x1, dtype=np.float32),
@@ -208,7 +229,10 @@ def full_resolution(reference, sources, clean_working, dynamic, selection, tau=1
     scale = max(sx, sy)  # the fade's distances are full-size pixels
     out = offset_blend(reference[roi], cand, lab, rep_roi, usable, labs, ring_px=ring_px,
                        plateau_px=PLATEAU_PX * scale, decay_px=DECAY_PX * scale,
-                       light_sigma_px=LIGHT_SIGMA_PX * scale)
+                       light_sigma_px=LIGHT_SIGMA_PX * scale,
+                       light_scale_px=LIGHT_SCALE_PX * scale,
+                       light_decay_px=LIGHT_DECAY_PX * scale, band_px=band_px,
+                       band_sigma_px=BAND_SIGMA_PX * scale)
     no_src = cv2.resize(selection.no_source.astype(np.uint8), size,
                         interpolation=cv2.INTER_NEAREST)[roi] > 0
     if no_src.any():

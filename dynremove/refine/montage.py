@@ -17,10 +17,15 @@ The blend replaces the paper's Poisson step by its low-frequency part: each
 chosen source gets a smooth offset from ``reference - source`` measured on a
 thin ring around the replaced region: the ring's median (the photos' exposure
 and white balance) everywhere, plus the membrane (harmonic) interpolation of
-each ring pixel's departure from it, faded within a few pixels of the ring
-(``ring_offset``). Ring pixels where the two disagree (a mover, a
-misalignment) are left out, so nothing bleeds inwards, which a plain Poisson
-solve with the ring as boundary does (measured: README "Fill by selection").
+each ring pixel's departure from it (``ring_offset``), in two parts: its local
+mean (light that changes across the photo: a glare on a glossy table seen from
+elsewhere, vignetting) fading over tens of pixels, the rest (content: an edge a
+pixel off) within a few pixels of the ring. Ring pixels where the two disagree
+(a mover, a misalignment) are left out, so nothing bleeds inwards, which a
+plain Poisson solve with the ring as boundary does (measured: README "Fill by
+selection"); a ring pixel far from the ring's median difference still counts
+when the band a little further out shows the same difference (light, not the
+mover's halo: ``band_light``).
 """
 
 from __future__ import annotations
@@ -45,6 +50,16 @@ DECAY_PX = 3.0
 # by a Gaussian of σ LIGHT_SIGMA_PX (``consistent_departures``)
 DEPARTURE_MAX_DEV = 6.0
 LIGHT_SIGMA_PX = 4.0
+# the light part of the departure: its normalised Gaussian mean of σ LIGHT_SCALE_PX
+# along the ring, faded over LIGHT_DECAY_PX beyond the plateau (``ring_offset``)
+LIGHT_SCALE_PX = 8.0
+LIGHT_DECAY_PX = 30.0
+# the band where light is told from content (``band_light``): BAND_PX[0] to
+# BAND_PX[1] px out of the replaced region, beyond the mover's halo; its local
+# mean of σ BAND_SIGMA_PX; a ring pixel within BAND_AGREE × max_de (ΔE) of it agrees
+BAND_PX = (6, 20)
+BAND_SIGMA_PX = 8.0
+BAND_AGREE = 0.5
 
 
 def pairwise_distance(colours: np.ndarray) -> np.ndarray:
@@ -176,13 +191,16 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
     out = reference.copy()
     ring = dilate_disc(replaced, ring_px) & ~replaced
     ry, rx = np.nonzero(ring)
+    by, bx = np.nonzero(band_around(replaced, BAND_PX))
     ref_ring = reference[ry, rx]
     for lbl in np.unique(labels[replaced]):
         if lbl == 0:
             continue
         sel = replaced & (labels == lbl)
         diff = labs[0, ry, rx] - labs[lbl, ry, rx]
-        good = ring_agrees(diff, usable[lbl, ry, rx], max_de)
+        local = band_light(labs[0, by, bx] - labs[lbl, by, bx], usable[lbl, by, bx],
+                           (by, bx), (ry, rx), BAND_SIGMA_PX, max_de)
+        good = ring_agrees(diff, usable[lbl, ry, rx], max_de, local=local)
         sy, sx = np.nonzero(sel)
         off = ring_offset(ref_ring, candidates[lbl, ry, rx], good, (ry, rx), sel)
         out[sy, sx] = add_offset(candidates[lbl, sy, sx], off)
@@ -193,12 +211,121 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
     return out
 
 
+def band_around(replaced: npt.NDArray[np.bool_], band_px: tuple[int, int]
+                ) -> npt.NDArray[np.bool_]:
+    """The pixels ``band_px[0]`` (excluded) to ``band_px[1]`` px (Euclidean discs) out of
+    ``replaced`` (H, W) bool: where ``band_light`` measures the light."""
+    return dilate_disc(replaced, band_px[1]) & ~dilate_disc(replaced, band_px[0])
+
+
+def gaussian_mean_at(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
+                     values: npt.NDArray[np.float32], qy: npt.NDArray[np.intp],
+                     qx: npt.NDArray[np.intp], sigma_px: float, *, min_weight: float = 1e-3
+                     ) -> npt.NDArray[np.float32]:
+    """The normalised Gaussian mean (Knutsson & Westin 1993) of scattered samples,
+    read at query points.
+
+    Parameters
+    ----------
+    ys, xs : (N,) int ndarrays
+        The samples' pixels (any origin: only relative positions count).
+    values : (N, C) float32 ndarray
+    qy, qx : (Q,) int ndarrays
+        The query pixels, in the samples' frame.
+    sigma_px : float
+        σ in pixels. From 8 px up the sums are taken per cell of ⌊σ / 4⌋² pixels
+        and blurred with σ / ⌊σ / 4⌋ (the full-size output of large photos), at
+        the cost of the working size's.
+
+    min_weight : float
+        Below this sum of the Gaussian's weights (the samples near the query),
+        NaN (0: never).
+
+    Returns
+    -------
+    mean : (Q, C) float32 ndarray
+        NaN where no sample lies within about 3σ of the query.
+    """
+    C = values.shape[1]
+    if len(ys) == 0:
+        return np.full((len(qy), C), np.nan, np.float32)
+    step = max(1, int(sigma_px // 4))
+    sigma = sigma_px / step
+    r = int(math.ceil(3 * sigma))
+    oy0, ox0 = min(ys.min(), qy.min(initial=ys.min())), min(xs.min(), qx.min(initial=xs.min()))
+    sy, sx = (ys - oy0) // step + r, (xs - ox0) // step + r
+    ty, tx = (qy - oy0) // step + r, (qx - ox0) // step + r
+    shape = (int(max(sy.max(), ty.max(initial=0))) + r + 1,
+             int(max(sx.max(), tx.max(initial=0))) + r + 1)
+    k = 2 * r + 1
+    w = np.zeros(shape, np.float32)
+    f = np.zeros(shape + (C,), np.float32)
+    np.add.at(w, (sy, sx), 1.0)  # sums per cell (one pixel each at step 1)
+    np.add.at(f, (sy, sx), values.astype(np.float32))
+    ws = cv2.GaussianBlur(w, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)[ty, tx]
+    fs = cv2.GaussianBlur(f, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
+    fs = fs.reshape(shape + (C,))[ty, tx]
+    out = fs / np.maximum(ws, 1e-6)[:, None]
+    if min_weight > 0:
+        out[ws < min_weight] = np.nan
+    return out
+
+
+def band_light(difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool_],
+               band: tuple[np.ndarray, np.ndarray], at: tuple[np.ndarray, np.ndarray],
+               sigma_px: float, max_de: float, *, passes: int = 2
+               ) -> npt.NDArray[np.float32]:
+    """The light difference between the reference and a source near each ring pixel,
+    measured in a band further out.
+
+    Light that differs between two photos (a glare seen from one viewpoint only,
+    vignetting, shade) spreads over the photo; the reference's mover (its halo,
+    the part the mask missed) is confined to the replaced region's edge. So a
+    ring pixel whose difference is far from the ring's median is still light when
+    the band ``BAND_PX`` beyond it shows the same difference (``ring_agrees``).
+    The band's local mean is robust: ``passes`` rounds, each keeping the band
+    pixels within ``BAND_AGREE × max_de`` (CIE76) of the mean of those kept
+    before (the first over all usable ones), as in ``consistent_departures``.
+
+    Parameters
+    ----------
+    difference : (B, 3) float32 ndarray
+        The reference's Lab minus the source's at the B band pixels (blurred,
+        ``fields.blurred_lab``).
+    usable : (B,) bool ndarray
+        Where the source has content.
+    band, at : (ys, xs) int ndarrays
+        The band's pixels and the ring's (the same frame).
+    sigma_px : float
+        σ of the local mean (``gaussian_mean_at``).
+    max_de : float
+        ``ring_agrees``' tolerance.
+
+    Returns
+    -------
+    local : (R, 3) float32 ndarray
+        At the ring pixels ``at``; NaN where no band pixel is near.
+    """
+    by, bx = band[0][usable], band[1][usable]
+    d = difference[usable]
+    keep = np.ones(len(by), bool)
+    for _ in range(passes):
+        if not keep.any():
+            break
+        loc = gaussian_mean_at(by[keep], bx[keep], d[keep], by, bx, sigma_px)
+        with np.errstate(invalid="ignore"):
+            keep = delta_e(d, loc) < BAND_AGREE * max_de
+    return gaussian_mean_at(by[keep], bx[keep], d[keep], at[0], at[1], sigma_px)
+
+
 def component_offsets(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8],
                       difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool_],
                       ring: npt.NDArray[np.bool_], sel: npt.NDArray[np.bool_],
                       replaced: npt.NDArray[np.bool_], *, ring_px: int, max_de: float = 15.0,
                       plateau_px: float = PLATEAU_PX, decay_px: float = DECAY_PX,
-                      light_sigma_px: float = LIGHT_SIGMA_PX):
+                      light_sigma_px: float = LIGHT_SIGMA_PX,
+                      light_scale_px: float = LIGHT_SCALE_PX,
+                      light_decay_px: float = LIGHT_DECAY_PX):
     """The offsets of the small regions that take one source, each from its own ring.
 
     One offset per source (``ring_offset`` over the ring of everything the source
@@ -256,14 +383,16 @@ def component_offsets(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.
         good = ring_agrees(difference[idx], usable[idx], max_de)
         off = ring_offset(ref_ring[idx], src_ring[idx], good, (cy, cx), comp,
                           plateau_px=plateau_px, decay_px=decay_px,
-                          light_sigma_px=light_sigma_px)
+                          light_sigma_px=light_sigma_px, light_scale_px=light_scale_px,
+                          light_decay_px=light_decay_px)
         qy, qx = np.nonzero(comp)
         out.append((qy + y0, qx + x0, off))
     return out
 
 
 def ring_agrees(difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool_],
-                max_de: float = 15.0) -> npt.NDArray[np.bool_]:
+                max_de: float = 15.0, *, local: npt.NDArray[np.float32] | None = None
+                ) -> npt.NDArray[np.bool_]:
     """Ring pixels whose reference − source difference may set the source's offset.
 
     difference : (R, 3) float32, the reference's Lab minus the source's at the R
@@ -271,13 +400,20 @@ def ring_agrees(difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool
     A pixel agrees when its difference lies within ``max_de`` of the usable
     ring's median difference: the median is the photos' exposure and
     white-balance offset (a darker reference, a glare that covers the ring), and
-    what departs from it is content (a misaligned edge, another mover).
+    what departs from it is content (a misaligned edge, another mover). With
+    ``local`` (R, 3), the light measured beyond the ring (``band_light``; NaN: none),
+    a pixel within ``BAND_AGREE × max_de`` of it agrees too: light that changes
+    across the photo (a glare on part of the ring only), not content.
     Returns (R,) bool.
     """
     if not usable.any():
         return usable.copy()
     med = np.median(difference[usable], axis=0)
-    return usable & (delta_e(difference, med) < max_de)
+    good = usable & (delta_e(difference, med) < max_de)
+    if local is not None:
+        with np.errstate(invalid="ignore"):
+            good |= usable & (delta_e(difference, local) < BAND_AGREE * max_de)
+    return good
 
 
 def add_offset(source: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32]
@@ -292,7 +428,8 @@ def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8]
                 good: npt.NDArray[np.bool_], ring: tuple[np.ndarray, np.ndarray],
                 sel: npt.NDArray[np.bool_], *, min_ring_px: int = 20,
                 plateau_px: float = PLATEAU_PX, decay_px: float = DECAY_PX,
-                light_sigma_px: float = LIGHT_SIGMA_PX) -> npt.NDArray[np.float32]:
+                light_sigma_px: float = LIGHT_SIGMA_PX, light_scale_px: float = LIGHT_SCALE_PX,
+                light_decay_px: float = LIGHT_DECAY_PX) -> npt.NDArray[np.float32]:
     """The offset ``reference - source`` at the pixels of ``sel``, from the ring.
 
     Parameters
@@ -313,6 +450,10 @@ def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8]
         The ring pixels whose departure is not within ``DEPARTURE_MAX_DEV`` of
         their neighbours' (a Gaussian of this σ) set none
         (``consistent_departures``).
+    light_scale_px, light_decay_px : float
+        The departure's light part, its normalised Gaussian mean along the ring
+        (σ ``light_scale_px``, ``gaussian_mean_at``), fades over
+        ``light_decay_px`` instead of ``decay_px``.
 
     Returns
     -------
@@ -321,8 +462,8 @@ def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8]
         ``reference - source`` (the photos' exposure and white-balance
         difference) plus the membrane (harmonic) interpolation of each ring
         pixel's departure from it (``fields.harmonic_fill``), faded with the
-        distance to the ring; the median alone (0 without any) when fewer than
-        ``min_ring_px`` ring pixels are good.
+        distance to the ring (its light part slowly, the rest fast); the median
+        alone (0 without any) when fewer than ``min_ring_px`` ring pixels are good.
 
     Notes
     -----
@@ -343,13 +484,17 @@ def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8]
     med = np.median(d, axis=0)
     gy, gx = ring[0][good], ring[1][good]
     ok = consistent_departures(gy, gx, d - med, light_sigma_px)
-    field = np.zeros(sel.shape + d.shape[1:], np.float32)
-    field[gy[ok], gx[ok]] = (d - med)[ok]
+    C = d.shape[1]
+    dep = (d - med)[ok]
+    light = gaussian_mean_at(gy[ok], gx[ok], dep, gy[ok], gx[ok], light_scale_px)
+    field = np.zeros(sel.shape + (2 * C,), np.float32)
+    field[gy[ok], gx[ok], :C] = light
+    field[gy[ok], gx[ok], C:] = dep - light
     known = np.zeros(sel.shape, bool)
     known[gy[ok], gx[ok]] = True
-    departure = harmonic_fill(field, ~known, need=sel)[sel]
-    return (med + departure * ring_fade(known, sel, plateau_px, decay_px)[:, None]
-            ).astype(np.float32)
+    f = harmonic_fill(field, ~known, need=sel)[sel]
+    fade_light, fade = ring_fade(known, sel, plateau_px, (light_decay_px, decay_px))
+    return (med + f[:, :C] * fade_light[:, None] + f[:, C:] * fade[:, None]).astype(np.float32)
 
 
 def consistent_departures(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
@@ -389,33 +534,26 @@ def consistent_departures(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
     keep = np.ones(len(ys), bool)
     if len(ys) == 0:
         return keep
-    # on a grid ``step`` times coarser where σ is large (the full-size output):
-    # the sums per cell, blurred with σ / step, cost what the working size's do
-    step = max(1, int(sigma_px // 4))
-    sigma = sigma_px / step
-    r = int(math.ceil(3 * sigma))
-    oy, ox = (ys - ys.min()) // step + r, (xs - xs.min()) // step + r
-    shape = (int(oy.max()) + r + 1, int(ox.max()) + r + 1)
-    k = 2 * r + 1
     dep = departure.astype(np.float32)
     for _ in range(passes):
-        w = np.zeros(shape, np.float32)
-        f = np.zeros(shape + dep.shape[1:], np.float32)
-        np.add.at(w, (oy[keep], ox[keep]), 1.0)  # sums per cell (one pixel each at step 1)
-        np.add.at(f, (oy[keep], ox[keep]), dep[keep])
-        ws = cv2.GaussianBlur(w, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)[oy, ox]
-        fs = cv2.GaussianBlur(f, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
-        fs = fs.reshape(shape + dep.shape[1:])[oy, ox] / np.maximum(ws, 1e-6)[:, None]
-        keep = np.abs(dep - fs).max(axis=1) < max_dev
+        # (no kept pixel near: the mean is 0, a departure within max_dev of none)
+        loc = (gaussian_mean_at(ys[keep], xs[keep], dep[keep], ys, xs, sigma_px, min_weight=0)
+               if keep.any() else np.zeros_like(dep))
+        keep = np.abs(dep - loc).max(axis=1) < max_dev
     return keep
 
 
 def ring_fade(known: npt.NDArray[np.bool_], sel: npt.NDArray[np.bool_], plateau_px: float,
-              decay_px: float) -> npt.NDArray[np.float32]:
+              decay_px: float | tuple[float, ...]):
     """``exp(-max(d - plateau_px, 0) / decay_px)`` at the pixels of ``sel`` (row-major),
-    d the Euclidean distance (px) to the nearest pixel of ``known`` (both (H, W) bool)."""
+    d the Euclidean distance (px) to the nearest pixel of ``known`` (both (H, W) bool):
+    (M,) float32, or a tuple of them for a tuple of ``decay_px``."""
     dist = cv2.distanceTransform((~known).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[sel]
-    return np.exp(-np.maximum(dist - plateau_px, 0.0) / decay_px).astype(np.float32)
+    beyond = np.maximum(dist - plateau_px, 0.0)
+    if isinstance(decay_px, tuple):
+        return tuple(np.exp(-beyond / d).astype(np.float32) for d in decay_px)
+    return np.exp(-beyond / decay_px).astype(np.float32)
 
-__all__ = ["add_offset", "component_offsets", "consistent_departures", "expansion_labels",
-           "offset_blend", "pairwise_distance", "ring_agrees", "ring_fade", "ring_offset"]
+__all__ = ["add_offset", "band_around", "band_light", "component_offsets",
+           "consistent_departures", "expansion_labels", "gaussian_mean_at", "offset_blend",
+           "pairwise_distance", "ring_agrees", "ring_fade", "ring_offset"]

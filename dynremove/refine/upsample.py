@@ -36,8 +36,10 @@ import numpy.typing as npt
 
 from dynremove.refine.colour import delta_e
 from dynremove.refine.fields import mask_boxes, remap_points
-from dynremove.refine.montage import (DECAY_PX, LIGHT_SIGMA_PX, PLATEAU_PX, add_offset,
-                                      component_offsets, ring_agrees, ring_offset)
+from dynremove.refine.montage import (BAND_PX, BAND_SIGMA_PX, DECAY_PX, LIGHT_DECAY_PX,
+                                      LIGHT_SCALE_PX, LIGHT_SIGMA_PX, PLATEAU_PX, add_offset,
+                                      band_around, band_light, component_offsets, ring_agrees,
+                                      ring_offset)
 from dynremove.refine.morphology import dilate_disc, grow_replaced
 from dynremove.refine.select import Selection, member_median, mixture_detail
 
@@ -110,25 +112,30 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     if not len(rows):
         return clean, dyn_full
     ring_px = max(3, int(round(3 * blur)))
-    # the bounding box of the replaced region dilated by ring_px + 1 (a disc
-    # reaches as far as a square along the axes)
-    y0, y1 = max(rows[0] - ring_px - 1, 0), min(rows[-1] + ring_px + 2, Hf)
-    x0, x1 = max(cols[0] - ring_px - 1, 0), min(cols[-1] + ring_px + 2, Wf)
+    band_px = (int(round(BAND_PX[0] * blur)), int(round(BAND_PX[1] * blur)))
+    # the bounding box of the replaced region dilated by the band's outer radius + 1
+    # (a disc reaches as far as a square along the axes)
+    m = max(ring_px, band_px[1]) + 1
+    y0, y1 = max(rows[0] - m, 0), min(rows[-1] + m + 1, Hf)
+    x0, x1 = max(cols[0] - m, 0), min(cols[-1] + m + 1, Wf)
     lab = np.ascontiguousarray(label[y0:y1, x0:x1])
     del label, rep
     rep = lab >= 1
     shape = rep.shape
     ring = dilate_disc(rep, ring_px) & ~rep
-    # the pixels sampled: the replaced ones and those the blurred ring reads
-    reach = ring_px + math.ceil(4 * blur) + 1
+    band = band_around(rep, band_px)
+    # the pixels sampled: the replaced ones and those the blurred ring and band read
+    reach = m - 1 + math.ceil(4 * blur) + 1
     near = cv2.dilate(rep.view(np.uint8), np.ones((2 * reach + 1, 2 * reach + 1), np.uint8))
     py, px = np.nonzero(near)
     del near
     index = np.full(shape, -1, np.int32)
     index[py, px] = np.arange(len(py), dtype=np.int32)
     ry, rx = np.nonzero(ring)
+    by, bx = np.nonzero(band)
+    del band
     qy, qx = np.nonzero(rep)  # the replaced pixels (row-major)
-    ring_i, rep_i = index[ry, rx], index[qy, qx]
+    ring_i, band_i, rep_i = index[ry, rx], index[by, bx], index[qy, qx]
     del index
     cand, usable, members = _sample_sources(reference, sources, selection, py + y0, px + x0,
                                             rep_i, (sx, sy))
@@ -141,25 +148,30 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
                                          LIGHT_SIGMA_PX * blur)
     del members, member
     diff = _ring_difference(reference[y0:y1, x0:x1], cand, (py, px), ring, blur)
+    band_mask = np.zeros(shape, bool)
+    band_mask[by, bx] = True
+    diff_band = _ring_difference(reference[y0:y1, x0:x1], cand, (py, px), band_mask, blur)
+    del band_mask
     # each source plus its offset to the reference, measured on the ring
     ref_ring = reference[ry + y0, rx + x0]
     out = np.empty((len(qy), 3), np.uint8)
     rep_index = np.full(shape, -1, np.int32)  # a replaced pixel's row in ``out``
     rep_index[qy, qx] = np.arange(len(qy), dtype=np.int32)
     for lbl in np.unique(chosen):
-        good = ring_agrees(diff[lbl], usable[lbl, ring_i], _MAX_DE)
+        local = band_light(diff_band[lbl], usable[lbl, band_i], (by, bx), (ry, rx),
+                           BAND_SIGMA_PX * blur, _MAX_DE)
+        good = ring_agrees(diff[lbl], usable[lbl, ring_i], _MAX_DE, local=local)
         mine = chosen == lbl
         sel = rep & (lab == lbl)
-        off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), sel,
-                          plateau_px=PLATEAU_PX * blur, decay_px=DECAY_PX * blur,
-                          light_sigma_px=LIGHT_SIGMA_PX * blur)
+        scaled = dict(plateau_px=PLATEAU_PX * blur, decay_px=DECAY_PX * blur,
+                      light_sigma_px=LIGHT_SIGMA_PX * blur,
+                      light_scale_px=LIGHT_SCALE_PX * blur,
+                      light_decay_px=LIGHT_DECAY_PX * blur)
+        off = ring_offset(ref_ring, cand[lbl, ring_i], good, (ry, rx), sel, **scaled)
         out[mine] = add_offset(cand[lbl, rep_i[mine]], off)
         for cy, cx, coff in component_offsets(ref_ring, cand[lbl, ring_i], diff[lbl],
                                               usable[lbl, ring_i], ring, sel, rep,
-                                              ring_px=ring_px, max_de=_MAX_DE,
-                                              plateau_px=PLATEAU_PX * blur,
-                                              decay_px=DECAY_PX * blur,
-                                              light_sigma_px=LIGHT_SIGMA_PX * blur):
+                                              ring_px=ring_px, max_de=_MAX_DE, **scaled):
             at = rep_index[cy, cx]
             out[at] = add_offset(cand[lbl, rep_i[at]], coff)
     no_src = _resize_nearest(selection.no_source.view(np.uint8), size)[y0:y1, x0:x1] > 0
