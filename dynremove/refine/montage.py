@@ -258,10 +258,13 @@ def gaussian_mean_at(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
     shape = (int(max(sy.max(), ty.max(initial=0))) + r + 1,
              int(max(sx.max(), tx.max(initial=0))) + r + 1)
     k = 2 * r + 1
-    w = np.zeros(shape, np.float32)
-    f = np.zeros(shape + (C,), np.float32)
-    np.add.at(w, (sy, sx), 1.0)  # sums per cell (one pixel each at step 1)
-    np.add.at(f, (sy, sx), values.astype(np.float32))
+    # the sums per cell (one pixel each at step 1), in float32 as the blur reads them
+    cell = sy * shape[1] + sx
+    n = shape[0] * shape[1]
+    w = np.bincount(cell, minlength=n).astype(np.float32).reshape(shape)
+    v = values.astype(np.float32)
+    f = np.stack([np.bincount(cell, v[:, c].astype(np.float64), n).astype(np.float32)
+                  for c in range(C)], axis=-1).reshape(shape + (C,))
     ws = cv2.GaussianBlur(w, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)[ty, tx]
     fs = cv2.GaussianBlur(f, (k, k), sigma, borderType=cv2.BORDER_CONSTANT)
     fs = fs.reshape(shape + (C,))[ty, tx]
