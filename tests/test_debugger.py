@@ -182,6 +182,26 @@ def test_the_fill_is_told(method_run):
         assert f"filled from source {h['source_names'][k - 1]}" in " ".join(vd.verdict_lines(h))
 
 
+def test_the_blends_offset_is_recorded_and_told(method_run):
+    """What the blend added to the chosen source (``Selection.offset``): recorded to
+    the level, and said by inspect at the filled pixel where it is largest."""
+    run_sel = method_run["res"].selection
+    if run_sel is None:
+        pytest.skip("no fill by selection in this run")
+    rec = vi.read_selection(method_run["path"])
+    filled = np.isfinite(run_sel.offset).all(-1)
+    assert filled.any() and not np.isfinite(run_sel.offset[run_sel.label <= 0]).any()
+    want = np.clip(np.round(np.nan_to_num(run_sel.offset)), -128, 127).astype(np.int16)
+    np.testing.assert_array_equal(rec["offset"], want)
+    mag = np.where(filled, np.abs(want).max(-1), -1)
+    y, x = np.unravel_index(int(np.argmax(mag)), mag.shape)
+    h = vi.pixel_history(method_run["path"], int(x), int(y))
+    assert h["selection"]["offset"] == [int(c) for c in want[y, x]]
+    words = " ".join(vd.verdict_lines(h))
+    told = "the blend added B/G/R " + "/".join(f"{int(c):+d}" for c in want[y, x])
+    assert (told in words) == (mag[y, x] >= 1)
+
+
 def test_a_lingering_mover_is_logged_and_told(tmp_path):
     """A mover that stands still in 3 of the 5 sources: the recording holds the
     lingering map, and inspect says which source filled a pixel of it and why the

@@ -79,6 +79,10 @@ def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
         rrb.Spatial2DView(name="fill", origin=p("result"),
                           contents=[p(P.RESULT_CLEAN), p(P.RESULT_SOURCE), p(P.RESULT_SEAMS),
                                     p(P.ERRORS_BACKGROUND)]),
+        # what the blend added to the chosen sources (grey: nothing; tinted: a colour
+        # or light correction), over the clean photo
+        rrb.Spatial2DView(name="blend offset", origin=p("result"),
+                          contents=[p(P.RESULT_CLEAN), p(P.RESULT_OFFSET)]),
         # inside L: which sources show the reference's content as static, and how
         # (green: they count; red: not found; hover a pixel for the words)
         rrb.Grid(*[rrb.Spatial2DView(

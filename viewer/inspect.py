@@ -514,7 +514,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     searched), ``data_cost`` and ``support`` (dicts of uint16 maps × DE_SCALE: what the graph
     cut weighed, ``Selection.data_cost`` and ``Selection.support``),
     ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
-    its own frame: where the flow followed the reference's mover into it); absent
+    its own frame: where the flow followed the reference's mover into it), ``offset``
+    ((H, W, 3) int16, B/G/R levels the blend added to the chosen source, 0 where it
+    added none or no source filled; ``paths.RESULT_OFFSET``); absent
     keys when the run had no selection step (or, for ``inpainted``, was recorded
     before it was logged)."""
     store, p = load_store(path), P.Paths(root)
@@ -563,6 +565,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     if rows:
         out["region_share"] = rows[0][1]
         out["region_rule"] = _static_values(store, p(P.RESULT_REGION_SHARE))
+    rows = _image_rows(store, p(P.RESULT_OFFSET), "Image", index=None)
+    if rows and rows[0][1].ndim == 3:
+        out["offset"] = rows[0][1][..., ::-1].astype(np.int16) - P.OFFSET_ZERO  # RGB -> BGR
     return out
 
 
@@ -703,6 +708,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.P_SCALE
         elif k in ("thresholds", "region_rule"):
             sel[k] = {n: (a[0] if isinstance(a, list) and a else a) for n, a in v.items()}
+        elif k == "offset":  # B/G/R levels the blend added to the chosen source
+            sel[k] = [int(c) for c in v[y, x]]
         else:
             sel[k] = int(v[y, x])
     return dict(

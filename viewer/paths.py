@@ -134,6 +134,10 @@ RESULT_REGION_SHARE = "result/selection/region_share"
 RESULT_DATA_COST = "result/selection/data_cost"
 RESULT_SUPPORT = "result/selection/support"
 RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV inpainting
+# what the blend added to the chosen source (Selection.offset), an RGB image of
+# OFFSET_ZERO + levels (clipped to 0..255): grey where it added nothing or no source filled
+RESULT_OFFSET = "result/selection/offset"
+OFFSET_ZERO = 128
 # the static 3-D structure test inside L: per source, whether it shows the reference's
 # content (EVIDENCE codes) and the best CIE76 ΔE along its epipolar line (uint16,
 # round(ΔE · DE_SCALE), DE_NONE where not searched); how many sources had to show it;

@@ -473,6 +473,12 @@ class RerunSink(StepColumns):
             self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
                  ).astype(np.uint8)), static=True)
+            if getattr(sel, "offset", None) is not None:
+                # what the blend added to the chosen source, as RGB around grey
+                off = np.nan_to_num(np.asarray(sel.offset, np.float32)[..., ::-1], nan=0.0)
+                self.rec.log(self.p(P.RESULT_OFFSET), rr.Image(
+                    np.clip(np.round(off) + P.OFFSET_ZERO, 0, 255).astype(np.uint8)),
+                    static=True)
             for k, mv in enumerate(np.asarray(sel.movers, bool)):
                 name = src_names[k] if k < len(src_names) else f"source{k}"
                 if getattr(sel, "followed", None) is not None and sel.followed[k].any():

@@ -301,6 +301,11 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                 why += (" — outside the final mask: the value written is within the fill's "
                         "--select-tau of the reference's (the margin the fill may change "
                         "around L)")
+            off = sel.get("offset")
+            if off and max(abs(c) for c in off) >= 1:
+                why += ("; the blend added B/G/R " + "/".join(f"{c:+d}" for c in off)
+                        + " levels to it (the reference's exposure and light around the "
+                        "region)")
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):

@@ -155,6 +155,10 @@ class Selection:
     # (S, H, W) bool, in each *source's* own frame: where the flow followed the
     # reference's movers into it (``_followed_mover``; all False where it did not)
     followed: npt.NDArray[np.bool_] | None = None
+    # (H, W, 3) float32, B/G/R levels: what the blend added to the chosen source's
+    # value (``montage.offset_blend``: the photos' exposure and light around the
+    # region); NaN where no source filled the pixel (kept, or inpainted)
+    offset: npt.NDArray[np.float32] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen",
@@ -1161,6 +1165,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         unseen[:] = False
     clean = reference.copy()
     members = np.zeros((S, H, W), bool)
+    offset = np.full((H, W, 3), np.nan, np.float32)
     if rep_b.any():
         if P.select_cluster_median:
             # where the scan is trusted, every free source is a witness of the
@@ -1174,6 +1179,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             members[lab_b[ly, lx] - 1, ly + y0, lx + x0] = True
         clean[roi] = offset_blend(reference[roi], cand_img, lab_b, rep_b, usable, labs)
         members[:, y0:y1, x0:x1] &= ~no_src[None]  # inpainted: no source's value
+        fy, fx = np.nonzero(rep_b & ~no_src)
+        offset[fy + y0, fx + x0] = (clean[fy + y0, fx + x0].astype(np.float32)
+                                    - cand_img[lab_b[fy, fx], fy, fx])
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
@@ -1229,7 +1237,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      static_need=np.where(mask, np.minimum(need, 255), 0).astype(np.uint8),
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
                      followed=np.stack([np.zeros((H, W), bool) if f is None else f
-                                        for f in followed]))
+                                        for f in followed]),
+                     offset=offset)
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
