@@ -598,7 +598,17 @@ def cmd_composite(args: argparse.Namespace) -> int:
                                          light=args.light)
         for o in outs:
             print(o)
-        print(f"wrote {len(outs)} composite sets under {args.out}")
+        print(f"wrote {len(outs)} composite set{'s' if len(outs) != 1 else ''} under "
+              f"{args.out}")
+        # sets an earlier run wrote there stay, and 'eval DIR' would score them too
+        stale = sorted(d.name for d in Path(args.out).iterdir()
+                       if d.is_dir() and (d / "composite.json").is_file()
+                       and d.resolve() not in {o.resolve() for o in outs})
+        if stale:
+            print(f"dynremove: note: {len(stale)} other composite set"
+                  f"{'s' if len(stale) != 1 else ''} under {args.out} from an earlier run "
+                  f"({', '.join(stale[:3])}{', …' if len(stale) > 3 else ''}): "
+                  "'dynremove eval' on the folder scores them too", file=sys.stderr)
     else:
         info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
                                         seed=args.seed, n_views=args.n_views,

@@ -200,6 +200,9 @@ def test_the_blends_offset_is_recorded_and_told(method_run):
     words = " ".join(vd.verdict_lines(h))
     told = "the blend added B/G/R " + "/".join(f"{int(c):+d}" for c in want[y, x])
     assert (told in words) == (mag[y, x] >= 1)
+    # a large correction is not called light (a trial read -115 levels as light)
+    assert ("a large correction" in words) == (mag[y, x] >= 40)
+    assert ("(the photos' exposure and light)" in words) == (1 <= mag[y, x] < 40)
 
 
 def test_a_lingering_mover_is_logged_and_told(tmp_path):
@@ -525,8 +528,10 @@ def test_the_static_test_is_told(method_run):
         head = {(True, False): "kept as static: ", (True, True): "passed (",
                 (False, True): "not passed: ", (False, False): "not passed ("}[
             (bool(sel.explained[y, x]), filled)]
+        c = int(counted[y, x])
         assert line.startswith("static 3-D structure test: " + head
-                               + f"{int(counted[y, x])} of the {need} source"), line
+                               + f"{c} source{'s' if c != 1 else ''} count as showing the "
+                               f"reference's content here, {need} needed"), line
         if filled:
             assert h["source_names"][sel.label[y, x] - 1] in line
         for k, n in enumerate(names):

@@ -227,12 +227,14 @@ def test_relit_composite_keeps_the_reference_and_the_objects(tmp_path):
     plain = composite.compose(statics, names, objs, seed=3)
     lit = composite.compose(statics, names, objs, seed=3, light=True)
     np.testing.assert_array_equal(lit.images[2], plain.images[2])
-    assert lit.info["light"][2] is None
+    views = lit.info["light"]["views"]
+    assert list(views) == lit.names and views[lit.names[2]] is None
+    assert "gain_bgr" in lit.info["light"]["model"] and "light" not in plain.info
     for k in (0, 1, 3, 4):
         np.testing.assert_array_equal(lit.masks[k], plain.masks[k])
         assert lit.info["objects"] == plain.info["objects"]
         # the view is the plain one × the recorded gains × the recorded blobs' field
-        light = lit.info["light"][k]
+        light = views[lit.names[k]]
         blobs = light["blobs"]
         assert 1 <= len(blobs) <= 3
         yy, xx = np.mgrid[0:200, 0:280].astype(np.float64)
@@ -244,7 +246,26 @@ def test_relit_composite_keeps_the_reference_and_the_objects(tmp_path):
         np.testing.assert_allclose(lit.images[k][inside], want[inside], atol=1.0)
         assert 0.85 * 0.94 - 1e-3 <= min(light["gain_bgr"])
         assert max(light["gain_bgr"]) <= 1.15 * 1.06 + 1e-3
-    assert lit.info["light"][0] != lit.info["light"][1]
+    assert views[lit.names[0]] != views[lit.names[1]]
+
+
+def test_composite_batch_refuses_no_sets_and_names_earlier_ones(tmp_path, capsys):
+    """``--n-sets`` below 1 is an error (it wrote nothing and said so, exit 0); sets an
+    earlier run left under --out are named, since eval on the folder scores them too."""
+    static = tmp_path / "static"
+    _static_set(static / "a")
+    synth.write_scene(synth.make_scene(seed=4, n_views=5, size=(120, 160), n_objects=1),
+                      tmp_path / "objects" / "walker")
+    args = ["composite", str(static), str(tmp_path / "objects"), "--out", str(tmp_path / "c"),
+            "--n-views", "5"]
+    assert main(args + ["--n-sets", "-3"]) == 2
+    assert "--n-sets must be >= 1, got -3" in capsys.readouterr().err
+    (tmp_path / "c" / "old+set").mkdir(parents=True)
+    (tmp_path / "c" / "old+set" / "composite.json").write_text("{}")
+    assert main(args + ["--n-sets", "1"]) == 0
+    out = capsys.readouterr()
+    assert "wrote 1 composite set under" in out.out
+    assert "1 other composite set under" in out.err and "old+set" in out.err
 
 
 def test_eval_full_size_and_ablation_skips_unknown_fields(data, tmp_path, monkeypatch, capsys):

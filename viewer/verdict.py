@@ -12,6 +12,9 @@ from typing import Any
 from dynremove.events import CASE_BOTH_IN_CLUSTER, CASE_GEOMETRY, CASE_ONE_IN_CLUSTER
 from dynremove.refine.parallax import SEARCH_CAP_DE as _LINE_CAP
 
+# a blend offset from this many levels up (any channel) is told as more than light
+_LARGE_OFFSET = 40
+
 
 def _label(v: bool | None) -> str:
     return "?" if v is None else ("dynamic" if v else "static")
@@ -303,9 +306,15 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                         "around L)")
             off = sel.get("offset")
             if off and max(abs(c) for c in off) >= 1:
+                # what the ring around the region asked for: exposure and light, or, when
+                # large, a shadow or another object the ring saw (a trial read -115
+                # levels as light)
                 why += ("; the blend added B/G/R " + "/".join(f"{c:+d}" for c in off)
-                        + " levels to it (the reference's exposure and light around the "
-                        "region)")
+                        + " levels to it, to meet the reference around the region"
+                        + (" (a large correction: the ring there differs from this source "
+                           "by more than light does, e.g. a shadow or a wrong source)"
+                           if max(abs(c) for c in off) >= _LARGE_OFFSET else
+                           " (the photos' exposure and light)"))
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
@@ -473,8 +482,9 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     parts = [f"{what}: {', '.join(who)}" for code, what in groups if (who := named(code))]
     counted = sum(c in (1, 2) for c in ev.values())
     passed = bool(sel.get("explained"))
-    evidence = (f"{counted} of the {need} source{'s' if need > 1 else ''} needed count as "
-                "showing the reference's content here (" + "; ".join(parts) + ")")
+    # ("3 of the 2 needed" read as a bug to a trial: more may count than are needed)
+    evidence = (f"{counted} source{'s' if counted != 1 else ''} count as showing the "
+                f"reference's content here, {need} needed (" + "; ".join(parts) + ")")
     p = sel.get("ref_mover_p")
     if passed:
         why_not = ""

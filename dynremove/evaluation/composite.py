@@ -365,7 +365,12 @@ def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_s
         if masks[ref].any() else None,
     }
     if light:
-        info["light"] = lights
+        info["light"] = {
+            "model": "view = plain view x gain_bgr (exposure x white balance, per B/G/R "
+                     "channel) x (1 + sum over blobs of gain x exp(-|p - center|^2 / "
+                     "(2 sigma_px^2))), p and center = (x, y) in px; gain a fraction "
+                     "(-0.3 = 30 % darker at the centre); the reference is not relit",
+            "views": {names[k]: lights[k] for k in range(V)}}
     return Composite(images=images, masks=masks, alphas=alphas,
                      background=statics[ref].copy(), statics=list(statics), ref_index=ref,
                      names=names, info=info, free=free)
@@ -465,6 +470,8 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
     written to ``out_root/<static>+<object>[+<object>...]``.
     """
 
+    if n_sets < 1:
+        raise InputError(f"--n-sets must be >= 1, got {n_sets}")
     root = Path(static_root)
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")
