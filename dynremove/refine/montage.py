@@ -236,7 +236,6 @@ def gaussian_mean_at(ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
         σ in pixels. From 8 px up the sums are taken per cell of ⌊σ / 4⌋² pixels
         and blurred with σ / ⌊σ / 4⌋ (the full-size output of large photos), at
         the cost of the working size's.
-
     min_weight : float
         Below this sum of the Gaussian's weights (the samples near the query),
         NaN (0: never).

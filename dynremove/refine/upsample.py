@@ -133,7 +133,6 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     index[py, px] = np.arange(len(py), dtype=np.int32)
     ry, rx = np.nonzero(ring)
     by, bx = np.nonzero(band)
-    del band
     qy, qx = np.nonzero(rep)  # the replaced pixels (row-major)
     ring_i, band_i, rep_i = index[ry, rx], index[by, bx], index[qy, qx]
     del index
@@ -147,11 +146,14 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
                                          member_median(cand[1:, rep_i], member), rep,
                                          LIGHT_SIGMA_PX * blur)
     del members, member
-    diff = _ring_difference(reference[y0:y1, x0:x1], cand, (py, px), ring, blur)
-    band_mask = np.zeros(shape, bool)
-    band_mask[by, bx] = True
-    diff_band = _ring_difference(reference[y0:y1, x0:x1], cand, (py, px), band_mask, blur)
-    del band_mask
+    # the ring's and the band's differences in one pass of blurs (their boxes overlap)
+    both = ring | band
+    del band
+    at = np.full(shape, -1, np.int32)
+    at[both] = np.arange(int(np.count_nonzero(both)), dtype=np.int32)
+    diff_all = _ring_difference(reference[y0:y1, x0:x1], cand, (py, px), both, blur)
+    diff, diff_band = diff_all[:, at[ry, rx]], diff_all[:, at[by, bx]]
+    del both, at, diff_all
     # each source plus its offset to the reference, measured on the ring
     ref_ring = reference[ry + y0, rx + x0]
     out = np.empty((len(qy), 3), np.uint8)
