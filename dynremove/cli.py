@@ -426,7 +426,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "seed, same sets; default 0)")
     c.add_argument("--n-views", type=int, default=6, metavar="N",
                    help="views per set, the middle N images of the static folder; the "
-                        "middle view is the reference (at least 2; default 6)")
+                        "middle view is the reference (view N//2 counting from 0: with an "
+                        "even N, the later of the two middle ones; at least 2; default 6)")
     c.add_argument("--objects", type=int, default=1, metavar="K",
                    help="moving objects pasted into each set (default 1)")
     c.add_argument("--n-sets", type=int, default=0, metavar="N",

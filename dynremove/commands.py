@@ -11,6 +11,7 @@ import argparse
 import contextlib
 import dataclasses
 import gc
+import json
 import re
 import signal
 import sys
@@ -566,6 +567,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         if out.is_dir():
             raise InputError(f"--json {out}: is a folder")
     progress = not args.quiet
+    if args.ablation or any(m not in ("median", "median-flow", "telea") for m in methods):
+        _note_compile(args)  # (each set's seconds leave the compilation out)
     if args.ablation:
         names = [n.strip() for n in (args.variants or "").split(",") if n.strip()] or None
         report = run_ablation(args.data_dir, base=params, names=names, sets=args.sets,
@@ -590,6 +593,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _composite_ref(folder: Path) -> str:
+    """The reference's file name that ``composite.json`` under ``folder`` records."""
+    return json.loads((Path(folder) / "composite.json").read_text())["ref"]
+
+
 def cmd_composite(args: argparse.Namespace) -> int:
     if args.n_sets:
         outs = composite.make_composites(args.static_dir, args.objects_dir, args.out,
@@ -597,7 +605,7 @@ def cmd_composite(args: argparse.Namespace) -> int:
                                          n_views=args.n_views, n_objects=args.objects,
                                          light=args.light)
         for o in outs:
-            print(o)
+            print(f"{o}  (reference {_composite_ref(o)})")
         print(f"wrote {len(outs)} composite set{'s' if len(outs) != 1 else ''} under "
               f"{args.out}")
         # sets an earlier run wrote there stay, and 'eval DIR' would score them too
@@ -610,11 +618,22 @@ def cmd_composite(args: argparse.Namespace) -> int:
                   f"({', '.join(stale[:3])}{', …' if len(stale) > 3 else ''}): "
                   "'dynremove eval' on the folder scores them too", file=sys.stderr)
     else:
-        info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
-                                        seed=args.seed, n_views=args.n_views,
-                                        n_objects=args.objects, light=args.light)
+        try:
+            info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
+                                            seed=args.seed, n_views=args.n_views,
+                                            n_objects=args.objects, light=args.light)
+        except InputError as e:
+            sets = composite.static_sets(Path(args.static_dir), args.n_views) \
+                if Path(args.static_dir).is_dir() else []
+            if not sets:
+                raise
+            # a folder of static sets given without --n-sets: say how to use it
+            raise InputError(f"{e}; {args.static_dir} holds {len(sets)} static set"
+                             f"{'s' if len(sets) != 1 else ''} of {args.n_views} or more "
+                             "images: add --n-sets N to make N composites from them") from e
         print(f"wrote {args.out}: {info['n_views']} views {info['size'][0]}x"
-              f"{info['size'][1]}, objects "
+              f"{info['size'][1]}, reference {info['ref']} (view {info['ref_index']} "
+              f"of 0-{info['n_views'] - 1}), objects "
               + ", ".join(o["set"] for o in info["objects"])
               + f", reference mask {100 * info['ref_mask_fraction']:.1f} %")
     return EXIT_OK

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import math
 import os
 from pathlib import Path
@@ -135,6 +136,27 @@ def test_whole_photo_table_labels_the_mean_unrecoverable_and_counts_sets():
     assert unrec.split()[-1] == "13.0"  # mean of 12.5 and 13.5
 
 
+def test_the_tables_figures_line_up_within_their_cells():
+    """A fresh-user trial: '33.7 0.990 0.19 7.6' under '30.0 0.956 0.16 14.0', and
+    '0.248 9.5 0.158' under '0.142 15.9 0.196': each figure now ends in the same
+    column on every row, a missing one ('-') too."""
+    from dynremove.evaluation.evaluate import format_table
+
+    rep = _whole_report(3)
+    by = {(r["set"], r["method"]): r for r in rep["sets"]}
+    by[("s0", "dynremove")].update(psnr=9.5, psnr_whole=33.7, damage=11.79, leftover=7.6)
+    by[("s1", "dynremove")].update(psnr=None, psnr_whole=None, ssim_whole=None)
+    by[("s2", "dynremove")].update(psnr=15.9, damage=0.19, leftover=14.0)
+    lines = format_table(rep).splitlines()
+    for first in ("set  ", "set "):  # the J table, then the whole-photo table
+        k = lines.index(next(ln for ln in lines if ln.startswith(first)
+                             and ("unrec%" in ln) == (first == "set ")))
+        rows = [ln for ln in lines[k + 2:k + 5]]
+        assert [r.split()[0] for r in rows] == ["s0", "s1", "s2"]
+        ends = [[m.end() for m in re.finditer(r"\S+", r)] for r in rows]
+        assert ends[0] == ends[1] == ends[2], rows
+
+
 def test_progress_line_counts_failed_methods_in_words(capsys):
     from dynremove.evaluation.evaluate import _stderr_progress
 
@@ -265,7 +287,15 @@ def test_composite_batch_refuses_no_sets_and_names_earlier_ones(tmp_path, capsys
     assert main(args + ["--n-sets", "1"]) == 0
     out = capsys.readouterr()
     assert "wrote 1 composite set under" in out.out
+    assert "a+walker  (reference 02_0002.png)" in out.out  # the middle view of 5
     assert "1 other composite set under" in out.err and "old+set" in out.err
+    # the folder of sets without --n-sets: the error says how to use it
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "holds 1 static set of 5 or more images: add --n-sets N" in err
+    # one set, an even number of views: the line names the reference
+    assert main(args[:1] + [str(static / "a")] + args[2:-1] + ["4"]) == 0
+    assert "reference 02_0002.png (view 2 of 0-3)" in capsys.readouterr().out
 
 
 def test_eval_full_size_and_ablation_skips_unknown_fields(data, tmp_path, monkeypatch, capsys):

@@ -354,7 +354,7 @@ def compose(statics: Sequence[np.ndarray], static_names: Sequence[str], object_s
                 images[k], lights[k] = relight(images[k], lrng)
     names = [f"{k:02d}_{n}.png" for k, n in enumerate(static_names)]
     info = {
-        "seed": int(seed), "n_views": V, "ref": names[ref], "size": [Ww, Hh],
+        "seed": int(seed), "n_views": V, "ref": names[ref], "ref_index": ref, "size": [Ww, Hh],
         "static_images": list(static_names), "objects": meta,
         "feather_sigma_px": sigma, "area_range": list(area_range),
         "ref_mask_fraction": float(masks[ref].mean()),
@@ -453,7 +453,8 @@ def make_composite(static_dir: str | os.PathLike, objects_dir: str | os.PathLike
     return comp.info
 
 
-def _static_sets(static_root: Path, n_views: int) -> list[Path]:
+def static_sets(static_root: Path, n_views: int) -> list[Path]:
+    """``static_root`` and its sub-folders that hold at least ``n_views`` images."""
     dirs = [static_root] + sorted(p for p in static_root.iterdir() if p.is_dir())
     return [d for d in dirs if len(image_files(d)) >= n_views]
 
@@ -475,7 +476,7 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
     root = Path(static_root)
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")
-    statics = _static_sets(root, n_views)
+    statics = static_sets(root, n_views)
     if not statics:
         raise InputError(f"{root}: no folder with at least {n_views} images")
     objs = _object_sets(objects_root)
@@ -496,4 +497,4 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
 
 
 __all__ = ["Composite", "compose", "free_map", "write_composite", "make_composite",
-           "make_composites", "relight", "MAX_SIDE", "AREA_RANGE", "FEATHER_PX"]
+           "make_composites", "relight", "static_sets", "MAX_SIDE", "AREA_RANGE", "FEATHER_PX"]
