@@ -40,3 +40,24 @@ def paste_at_same_spot(sc, frm, to):
         img, mask = warp_mover(sc, frm, k)
         out[k][mask] = img[mask]
     return out
+
+
+def with_cast_shadow(sc, linger, *, dx=30, dy=20, factor=0.7):
+    """The reference's mover standing still in the views ``linger``, casting a shadow
+    there and in the reference: its mask shifted by (dx, dy) px darkens the scene by
+    ``factor`` (moved into each view by the homography of the layer it stands on).
+    Returns the images and the shadow's mask in the reference (outside the mover)."""
+    ref = sc.ref_index
+    m = sc.masks[ref]
+    shadow = np.zeros_like(m)
+    shadow[dy:, dx:] = m[:-dy, :-dx]
+    shadow = cv2.erode(shadow.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~m
+    out = paste_at_same_spot(sc, ref, linger)
+    layer = _foot_layer(sc, ref)
+    Hs = sc.layer_homographies
+    for k in [ref, *linger]:
+        h = Hs[k, layer] @ np.linalg.inv(Hs[ref, layer])
+        s = cv2.warpPerspective(shadow.astype(np.uint8) * 255, h, m.shape[::-1]) > 127
+        s &= ~(m if k == ref else warp_mover(sc, ref, k)[1])
+        out[k][s] = (out[k][s] * factor).astype(np.uint8)
+    return out, shadow

@@ -438,6 +438,48 @@ def min_witnesses(n_sources: int) -> int:
     return max(2, -(-int(n_sources) // 3))
 
 
+def darker(lab: npt.NDArray[np.float32], lab_seen: npt.NDArray[np.float32], tau: float
+           ) -> npt.NDArray[np.bool_]:
+    """Where ``lab`` shows ``lab_seen``'s colour in shadow: its L lower by ``tau`` or
+    more, and its a, b within that L difference (CIE76 units; (..., 3) float Lab
+    in, (...) bool out). A shadow or a dark reflection lowers L far more than it
+    moves the hue."""
+    dL = lab_seen[..., 0] - lab[..., 0]
+    dab = np.sqrt(((lab_seen[..., 1:] - lab[..., 1:]) ** 2).sum(-1))
+    return (dL >= tau) & (dab < dL)
+
+
+def smooth_gain(L: npt.NDArray[np.float32], L_seen: npt.NDArray[np.float32],
+                where: npt.NDArray[np.bool_], tau: float, *, sigma_px: float = 3.0
+                ) -> npt.NDArray[np.bool_]:
+    """The pixels of ``where`` at which ``L`` is ``L_seen`` times a smooth gain: the
+    gain g, the ratio (L + 1) / (L_seen + 1) averaged over ``where`` by a normalised
+    Gaussian of σ ``sigma_px``, leaves ``|(L + 1) - g (L_seen + 1)|`` under ``tau / 2``.
+    A shadow darkens the ground and keeps its texture; a dark object over it (a
+    dark coat in a crowd, next to a mover) does not (CIE L in 0-100; (H, W) in and
+    out). Without it, breakdance's moving crowd took 2,600 px of such "shadow"."""
+    ratio = np.where(where, (L + 1.0) / (L_seen + 1.0), 0.0).astype(np.float32)
+    num = cv2.GaussianBlur(ratio, (0, 0), sigma_px)
+    den = cv2.GaussianBlur(where.astype(np.float32), (0, 0), sigma_px)
+    gain = num / np.maximum(den, 1e-6)
+    return where & (np.abs((L + 1.0) - gain * (L_seen + 1.0)) < 0.5 * tau)
+
+
+def attach_shadow(region: npt.NDArray[np.uint8], dark: npt.NDArray[np.bool_]
+                  ) -> npt.NDArray[np.uint8]:
+    """``region`` (H, W) uint8 0/1 with the pixels of ``dark`` (H, W) bool that
+    connect to it (8-connected), each component growing by at most its own area
+    (a shadow is no larger than its mover: a false alarm seeds no large region,
+    as in ``_consensus_growth``). Returns (H, W) uint8 0/1."""
+    both = (region > 0) | dark
+    n, comp = cv2.connectedComponents(both.view(np.uint8), connectivity=8)
+    a_region = np.bincount(comp[region > 0], minlength=n)
+    a_added = np.bincount(comp[dark & (region == 0)], minlength=n)
+    ok = (a_region > 0) & (a_added <= a_region)
+    ok[0] = False
+    return (ok[comp] & both).view(np.uint8) | region
+
+
 def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray,
                         flow_agree: np.ndarray, mask: np.ndarray, ratio: float, *,
                         found=None, min_frac: float = 5e-4, tau: float = 10.0,
@@ -468,8 +510,12 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
        over σ 3 px), the reference shows something foreign to the scene; where
        theirs is the rarer colour, they show their own movers.
     3. **Regions.** Hysteresis (seeds above ``ratio``, grown through witnessed
-       pixels above 1.5), holes filled, components under ``min_frac`` of the
-       image dropped.
+       pixels above 1.5), holes filled; then grown into the witnessed pixels next
+       to them where the reference shows the witnesses' colour darker by a smooth
+       gain (``darker``, ``smooth_gain``: the mover's cast shadow or reflection,
+       which the colour test cannot tell from the scene), by at most their own
+       area (``attach_shadow``); components
+       under ``min_frac`` of the image dropped.
     4. **Surroundings, geometry.** At least two (``min_witnesses``) of a region's
        witnesses must see its surroundings (a ring 3–10 px out) as the reference does on
        ``_RING_OK`` of it: across a wide baseline a whole neighbourhood differs,
@@ -556,6 +602,12 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     seeded[np.unique(comp[hi > 0])] = True
     seeded[0] = False
     grown = fill_holes(seeded[comp].astype(np.uint8))
+    # its cast shadow (or dark reflection): the scene's own colour, darker, so the
+    # colour test leaves it out, and the ring below would then lie on it, where the
+    # witnesses see the ground unshadowed (a lingering mover with a shadow was
+    # rejected whole, or its shadow's darkness blended into the fill: tim6's cup)
+    dark = (cand > 0) & darker(lab_r, wit, tau)
+    grown = attach_shadow(grown, dark & smooth_gain(lab_r[..., 0], wit[..., 0], dark, tau))
     n, comp, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
     keep = stats[:, cv2.CC_STAT_AREA] >= min_frac * H * W
     keep[0] = False
@@ -1242,6 +1294,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
-           "Selection", "complete_regions", "median_parallax_px", "member_median", "min_witnesses",
+           "Selection", "attach_shadow", "complete_regions", "darker", "median_parallax_px",
+           "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
            "mixture_detail", "region_shares", "select_fill"]
