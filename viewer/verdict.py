@@ -271,9 +271,9 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
             if not st["select"]:
                 changes.append("left out by the fill by selection (it kept the reference)")
             elif sel_.get("lingering"):
-                changes.append("added back by the fill by selection: a mover that lingered "
-                               "(--select-minority: the sources that saw the background "
-                               "agree against the reference)")
+                changes.append("added back by the fill by selection: a mover that lingered, "
+                               "or its cast shadow (--select-minority: the sources that saw "
+                               "the background agree against the reference)")
             else:
                 changes.append("added back by the fill by selection: where the sources "
                                "agree with one another and the reference alone differs "
@@ -294,8 +294,9 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
             lines.append("fill: inpainted (OpenCV Telea): no source shows the background "
                          "here" + (f" ({others})" if others else ""))
         elif k > 0:
-            why = (" — a mover that lingered: the reference and most sources show it, "
-                   "the sources that saw the background filled it" if sel.get("lingering")
+            why = (" — a mover that lingered, or its cast shadow: the reference and most "
+                   "sources show it, the sources that saw the background filled it"
+                   if sel.get("lingering")
                    else " — the photomontage kept the reference here, but the rest of its "
                    "region of L was replaced (--select-complete): a piece of the same mover"
                    + (f"; {region}" if (region := region_words(sel)) else "")
