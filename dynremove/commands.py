@@ -32,7 +32,8 @@ from dynremove.batch import at_output_size, load_for_reference, write_outputs
 from dynremove.errors import InputError
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.bench import run_bench
-from dynremove.evaluation.evaluate import format_ablation, format_table, run_ablation, run_eval
+from dynremove.evaluation.evaluate import (METHODS, format_ablation, format_table, image_files,
+                                          run_ablation, run_eval)
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 from dynremove.params import PRESETS, Params, preset
 from dynremove.pipeline import remove_dynamic
@@ -570,6 +571,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.ablation or any(m not in ("median", "median-flow", "telea") for m in methods):
         _note_compile(args)  # (each set's seconds leave the compilation out)
     if args.ablation:
+        if args.methods != ",".join(METHODS):
+            _note(args, "--methods is not used with --ablation: it varies the "
+                        f"{args.preset} preset's method (--variants picks the variants)")
         names = [n.strip() for n in (args.variants or "").split(",") if n.strip()] or None
         report = run_ablation(args.data_dir, base=params, names=names, sets=args.sets,
                               jobs=args.jobs, max_side=args.max_side, ref=args.ref,
@@ -618,19 +622,20 @@ def cmd_composite(args: argparse.Namespace) -> int:
                   f"({', '.join(stale[:3])}{', …' if len(stale) > 3 else ''}): "
                   "'dynremove eval' on the folder scores them too", file=sys.stderr)
     else:
-        try:
-            info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
-                                            seed=args.seed, n_views=args.n_views,
-                                            n_objects=args.objects, light=args.light)
-        except InputError as e:
-            sets = composite.static_sets(Path(args.static_dir), args.n_views) \
-                if Path(args.static_dir).is_dir() else []
-            if not sets:
-                raise
+        root = Path(args.static_dir)
+        if args.n_views >= 2 and root.is_dir() and len(image_files(root)) < 2:
             # a folder of static sets given without --n-sets: say how to use it
-            raise InputError(f"{e}; {args.static_dir} holds {len(sets)} static set"
-                             f"{'s' if len(sets) != 1 else ''} of {args.n_views} or more "
-                             "images: add --n-sets N to make N composites from them") from e
+            sets = [d for d in composite.static_sets(root, args.n_views) if d != root]
+            if sets:
+                raise InputError(
+                    f"{root}: no images of its own, but {len(sets)} static set"
+                    f"{'s' if len(sets) != 1 else ''} of {args.n_views} or more images in "
+                    f"its folders ({', '.join(d.name for d in sets[:3])}"
+                    f"{', ...' if len(sets) > 3 else ''}): add --n-sets N to make N "
+                    "composites from them, or give one of them")
+        info = composite.make_composite(args.static_dir, args.objects_dir, args.out,
+                                        seed=args.seed, n_views=args.n_views,
+                                        n_objects=args.objects, light=args.light)
         print(f"wrote {args.out}: {info['n_views']} views {info['size'][0]}x"
               f"{info['size'][1]}, reference {info['ref']} (view {info['ref_index']} "
               f"of 0-{info['n_views'] - 1}), objects "

@@ -68,6 +68,11 @@ def test_eval_cli_writes_json(data, tmp_path, capsys):
                  "64", "--quiet"]) == 0
     assert "scored at the analysis size (--max-side 64)" in capsys.readouterr().out
     assert main(["eval", str(tmp_path / "nowhere")]) == 2
+    capsys.readouterr()
+    # the progress line names each set's reference (a trial found it only in the JSON)
+    assert main(["eval", str(data), "--sets", "syn1", "--methods", "median"]) == 0
+    ref = json.loads(out.read_text())["set_info"][0]["ref"]
+    assert f", reference {ref}" in capsys.readouterr().err
 
 
 def _whole_report(n_sets: int) -> dict:
@@ -281,7 +286,7 @@ def test_composite_batch_refuses_no_sets_and_names_earlier_ones(tmp_path, capsys
     args = ["composite", str(static), str(tmp_path / "objects"), "--out", str(tmp_path / "c"),
             "--n-views", "5"]
     assert main(args + ["--n-sets", "-3"]) == 2
-    assert "--n-sets must be >= 1, got -3" in capsys.readouterr().err
+    assert "--n-sets must be >= 1 (or left out" in capsys.readouterr().err
     (tmp_path / "c" / "old+set").mkdir(parents=True)
     (tmp_path / "c" / "old+set" / "composite.json").write_text("{}")
     assert main(args + ["--n-sets", "1"]) == 0
@@ -292,7 +297,14 @@ def test_composite_batch_refuses_no_sets_and_names_earlier_ones(tmp_path, capsys
     # the folder of sets without --n-sets: the error says how to use it
     assert main(args) == 2
     err = capsys.readouterr().err
-    assert "holds 1 static set of 5 or more images: add --n-sets N" in err
+    assert "no images of its own, but 1 static set of 5 or more images in its folders (a): " \
+        "add --n-sets N" in err
+    # an error of another kind gets no such hint (a trial saw it on --n-views 1)
+    assert main(args[:-1] + ["1"]) == 2
+    err = capsys.readouterr().err
+    assert "--n-views must be >= 2" in err and "--n-sets" not in err
+    assert main(args[:1] + [str(static / "a")] + args[2:-1] + ["9"]) == 2
+    assert "--n-views 9 needs 9 images;" in capsys.readouterr().err
     # one set, an even number of views: the line names the reference
     assert main(args[:1] + [str(static / "a")] + args[2:-1] + ["4"]) == 0
     assert "reference 02_0002.png (view 2 of 0-3)" in capsys.readouterr().out
@@ -312,6 +324,11 @@ def test_eval_full_size_and_ablation_skips_unknown_fields(data, tmp_path, monkey
     assert rep["set_info"][0]["size"] == [128, 96] and rep["max_side"] == 0
     assert all(0 <= a["mean_jaccard"] <= 1 for a in rep["ablation"])
     assert "no-update" in capsys.readouterr().out
+    # --methods has no say in an ablation: a note says so (a trial ran 18 variants of
+    # the method after asking for the median stack)
+    assert main(["eval", str(data), "--sets", "syn1", "--methods", "median", "--ablation",
+                 "--variants", "no-update"]) == 0
+    assert "--methods is not used with --ablation" in capsys.readouterr().err
 
 
 DATA = Path(os.environ.get("DYNREMOVE_DATA", Path(__file__).resolve().parents[2] / "shared/data"))

@@ -102,7 +102,8 @@ def _read_static(static_dir: str | os.PathLike, n_views: int, max_side: int
 
     paths, _ = io.list_inputs([static_dir])
     if len(paths) < n_views:
-        raise InputError(f"{static_dir}: {len(paths)} images, need --n-views {n_views}")
+        raise InputError(f"--n-views {n_views} needs {n_views} images; {static_dir} has "
+                         f"{len(paths)}")
     start = min(max(0, len(paths) // 2 - n_views // 2), len(paths) - n_views)
     paths = paths[start:start + n_views]
     imgs = [io.read_image(p)[0] for p in paths]
@@ -472,7 +473,8 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
     """
 
     if n_sets < 1:
-        raise InputError(f"--n-sets must be >= 1, got {n_sets}")
+        raise InputError(f"--n-sets must be >= 1 (or left out: one set from STATIC_DIR "
+                         f"itself), got {n_sets}")
     root = Path(static_root)
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")

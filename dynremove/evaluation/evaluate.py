@@ -462,6 +462,7 @@ def _stderr_progress(k: int, n: int, res: dict) -> None:
         return
     unscored = not (info.get("has_mask", True) or info.get("has_background", True))
     print(f"[{k}/{n}] {res['set']}: {res['seconds']:.1f} s"
+          + (f", reference {info['ref']}" if info.get("ref") else "")
           + (f"  (J {', '.join(js)})" if js else "")
           + ("  (no masks/<reference>.png and no background.png: nothing to score, '-' "
              "in the table)" if unscored else "")
