@@ -128,6 +128,13 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.probe and not args.record:
         raise InputError("--probe needs --record FILE.rrd (a probe's decisions are recorded "
                          "there, for the viewer and `dynremove inspect --pixel`)")
+    if not args.record:  # the recording's own flags do nothing without one
+        given = [f for f, v in (("--record-every-rows", args.record_every_rows is not None),
+                                ("--record-detail", args.record_detail != "default"),
+                                ("--sample-static", args.sample_static != 0.002)) if v]
+        if given:
+            raise InputError(f"{', '.join(given)} need{'s' if len(given) == 1 else ''} "
+                             "--record FILE.rrd (they set what the recording holds)")
     if args.compare and not args.record:
         raise InputError("--compare needs --record FILE.rrd (the two runs go into one "
                          "recording)")

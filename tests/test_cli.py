@@ -230,6 +230,12 @@ def test_probe_is_a_photo_pixel_scaled_to_the_analysis_image(tmp_path, capsys, f
     # without a recording a probe does nothing: refused, as --compare is
     rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "40,30", *FAST)
     assert rc == 2 and "--probe needs --record" in err
+    # nor do the recording's other flags (a trial's run took them and said nothing)
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--record-every-rows", "5",
+                         "--record-detail", "full", *FAST)
+    assert rc == 2 and "--record-every-rows, --record-detail need --record" in err
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--sample-static", "0.5", *FAST)
+    assert rc == 2 and "--sample-static needs --record" in err
 
 
 def test_flag_values_out_of_range_are_usage_errors(tmp_path, capsys, folder):
