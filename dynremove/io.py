@@ -314,22 +314,22 @@ def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
             paths.append(p)
         else:
             raise InputError(f"{p}: no such file or folder")
-    seen: dict[Path, Path] = {}
-    unique = []
+    seen: dict[Path, list[Path]] = {}
     for q in paths:
-        key = q.resolve()
-        if key in seen:
-            same = "" if str(q) == str(seen[key]) else f" (as {seen[key]})"
-            notes.append(f"{q} is given twice{same}: used once")
-        else:
-            seen[key] = q
-            unique.append(q)
-    paths = unique
+        seen.setdefault(q.resolve(), []).append(q)
+    for names in seen.values():  # one note per file given more than once
+        if len(names) > 1:
+            times = "twice" if len(names) == 2 else f"{len(names)} times"
+            also = sorted({str(n) for n in names[1:]} - {str(names[0])})
+            notes.append(f"{names[0]} is given {times}"
+                         + (f" (also as {', '.join(also)})" if also else "") + ": used once")
+    paths = [names[0] for names in seen.values()]
     if len(paths) < at_least:
-        # (a folder: the images found in it; files given one by one: those files)
+        # (a folder: the images found in it; files given one by one: those files, once)
         where = " in " if any(Path(a).is_dir() for a in args) else ": "
+        listed = list(dict.fromkeys(str(a) for a in args))
         raise InputError(f"need at least 2 images, found {len(paths)}"
-                         + (f"{where}{', '.join(str(a) for a in args)}" if args else "")
+                         + (f"{where}{', '.join(listed)}" if args else "")
                          + (f" ({'; '.join(notes)})" if notes else "") + _subfolder_hint(args))
     return paths, notes
 

@@ -205,6 +205,12 @@ def test_the_same_file_twice_is_used_once(tmp_path, capsys, folder):
     paths, notes = io.list_inputs([files[0], *files, str(files[1])])
     assert paths == files
     assert len(notes) == 2 and all("given twice" in n and "used once" in n for n in notes)
+    # one file three times: one note that says so, and the error lists it once
+    _, notes = io.list_inputs([files[0], files[1], files[0], files[0]])
+    assert notes == [f"{files[0]} is given 3 times: used once"]
+    with pytest.raises(InputError) as e:
+        io.list_inputs([files[0]] * 3)
+    assert str(e.value).count(str(files[0])) == 2  # the listing and the note
 
 
 def test_per_file_notes_are_grouped(tmp_path, capsys, scene):
