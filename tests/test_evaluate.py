@@ -114,6 +114,20 @@ def test_a_set_that_cannot_be_read_does_not_lose_the_others(data, tmp_path, caps
     assert "mean J (1 set) " in cap.out
 
 
+def test_a_set_with_nothing_to_score_is_not_run(data, tmp_path, capsys):
+    """No true mask and no background: the methods are not run (a trial's eval of the
+    bursts spent 17 s on a set it then left blank), and the line says so."""
+    import shutil
+
+    shutil.copytree(data / "syn1" / "frames", tmp_path / "d" / "syn1" / "frames")
+    out = tmp_path / "e.json"
+    assert main(["eval", str(tmp_path / "d"), "--methods", "dynremove,median", "--json",
+                 str(out)]) == 0
+    assert "nothing to score, not run" in capsys.readouterr().err
+    rows = json.loads(out.read_text())["sets"]
+    assert len(rows) == 2 and all(r["seconds"] is None and r["jaccard"] is None for r in rows)
+
+
 def test_whole_photo_table_labels_the_mean_unrecoverable_and_counts_sets():
     from dynremove.evaluation.evaluate import format_table
 

@@ -395,6 +395,12 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
                 "info": {"set": es.name, "error": msg, "notes": [msg]},
                 "seconds": time.perf_counter() - t_set}
     rows, notes = [], list(ls.notes)
+    if ls.gt is None and ls.background is None:
+        # nothing to score against: the methods are not run (a trial's eval of the
+        # bursts spent 17 s on a set it then left blank)
+        rows = [{"set": es.name, "method": m, **dict.fromkeys(SCORE_KEYS), "seconds": None}
+                for m, _ in variants]
+        variants = []
     # the kernels compiled or loaded outside the methods' seconds (the first set of
     # a fresh install reported 68 s against 9.5 s on a rerun)
     for _, pd in variants:
@@ -464,8 +470,8 @@ def _stderr_progress(k: int, n: int, res: dict) -> None:
     print(f"[{k}/{n}] {res['set']}: {res['seconds']:.1f} s"
           + (f", reference {info['ref']}" if info.get("ref") else "")
           + (f"  (J {', '.join(js)})" if js else "")
-          + ("  (no masks/<reference>.png and no background.png: nothing to score, '-' "
-             "in the table)" if unscored else "")
+          + ("  (no masks/<reference>.png and no background.png: nothing to score, not "
+             "run; '-' in the table)" if unscored else "")
           + (f"  {_count(err, 'method')} failed" if err else ""), file=sys.stderr,
           flush=True)
 
