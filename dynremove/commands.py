@@ -93,9 +93,41 @@ def params_from_args(args: argparse.Namespace) -> Params:
     base = preset(args.preset)
     changes = {k[2:]: v for k, v in vars(args).items() if k.startswith("p_") and v is not None}
     try:
-        return dataclasses.replace(base, **changes) if changes else base
+        params = dataclasses.replace(base, **changes) if changes else base
     except (TypeError, ValueError) as e:  # Params.__post_init__ validates the values
         raise InputError(flag_message(str(e))) from None
+    unused = unused_fields(changes, params)
+    if unused:  # accepted (and in report.json), but say they change nothing
+        _note(args, f"{', '.join(_flag(f) for f in unused)}: no effect with these "
+                    f"settings ({unused_reason(params, unused[0])})")
+    return params
+
+
+def unused_fields(changes: dict, params: Params) -> list[str]:
+    """The fields of ``changes`` whose stage ``params`` does not run: the fill's
+    (``fuse``, ``fill``, ``select_*``) without ``fuse``, ``select_*`` with another
+    ``fill``, ``snap_*`` without ``snap``, the clean-up's without ``clean_mask``."""
+    def off(f: str) -> bool:
+        if f.startswith("select_"):
+            return not params.fuse or params.fill != "select"
+        if f == "fill" or f.startswith("fuse_"):
+            return not params.fuse
+        if f.startswith("snap_"):
+            return not params.snap
+        if f in ("min_region_px", "clean_majority"):
+            return not params.clean_mask
+        return False
+    return [f for f in changes if off(f)]
+
+
+def unused_reason(params: Params, field: str) -> str:
+    """Why ``field`` has no effect under ``params`` (see ``unused_fields``)."""
+    if field.startswith(("select_", "fuse_")) or field == "fill":
+        return ("the fill stage is off: --no-fuse, as in the paper preset" if not params.fuse
+                else f"--fill {params.fill} does not select")
+    if field.startswith("snap_"):
+        return "--no-snap"
+    return "--no-clean-mask"
 
 
 _PARAM_FIELDS = frozenset(f.name for f in dataclasses.fields(Params))

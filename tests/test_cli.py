@@ -200,6 +200,20 @@ def test_folder_order_counts_numbers_by_value(tmp_path, scene):
     assert [p.name for p in paths] == ["f8.png", "F9.png", "f10.png", "f11.png"]
 
 
+def test_flags_of_a_stage_that_does_not_run_are_told(tmp_path, capsys, folder):
+    """A trial ran ``--preset paper --fill median --select-tau 5``: accepted, written
+    to report.json, and no word that the paper preset has no fill stage."""
+    out = str(tmp_path / "o")
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--preset", "paper", "--fill",
+                         "median", "--select-tau", "5", *FAST)
+    assert rc == 0
+    assert ("note: --fill, --select-tau: no effect with these settings (the fill stage "
+            "is off: --no-fuse, as in the paper preset)") in err
+    rc, _, err = run_cli(capsys, folder, "--out", out, "--no-snap", "--snap-iters", "2",
+                         "--select-tau", "5", *FAST)
+    assert rc == 0 and "note: --snap-iters: no effect with these settings (--no-snap)" in err
+
+
 def test_the_same_file_twice_is_used_once(tmp_path, capsys, folder):
     files = sorted(folder.iterdir())
     paths, notes = io.list_inputs([files[0], *files, str(files[1])])
