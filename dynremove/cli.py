@@ -23,7 +23,7 @@ from typing import Any, Callable, Sequence
 
 import cv2
 
-from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, Terminated, clear_stop,
+from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, SAMPLE_STATIC, Terminated, clear_stop,
                                 request_stop, cmd_batch, cmd_bench,
                                 cmd_composite, cmd_demo, cmd_eval, cmd_export, cmd_inspect,
                                 cmd_run, cmd_view, interruption)
@@ -280,8 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--probe", type=parse_xy, action="append", metavar="X,Y",
                    help="record every decision at this pixel of the photo (repeatable; "
                         "scaled to the analysis image when the photos are downscaled)")
-    r.add_argument("--sample-static", type=parse_fraction, default=0.002, metavar="F",
-                   help="fraction of static decisions recorded (default 0.002)")
+    r.add_argument("--sample-static", type=parse_fraction, default=SAMPLE_STATIC, metavar="F",
+                   help=f"fraction of static decisions recorded (default {SAMPLE_STATIC})")
     r.add_argument("--gt", default=None, metavar="MASK",
                    help="true mask of the reference (0/255, white = moving) at the "
                         "photo's full size: the result is scored against it (Jaccard, "
@@ -341,7 +341,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "decision (see run --record-detail)")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
     add_param_flags(d, listed=False)
-    d.set_defaults(fn=cmd_demo, probe=None, sample_static=0.002, compare=None)
+    d.set_defaults(fn=cmd_demo, probe=None, sample_static=SAMPLE_STATIC, compare=None)
 
     b = sub.add_parser(
         "bench", help="stage timings, throughput and peak memory",

@@ -130,6 +130,8 @@ def unused_reason(params: Params, field: str) -> str:
     return "--no-clean-mask"
 
 
+SAMPLE_STATIC = 0.002  # run --sample-static's default: the share of static decisions recorded
+
 _PARAM_FIELDS = frozenset(f.name for f in dataclasses.fields(Params))
 
 
@@ -163,7 +165,8 @@ def cmd_run(args: argparse.Namespace) -> int:
     if not args.record:  # the recording's own flags do nothing without one
         given = [f for f, v in (("--record-every-rows", args.record_every_rows is not None),
                                 ("--record-detail", args.record_detail != "default"),
-                                ("--sample-static", args.sample_static != 0.002)) if v]
+                                ("--sample-static", args.sample_static != SAMPLE_STATIC)
+                                ) if v]
         if given:
             raise InputError(f"{', '.join(given)} need{'s' if len(given) == 1 else ''} "
                              "--record FILE.rrd (they set what the recording holds)")

@@ -334,14 +334,7 @@ def _consensus_growth(lab_r, sources, base, mask, valid, P, model):
         hit[ys + y0, xs + x0] |= unmatched
         alone[ys + y0, xs + x0] = unmatched & ~agreed
     hit = cv2.morphologyEx(hit, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
-    n, lab = cv2.connectedComponents((hit | mask).astype(np.uint8), connectivity=8)
-    # a component grows by at most its own detected area (a shadow is no larger
-    # than its mover; a small false alarm must not seed a large region)
-    a_mask = np.bincount(lab[mask], minlength=n)
-    a_hit = np.bincount(lab[(hit > 0) & ~mask], minlength=n)
-    ok = (a_mask > 0) & (a_hit <= a_mask)
-    ok[0] = False
-    grown = ok[lab] & (hit > 0)
+    grown = capped_growth(mask, hit > 0)
     return grown, grown & alone
 
 
@@ -465,19 +458,26 @@ def smooth_gain(L: npt.NDArray[np.float32], L_seen: npt.NDArray[np.float32],
     return where & (np.abs((L + 1.0) - gain * (L_seen + 1.0)) < 0.5 * tau)
 
 
+def capped_growth(core: npt.NDArray[np.bool_], add: npt.NDArray[np.bool_]
+                  ) -> npt.NDArray[np.bool_]:
+    """The pixels of ``add`` outside ``core`` (both (H, W) bool) that connect to it
+    (8-connected through ``core | add``), each component of ``core`` growing by at
+    most its own area: a shadow is no larger than its mover, and a small false
+    alarm must not seed a large region. (H, W) bool."""
+    n, comp = cv2.connectedComponents((core | add).view(np.uint8), connectivity=8)
+    added = add & ~core
+    a_core = np.bincount(comp[core], minlength=n)
+    a_added = np.bincount(comp[added], minlength=n)
+    ok = (a_core > 0) & (a_added <= a_core)
+    ok[0] = False
+    return ok[comp] & added
+
+
 def attach_shadow(region: npt.NDArray[np.uint8], dark: npt.NDArray[np.bool_]
                   ) -> npt.NDArray[np.uint8]:
     """``region`` (H, W) uint8 0/1 with the pixels of ``dark`` (H, W) bool that
-    connect to it (8-connected), each component growing by at most its own area
-    (a shadow is no larger than its mover: a false alarm seeds no large region,
-    as in ``_consensus_growth``). Returns (H, W) uint8 0/1."""
-    both = (region > 0) | dark
-    n, comp = cv2.connectedComponents(both.view(np.uint8), connectivity=8)
-    a_region = np.bincount(comp[region > 0], minlength=n)
-    a_added = np.bincount(comp[dark & (region == 0)], minlength=n)
-    ok = (a_region > 0) & (a_added <= a_region)
-    ok[0] = False
-    return (ok[comp] & both).view(np.uint8) | region
+    connect to it (``capped_growth``). Returns (H, W) uint8 0/1."""
+    return region | capped_growth(region > 0, dark).view(np.uint8)
 
 
 def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray,
@@ -1294,7 +1294,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
-           "Selection", "attach_shadow", "complete_regions", "darker", "median_parallax_px",
-           "member_median", "min_witnesses", "smooth_gain",
+           "Selection", "attach_shadow", "capped_growth", "complete_regions", "darker",
+           "median_parallax_px", "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
            "mixture_detail", "region_shares", "select_fill"]
