@@ -40,3 +40,18 @@ def test_one_thread_when_opencv_has_one():
     finally:
         cv2.setNumThreads(before)
     assert names == [threading.main_thread().name] * 3
+
+
+def test_after_an_error_the_sources_not_yet_started_do_not_run():
+    import time
+    ran = []
+
+    def fn(k):
+        ran.append(k)
+        if k == 0:
+            raise ValueError("source 0 failed")
+        time.sleep(0.2)
+        return k
+    with pytest.raises(ValueError, match="source 0 failed"):
+        for_each_source(fn, 8)
+    assert len(ran) < 8, ran  # 2 workers: source 0 fails at once, the rest are cancelled
