@@ -28,6 +28,7 @@ from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, SAMPLE_STATIC, Termin
                                 cmd_composite, cmd_demo, cmd_eval, cmd_export, cmd_inspect,
                                 cmd_run, cmd_view, interruption)
 from dynremove.errors import InputError
+from dynremove.evaluation.composite import MAX_SIDE as COMPOSITE_MAX_SIDE
 from dynremove.evaluation.evaluate import ABLATIONS, METHODS
 from dynremove.params import DEFAULT, FIELD_CHOICES, PAPER, PRESETS, Params, field_docs
 
@@ -222,11 +223,44 @@ class _Parser(argparse.ArgumentParser):
         _Parser.parsing = [str(a) for a in (sys.argv[1:] if args is None else args)]
         # an unknown flag is the sub-command's error, so the hint names its help
         ns, extra = self.parse_known_args(args, namespace)
+        subs = getattr(self, "subcommands", {})
+        sub = subs.get(getattr(ns, "cmd", None), self)
         if extra:
-            subs = getattr(self, "subcommands", {})
-            subs.get(getattr(ns, "cmd", None), self).error(
-                "unrecognized arguments: " + " ".join(extra))
+            sub.error("unrecognized arguments: " + " ".join(extra))
+        twice = _given_twice(sub, _Parser.parsing)
+        if twice:
+            sub.error(twice)
         return ns
+
+
+def _given_twice(parser: argparse.ArgumentParser, argv: Sequence[str]) -> str | None:
+    """The first flag of ``parser`` that takes one value and was given two different
+    ones (``--ref 3 --ref 2``, ``--snap --no-snap``), as an error message; None if
+    none was. argparse keeps the last silently, and a user who wrote both meant one
+    of them. The same value twice is not an error."""
+    single = {o: a for a in parser._actions  # noqa: SLF001 - no public list of them
+              if isinstance(a, (argparse._StoreAction, argparse.BooleanOptionalAction))
+              and a.nargs in (None, 0) for o in a.option_strings}
+    seen: dict[str, tuple[str, str]] = {}  # dest -> (as written, value)
+    i = 0
+    while i < len(argv) and argv[i] != "--":
+        flag, eq, value = argv[i].partition("=")
+        a = single.get(flag) if flag.startswith("-") else None
+        i += 1
+        if a is None:
+            continue
+        written = argv[i - 1]
+        if isinstance(a, argparse.BooleanOptionalAction):
+            value = flag.startswith("--no-")
+        elif not eq and i < len(argv):
+            value, written = argv[i], f"{flag} {argv[i]}"
+            i += 1
+        if a.dest in seen and seen[a.dest][1] != value:
+            what = ("one of them" if isinstance(a, argparse.BooleanOptionalAction)
+                    else f"{a.option_strings[-1]} once")
+            return f"{seen[a.dest][0]} and {written} both given: give {what}"
+        seen.setdefault(a.dest, (written, value))
+    return None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -414,7 +448,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "and paste them, moving, into consecutive views of a static set. "
                     "Writes DIR/frames/, DIR/masks/ (0/255), DIR/background.png, "
                     "DIR/free.png (0/255: reference pixels some other view shows free of "
-                    "the objects) and DIR/composite.json: the layout 'dynremove eval' reads.")
+                    "the objects) and DIR/composite.json: the layout 'dynremove eval' reads. "
+                    f"Static views are resized so that their longer side is at most "
+                    f"{COMPOSITE_MAX_SIDE} px (the DAVIS frames' size).")
     c.add_argument("static_dir", metavar="STATIC_DIR",
                    help="folder of static images (with --n-sets: a folder of such folders)")
     c.add_argument("objects_dir", metavar="OBJECTS_DIR",

@@ -13,9 +13,11 @@ import dataclasses
 import gc
 import json
 import re
+import shutil
 import signal
 import sys
 import os
+import textwrap
 import time
 import traceback
 import warnings
@@ -812,15 +814,39 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             # (3 px: the full-size refinement adds specks that far out: a trial's
             # speck 3 analysis px from the border had no note)
             if L is not None and L[max(y - 3, 0):y + 4, max(x - 3, 0):x + 4].any():
-                print("NOTE: within 3 analysis pixels of the final mask's border. The verdict "
-                      "below is the analysis image's; at full size the mask is refined on the "
-                      "photo's edges and the fill reaches about one analysis pixel beyond it, "
-                      "so this photo pixel may be in dynamic_mask.png and changed in clean.png "
-                      "(it is there if it changed by ΔE 10 or more)")
-        print(vd.format_pixel_history(hist))
+                print(for_terminal(
+                    "NOTE: within 3 analysis pixels of the final mask's border. The verdict "
+                    "below is the analysis image's; at full size the mask is refined on the "
+                    "photo's edges and the fill reaches about one analysis pixel beyond it, "
+                    "so this photo pixel may be in dynamic_mask.png and changed in clean.png "
+                    "(it is there if it changed by ΔE 10 or more)"))
+        print(for_terminal(vd.format_pixel_history(hist)))
     if args.failures:
-        print(vd.format_failures(ins.failures(path, top=args.top, root=args.root)))
+        print(for_terminal(vd.format_failures(ins.failures(path, top=args.top,
+                                                            root=args.root))))
     return EXIT_OK
+
+
+def for_terminal(text: str, width: int | None = None) -> str:
+    """``text`` with its long lines wrapped at word boundaries to ``width`` columns (the
+    terminal's, at most 100), each continuation indented two spaces past the line's
+    own indent, when standard output is a terminal (``width`` None); as it is when
+    piped, so that ``grep`` sees whole lines. ``inspect``'s reasons run to 500
+    characters, which a terminal breaks mid-word."""
+    if width is None:
+        if not sys.stdout.isatty():
+            return text
+        width = min(shutil.get_terminal_size((100, 24)).columns, 100)
+    out = []
+    for line in text.split("\n"):
+        indent = line[:len(line) - len(line.lstrip())]
+        if len(line) <= width or len(indent) > width // 2:
+            out.append(line)
+            continue
+        out.append(textwrap.fill(line.strip(), width, initial_indent=indent,
+                                 subsequent_indent=indent + "  ", break_long_words=False,
+                                 break_on_hyphens=False))
+    return "\n".join(out)
 
 
 def cmd_export(args: argparse.Namespace) -> int:

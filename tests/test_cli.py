@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from dynremove import commands, io
-from dynremove.cli import main
+from dynremove.cli import build_parser, main
 from dynremove.errors import InputError
 from dynremove.progress import stage_labels
 from dynremove.evaluation import synth
@@ -84,7 +84,6 @@ def test_method_flags_are_listed_by_run_only(capsys, cmd):
     """The commands that pass the method's flags through take every one of them, and
     their help points at 'run --help' instead of listing sixty flags under their own
     options (a fresh-user trial lost bench's and eval's options that way)."""
-    from dynremove.cli import build_parser
     text = help_of(capsys, cmd)
     assert "--select-tau" in text and "'dynremove run --help' lists them" in text, text
     assert "--select-tau FLOAT" not in text and "--patch-size INT" not in text
@@ -377,6 +376,24 @@ def test_an_empty_ref_is_an_error_not_the_default(capsys, folder):
     with pytest.raises(SystemExit) as e:
         main(["run", str(folder), "--ref", ""])
     assert e.value.code == 2 and "--ref '': give an index" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args,line", [
+    (["--ref", "3", "--ref", "2"], "--ref 3 and --ref 2 both given: give --ref once"),
+    (["--patch-size=9", "--patch-size", "11"],
+     "--patch-size=9 and --patch-size 11 both given: give --patch-size once"),
+    (["--snap", "--no-snap"], "--snap and --no-snap both given: give one of them"),
+])
+def test_a_flag_given_twice_with_two_values_is_an_error(capsys, folder, args, line):
+    """argparse keeps the last value silently; a user who wrote two meant one of them."""
+    with pytest.raises(SystemExit) as e:
+        main(["run", str(folder), *args])
+    assert e.value.code == 2 and line in capsys.readouterr().err
+
+
+def test_a_flag_given_twice_with_one_value_is_accepted():
+    ns = build_parser().parse_args(["run", "a.jpg", "b.jpg", "--ref", "1", "--ref=1"])
+    assert ns.ref == "1"
 
 
 def test_two_videos_are_named_as_videos(tmp_path, folder):

@@ -627,3 +627,18 @@ def test_a_pixel_the_fill_put_back_says_so():
     h["stages"] = {"scan": True, "clean": True, "votes": True, "snap": True, "select": True}
     line = next(ln for ln in vd.verdict_lines(h) if ln.startswith("after the scans"))
     assert "fill by selection" not in line, line  # unchanged by the fill: not named
+
+
+def test_long_lines_are_wrapped_for_a_terminal_and_whole_when_piped(monkeypatch):
+    """inspect's reasons run to 500 characters: on a terminal they wrap at words, each
+    continuation indented under its line; piped (grep), the lines stay whole."""
+    line = "  source 3: " + "agrees with the fill's colour consensus " * 8
+    text = "pixel (5, 7): static\n" + line + "\nend"
+    wrapped = commands.for_terminal(text, 60).split("\n")
+    assert wrapped[0] == "pixel (5, 7): static" and wrapped[-1] == "end"
+    body = wrapped[1:-1]
+    assert len(body) > 4 and all(len(w) <= 60 for w in body)
+    assert body[0].startswith("  source 3: ") and all(w.startswith("    ") for w in body[1:])
+    assert " ".join(w.strip() for w in body) == line.strip()  # no word cut, none lost
+    monkeypatch.setattr("sys.stdout.isatty", lambda: False)
+    assert commands.for_terminal(text) == text

@@ -165,8 +165,8 @@ REASONS = {0: "not considered", 1: "chosen",
            2: "combined (agrees with the chosen one: averaged with it)",
            3: "its own mover", 4: "outside its frame or no content",
            5: "disagrees with the fill's colour consensus",
-           6: "agrees with the fill's colour consensus, not averaged in (not close to the "
-              "chosen one)",
+           6: "agrees with the fill's colour consensus, but not with the source chosen "
+              "here, so not averaged with it",
            7: "still shows the mover that lingered here",
            8: "shows the reference's mover, moved here (the flow followed it)"}
 OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
