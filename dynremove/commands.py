@@ -418,7 +418,10 @@ def read_gt(path: str, iset: io.ImageSet, ref: int) -> tuple[np.ndarray, str | N
     the same way, with a note. Any other size is an InputError: scoring it
     would compare different framings.
     """
-    m = io.read_mask(path)
+    try:
+        m = io.read_mask(path)
+    except InputError as e:
+        raise InputError(f"--gt {e}") from None
     W0, H0 = iset.original_size
     h, w = m.shape
     raw = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)

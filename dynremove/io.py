@@ -542,7 +542,11 @@ def _read_with_pillow(path: Path, head: bytes) -> np.ndarray:
                 arr = cv2.cvtColor(np.asarray(im.convert("RGB")), cv2.COLOR_RGB2BGR)
     except InputError:
         raise
-    except Exception:  # noqa: BLE001 - any decoder failure is "not readable"
+    except Exception as e:  # noqa: BLE001 - any decoder failure is "not readable"
+        if isinstance(e, OSError) and "truncated" in str(e):
+            # (OpenCV returns nothing for a JPEG cut short, and says nothing)
+            raise InputError(f"{path}: the file is cut short, not a whole image (Pillow: "
+                             f"{e}): copy or export it again") from None
         raise InputError(f"{path}: not a readable image (corrupt or unsupported format)"
                          ) from None
     return np.ascontiguousarray(arr)
@@ -760,6 +764,10 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
 def read_mask(path: str | os.PathLike, size: tuple[int, int] | None = None) -> np.ndarray:
     """Read a 0/255 mask as (H, W) bool, resized (nearest) to ``size`` = (W, H)."""
     p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: no such file")
+    if p.is_dir():
+        raise InputError(f"{p}: is a folder, not a mask image")
     m = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
     if m is None:
         raise InputError(f"{p}: not a readable mask image")

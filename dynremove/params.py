@@ -30,6 +30,12 @@ WRITE_MODES = ("patch", "pixel")
 FILL_MODES = ("select", "median")
 
 
+def _one_of(choices) -> str:
+    """('a', 'b', 'c') -> "a, b or c" (the choices of a flag, in an error)."""
+    c = [str(x) for x in choices]
+    return c[0] if len(c) == 1 else ", ".join(c[:-1]) + " or " + c[-1]
+
+
 @dataclass(frozen=True, kw_only=True, slots=True)
 class Params:
     """Parameters of the method (paper Sec. 3). Make variants with ``replace``.
@@ -143,18 +149,19 @@ class Params:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.correspondence not in CORRESPONDENCE_METHODS:
             raise ValueError(
-                f"correspondence must be one of {CORRESPONDENCE_METHODS}, "
+                f"correspondence must be {_one_of(CORRESPONDENCE_METHODS)}, "
                 f"got {self.correspondence!r}")
         if self.write not in WRITE_MODES:
-            raise ValueError(f"write must be one of {WRITE_MODES}, got {self.write!r}")
+            raise ValueError(f"write must be {_one_of(WRITE_MODES)}, got {self.write!r}")
         if self.flow_preset not in ("fast", "medium", "ultrafast"):
-            raise ValueError(f"flow_preset must be fast/medium/ultrafast, got {self.flow_preset!r}")
+            raise ValueError(f"flow_preset must be {_one_of(('fast', 'medium', 'ultrafast'))}, "
+                             f"got {self.flow_preset!r}")
         if not 0.0 <= self.exposure_match < 1.0:
             raise ValueError(f"exposure_match must be in [0, 1), got {self.exposure_match}")
         if not 0.0 <= self.near_copy_agree <= 1.0:
             raise ValueError(f"near_copy_agree must be in [0, 1], got {self.near_copy_agree}")
         if self.fill not in FILL_MODES:
-            raise ValueError(f"fill must be one of {FILL_MODES}, got {self.fill!r}")
+            raise ValueError(f"fill must be {_one_of(FILL_MODES)}, got {self.fill!r}")
         for name in ("select_tau", "select_beta"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")

@@ -539,16 +539,24 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    np.isin(selection.reasons[k][lg], (OUTSIDE, STILL_LINGERING),
                            invert=True).mean() >= 0.5]
             wit = sorted(set(wit) | set(used))
+            # the sources that still show it over most of it (each part of a large
+            # region may have other witnesses: "most photos" was wrong when 5 of 6
+            # sources witnessed one part or another, a fresh-user trial on DAVIS dog)
+            still = [k for k in range(len(srcs)) if k not in wit and selection.reasons
+                     is not None and (selection.reasons[k][lg] == STILL_LINGERING).mean() >= 0.5]
+            shown = (f"the reference and {_names([names[srcs[k]] for k in still])} show it in "
+                     "place" if still else "the reference and other photos show it in place "
+                     "(each part in other ones)")
             said = (f"{_names([names[srcs[k]] for k in wit])} saw the background there "
                     + ("and filled it" if used == wit else
                        f"and it was filled from {_names([names[srcs[k]] for k in used])}"))
             msgs.append(
-                f"{n_lg} px show a mover that most photos show in place; {said}"
+                f"{n_lg} px show a mover that lingered: {shown}; {said}"
                 + (f" (the keypoint matches depart {selection.parallax_px:.0f} px from one "
                    "plane between the photos, the movers' own matches included: as 3-D "
                    "parallax, an edge the mover hides may come out misplaced)"
                    if selection.consensus_mode == "parallax" else "")
-                + "; --select-minority 0 keeps the majority's view")
+                + "; --select-minority 0 turns this step off")
             warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and selection.consensus_mode == "scan" and dyn.any():
         note = _knee_note(views, params.select_parallax_px)

@@ -482,7 +482,8 @@ def test_ref_of_every_set_refuses_a_path(tmp_path, capsys, folder, cmd):
     ("--select-tau", "-1", "dynremove: error: --select-tau -1.0: must be > 0"),
     ("--patch-size", "4", "dynremove: error: --patch-size 4: must be odd and >= 3"),
     ("--dbscan-min-pts", "0", "dynremove: error: --dbscan-min-pts 0: must be >= 1"),
-    ("--correspondence", "magic", "dynremove: error: --correspondence magic: must be one of"),
+    ("--correspondence", "magic", "dynremove: error: --correspondence magic: must be "
+                                  "homography+flow, homography, flow or gated"),
     ("--refine-tau", "-1", "dynremove: error: --refine-tau must be >= 0 and "
                            "--refine-shrink-frac in (0, 1]"),
 ])
@@ -497,8 +498,8 @@ def test_parameter_error_messages_use_flags_for_every_field():
     from dynremove.commands import flag_message
 
     assert flag_message("t_r must be in [0, 1], got 5.0") == "--t-r 5.0: must be in [0, 1]"
-    assert (flag_message("fill must be one of ('select', 'median'), got 'x'")
-            == "--fill x: must be one of ('select', 'median')")
+    assert (flag_message("fill must be select or median, got 'x'")
+            == "--fill x: must be select or median")
     for f in dataclasses.fields(Params):
         msg = flag_message(f"{f.name} must be > 0, got -1")
         assert msg == f"--{f.name.replace('_', '-')} -1: must be > 0", msg

@@ -454,17 +454,21 @@ def test_lingering_mover_seen_free_in_two_sources_is_removed():
     sc = synth.make_scene(seed=0, n_views=6, size=(360, 640), n_objects=1)
     ref = sc.ref_index
     gt = sc.masks[ref]
-    ims = paste_at_same_spot(sc, ref, [k for k in range(6) if k not in (ref, 0, 1)])
+    copies = [k for k in range(6) if k not in (ref, 0, 1)]
+    ims = paste_at_same_spot(sc, ref, copies)
     plain = _jaccard(remove_dynamic(sc.images, ref=ref).dynamic, gt)
     r = remove_dynamic(ims, ref=ref)
     assert _jaccard(r.dynamic, gt) >= plain - 0.1
     # the clean photo shows the background over most of the mover
     assert (_de(r.clean, sc.background)[gt] <= 10).mean() >= 0.75
-    # the note names the two photos that saw the background, and no other
-    note = [w for w in r.warnings if "show in place" in w]
+    # the note names the two photos that saw the background, and no other, and the
+    # three that show the mover in place
+    note = [w for w in r.warnings if "show it in place" in w]
     assert len(note) == 1, r.warnings
     named = note[0].split("; ")[1].split(" saw the background")[0]
     assert named == "image0 and image1", note
+    shown = note[0].split("lingered: ")[1].split("; ")[0]
+    assert all(f"image{k}" in shown for k in copies) and "image0" not in shown, note
     # planted: without the step the lingering mover stays (the failure it guards)
     off = remove_dynamic(ims, ref=ref, params=preset("default").replace(select_minority=0.0))
     assert _jaccard(off.dynamic, gt) < 0.2
@@ -581,7 +585,8 @@ def test_lingering_mover_is_reported_and_logged():
         warnings.simplefilter("always")
         remove_dynamic(sc.images, ref=ref)
     assert not [w for w in plain if "most photos show" in str(w.message)]
-    ims = paste_at_same_spot(sc, ref, [k for k in range(6) if k not in (ref, 0, 1)])
+    copies = [k for k in range(6) if k not in (ref, 0, 1)]
+    ims = paste_at_same_spot(sc, ref, copies)
     with pytest.warns(UserWarning, match="most photos show"):
         r = remove_dynamic(ims, ref=ref)
     gt = sc.masks[ref]
@@ -606,7 +611,8 @@ def test_lingering_mover_is_found_when_the_scans_flag_nothing():
     sc = synth.make_scene(seed=0, n_views=6, size=(240, 432), n_objects=1)
     ref = sc.ref_index
     gt = sc.masks[ref]
-    ims = paste_at_same_spot(sc, ref, [k for k in range(6) if k not in (ref, 0, 1)])
+    copies = [k for k in range(6) if k not in (ref, 0, 1)]
+    ims = paste_at_same_spot(sc, ref, copies)
     P = preset("default")
     st, views = prepare(ims, ref, P)
     empty = np.zeros(gt.shape, bool)
