@@ -290,8 +290,9 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
     """Every set below ``root`` (itself included), sorted by name; see the module doc.
 
     ``notes`` (a list) receives a line for what a user may expect to be run and is
-    not: the subfolders of a folder that is itself a set (never searched), and a
-    folder with a single photo (no set)."""
+    not: the subfolders of a folder that is itself a set (never searched), a
+    folder with a single photo (no set), and the files of a set's folder that are
+    not images."""
     notes = [] if notes is None else notes
     root = Path(root)
     if not root.is_dir():
@@ -319,6 +320,12 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
             entries = []
         if len(imgs) >= 2:
             found.append(BatchSet(name_of(d), tuple(imgs)))
+            kept = {q.name for q in imgs}
+            other = [q.name for q in entries if q.is_file() and q.name not in kept
+                     and not io.is_video_file(q)]
+            if other:  # (as ``run`` on the folder says)
+                notes.append(f"{name_of(d)}: skipped {len(other)} non-image file(s): "
+                             + io.listing(other))
             subs = [q.name for q in entries if q.is_dir() and q.name.lower() not in SKIP_DIRS
                     and q.resolve() not in skip]
             if subs:

@@ -297,6 +297,13 @@ def test_what_the_search_does_not_run_is_said(tmp_path, capsys):
     assert "dynremove: note: lonely: one photo only (view0.png): not a set" in err
     assert o.startswith("1 set: 1 done")
     assert json.loads((out / "summary.json").read_text())["notes"] == notes
+    # files of a set's folder that are not images: said, as ``run`` on the folder says
+    (r2 / "trip" / "notes.txt").write_text("x")
+    (r2 / "trip" / "Thumbs.db").write_bytes(b"\0")
+    notes = []
+    assert [len(x.inputs) for x in batch.find_sets(r2, notes=notes)] == [3]
+    assert notes == ["lonely: one photo only (view0.png): not a set",
+                     "trip: skipped 2 non-image file(s): Thumbs.db, notes.txt"]
 
 
 def test_a_set_that_fails_after_an_earlier_run_says_its_outputs_are_old(tmp_path, capsys):
