@@ -140,6 +140,9 @@ def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
         raise InputError(f"reference index {ref} out of range 0..{len(images) - 1}")
 
 
+# a reference this dark against the other photos' median level (×) gets a note
+DARK_REFERENCE = 0.5
+
 def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
             timings: dict[str, float] | None = None,
             progress: Progress | None = None) -> tuple[ScanInputs, list[geometry.TwoView]]:
@@ -434,6 +437,16 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                     "its levels before comparing: " + ", ".join(level(k) for k in scaled)
                     + " (--exposure-match 0 turns this off)")
         warnings.warn(msgs[-1], stacklevel=2)
+        m_all = [float(np.exp(np.log(g).mean())) for g in gains]
+        if m_all and np.median(m_all) <= DARK_REFERENCE:
+            # the others' colours squeezed into the reference's few levels: its
+            # differences shrink as much, and the thresholds (ΔE, t_r) see less (a
+            # fresh-user trial's reference at ×0.25 kept its bottle)
+            msgs.append(f"the reference is much darker than the other photos (their levels "
+                        f"×{np.median(m_all):.2f} to match it): what moved differs less in "
+                        "its few levels, so less of it may be found; a brighter photo as "
+                        "--ref may do better")
+            warnings.warn(msgs[-1], stacklevel=2)
     probe = np.zeros((H, W), np.bool_)
     for (x, y) in probes:
         probe[y, x] = True

@@ -72,6 +72,7 @@ def test_a_darker_reference_is_found_and_filled_as_at_its_own_exposure():
         r = remove_dynamic(dark, ref=ref)
     gt = sc.masks[ref]
     assert jaccard(r.dynamic, gt) >= jaccard(plain.dynamic, gt) - 0.05
+    assert not any("much darker" in w for w in r.warnings)  # 65 %: no such note
     off = remove_dynamic(dark, ref=ref, params={"exposure_match": 0.0})
     assert off.dynamic.mean() > 2 * r.dynamic.mean()  # what it fixes
     # the fill is at the reference's level: inside the true mask the clean photo
@@ -79,6 +80,20 @@ def test_a_darker_reference_is_found_and_filled_as_at_its_own_exposure():
     bg = sc.background.astype(np.float64) * 0.65
     inside = gt & r.dynamic
     assert np.median(np.abs(r.clean[inside].astype(float) - bg[inside])) <= 6
+
+
+def test_a_reference_much_darker_than_the_others_gets_a_note():
+    """At 30 % of the others' brightness the reference's few levels hide what moved
+    (a fresh-user trial's reference at 25 % kept its bottle): the run says so and
+    points to a brighter photo as --ref."""
+    sc = synth.make_scene(seed=1, n_views=4, size=(120, 216))
+    ref = sc.ref_index
+    dark = [im.copy() for im in sc.images]
+    dark[ref] = (dark[ref].astype(np.float64) * 0.3).round().astype(np.uint8)
+    r = remove_dynamic(dark, ref=ref)
+    note = [w for w in r.warnings if "much darker" in w]
+    assert len(note) == 1 and "--ref" in note[0], r.warnings
+    assert "×0.3" in note[0], note
 
 
 def test_a_colour_cast_is_named_as_one():
