@@ -142,6 +142,13 @@ def _not_reached(h: dict[str, Any]) -> str:
                 "was none of them")
     if cut:
         return f"no scan reached it: the run was {cut['message']}"
+    if h.get("final_dynamic") is None:
+        # a file cut short (a copy interrupted, a disk full): read up to its last
+        # complete message, which may lie inside a scan (a fresh-user trial's
+        # head -c copy said "no scan reached it" above a history of patches there)
+        return ("no decision about it is recorded: the recording ends before the run "
+                "finished (cut short), and of an unfinished scan only the dynamic, "
+                "probed and sampled decisions are kept; this pixel was none of them")
     return "no scan of this recording reached it"
 
 
