@@ -607,6 +607,27 @@ def test_a_reference_kept_against_a_cheaper_source_is_told_as_the_seams_doing():
     assert "it was the cheapest label here" in vd.static_test_line(h)
 
 
+def test_a_pixel_the_fill_added_names_the_rule_that_did():
+    """A fresh-user trial read three rules offered for one pixel ("--select-grow-px,
+    --select-complete, or at the frame's edge"). The region rule is named from the
+    recorded ``completed`` map; the edge only within a patch of the frame's edge."""
+    def line_for(x, y, completed):
+        h = {"final_dynamic": True, "source_names": ["a.png", "b.png"], "replacements": [],
+             "gt": None, "x": x, "y": y, "t_r": 0.3, "decisions": [], "size": (100, 200),
+             "patch_size": 13,
+             "stages": {"scan": False, "clean": False, "votes": False, "snap": False,
+                        "select": True},
+             "selection": {"source": 1, "inpainted": 0, "completed": completed}}
+        return next(ln for ln in vd.verdict_lines(h) if ln.startswith("after the scans"))
+    inner = line_for(100, 50, 0)
+    assert "--select-grow-px" in inner and "--select-complete" not in inner, inner
+    assert "frame's edge" not in inner, inner
+    region = line_for(100, 50, 1)
+    assert "--select-complete" in region and "--select-grow-px" not in region, region
+    edge = line_for(3, 50, 0)
+    assert "frame's edge" in edge and "--select-grow-px" in edge, edge
+
+
 def test_a_pixel_the_fill_put_back_says_so():
     """A fresh-user trial read "dropped by GrabCut (snap to edges); in the final mask:
     yes" as a contradiction: the fill by selection had put the pixel back. The line

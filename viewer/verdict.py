@@ -128,6 +128,26 @@ def candidate_counts(d: dict[str, Any]) -> str:
     return head + ": " + ", ".join(parts)
 
 
+def _added_by(h: dict[str, Any]) -> str:
+    """Which rule of the fill by selection added a pixel to L, as far as the recording
+    tells: ``completed`` == 1 is the region rule; a pixel within a patch of the frame's
+    edge may be the edge rule (``select.to_the_border``); elsewhere the consensus
+    growth (a fresh-user trial read all three rules offered for one pixel)."""
+    if (h.get("selection") or {}).get("completed") == 1:
+        return ("its region of L was replaced almost whole, so the graph cut's choice to "
+                "keep it was overruled (--select-complete)")
+    growth = ("the sources, near a mover, agree with one another and the reference alone "
+              "differs, or none agrees with the reference and it shows the movers' colours "
+              "(--select-grow-px)")
+    H, W = h.get("size", (0, 0))
+    p = int(h.get("patch_size") or 0)
+    x, y = h.get("x", -1), h.get("y", -1)
+    if H and W and p and min(x, y, W - 1 - x, H - 1 - y) < p:
+        return (f"at the frame's edge, where the scans' p×p patches stop short (L taken "
+                f"to the edge), or where {growth}")
+    return "where " + growth
+
+
 def _not_reached(h: dict[str, Any]) -> str:
     """The first line for a pixel no recorded scan says anything about."""
     cut = h.get("interrupted")
@@ -282,10 +302,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                                "or its cast shadow (--select-minority: the sources that saw "
                                "the background agree against the reference)")
             else:
-                changes.append("added back by the fill by selection: where the sources "
-                               "agree with one another and the reference alone differs "
-                               "(--select-grow-px), where its region of L was replaced "
-                               "almost whole (--select-complete), or at the frame's edge")
+                changes.append("added back by the fill by selection: " + _added_by(h))
         if changes:
             lines.append("after the scans: " + "; ".join(changes) +
                          f"; in the final mask: {'yes' if st[names[-1]] else 'no'}")
