@@ -143,6 +143,7 @@ def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
 # a reference this dark against the other photos' median level (×) gets a note
 DARK_REFERENCE = 0.5
 
+
 def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
             timings: dict[str, float] | None = None,
             progress: Progress | None = None) -> tuple[ScanInputs, list[geometry.TwoView]]:
