@@ -507,6 +507,27 @@ def test_a_recording_cut_anywhere_is_read_without_an_internal_error(tmp_path, ca
     assert answered > 0  # some cuts hold the scans' events
 
 
+def test_a_recording_cut_anywhere_exports_what_it_holds_or_says_it_is_cut(tmp_path, capsys):
+    """export of a file cut short: the GIF of the snapshots it holds, or, where the cut
+    lies before any, that the recording is cut short (a trial read "no reference
+    snapshots recorded" of a copy stopped midway)."""
+    full = tmp_path / "full.rrd"
+    fabricate_run([RerunSink(full, record_every_rows=8)], H=H, W=W, S=S, n_scans=2)
+    data = full.read_bytes()
+    exported = 0
+    for frac in np.linspace(0.1, 0.9, 9):
+        cut = tmp_path / f"cut{frac:.2f}.rrd"
+        cut.write_bytes(data[:int(frac * len(data))])
+        rc = main(["export", str(cut), "--gif", str(tmp_path / "o.gif")])
+        err = capsys.readouterr().err
+        assert rc in (0, 2) and "internal error" not in err, (frac, err)
+        assert "no reference snapshots recorded" not in err, (frac, err)
+        if rc == 2 and "snapshots" in err:
+            assert "cut short" in err, (frac, err)
+        exported += rc == 0
+    assert exported > 0
+
+
 def test_a_kept_pixel_next_to_L_says_the_full_size_fill_may_reach_it(downscaled, capsys):
     """A trial asked about a photo pixel the full-size fill had changed (one analysis
     pixel beyond L) and read "kept". Such pixels now get a line saying so; a kept

@@ -39,6 +39,12 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
     inp = vi._blob_rows(store, p(P.REFERENCE_INPUT), index=None)
     images = snaps["image"]
     if not images:
+        if vi.read_final_dynamic(path_rrd, root=root) is None:
+            # a file cut short: Rerun writes a scan's snapshots in chunks, which may all
+            # lie beyond the cut (a fresh-user trial's head -c copy)
+            raise InputError(f"{path_rrd}: no reference snapshots in what could be read: "
+                             "the recording ends before the run finished (cut short); "
+                             "'dynremove inspect' still reads the decisions it holds")
         raise InputError(f"{path_rrd}: no reference snapshots recorded")
     ref_in = vi.decode(inp[0][1]) if inp else vi.decode(images[0][1])
     H, W = ref_in.shape[:2] if not (H and W) else (H, W)
