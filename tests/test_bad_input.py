@@ -273,7 +273,8 @@ def test_unreadable_file_in_the_set(tmp_path, capsys, scene, kind):
                      "text-as-jpeg": b"<html>not found</html>"}[kind])
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, *paths, bad, "--out", out)
-    problem = "empty file" if kind == "zero-byte" else "not a readable image"
+    problem = {"zero-byte": "empty file", "truncated": "cut short"}.get(kind,
+                                                                      "not a readable image")
     assert_input_error(rc, err, str(bad), problem, out=out)
     with pytest.raises(InputError, match=problem):
         io.read_image(bad)

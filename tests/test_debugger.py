@@ -213,7 +213,7 @@ def test_a_lingering_mover_is_logged_and_told(tmp_path):
     ref = sc.ref_index
     ims = paste_at_same_spot(sc, ref, [k for k in range(6) if k not in (ref, 0, 1)])
     path = tmp_path / "linger.rrd"
-    with pytest.warns(UserWarning, match="most photos show"):
+    with pytest.warns(UserWarning, match="a mover that lingered"):
         remove_dynamic(ims, ref=ref, sink=RerunSink(path, gt_mask=sc.masks[ref]))
     sel = vi.read_selection(path)
     assert sel["lingering"].astype(bool).sum() >= 0.4 * sc.masks[ref].sum()  # (as in test_select)

@@ -722,6 +722,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
                       case=int(u["case"]), new_x=int(u["new_x"]), new_y=int(u["new_y"]),
                       new_C=float(u["new_C"])) for u in upd[(upd["x"] == x) & (upd["y"] == y)]],
         final_dynamic=bool(L[y, x]) if L is not None and inside else None,
+        # the recording holds no final L: it ends before the run finished
+        ended_early=L is None,
         stages=stages, clean_rule=clean_rule,
         clean_params={k: params.get(k) for k in ("patch_size", "min_region_px")},
         gt=bool(gt[y, x]) if gt is not None and inside else None,

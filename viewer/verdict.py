@@ -162,7 +162,7 @@ def _not_reached(h: dict[str, Any]) -> str:
                 "was none of them")
     if cut:
         return f"no scan reached it: the run was {cut['message']}"
-    if h.get("final_dynamic") is None:
+    if h.get("ended_early"):
         # a file cut short (a copy interrupted, a disk full): read up to its last
         # complete message, which may lie inside a scan (a fresh-user trial's
         # head -c copy said "no scan reached it" above a history of patches there)
