@@ -484,18 +484,25 @@ def test_recording_of_an_older_sink_cut_after_the_scans(tmp_path):
     assert vi._where_cut(store, "", 1, 1, H, W)["message"] == "interrupted after the scans"
 
 
+def _cut_copies(tmp_path, fractions):
+    """(fraction, path) of copies of a fabricated 2-scan recording cut at each
+    fraction of its bytes (a full disk, a copy stopped midway)."""
+    full = tmp_path / "full.rrd"
+    fabricate_run([RerunSink(full, record_every_rows=8)], H=H, W=W, S=S, n_scans=2)
+    data = full.read_bytes()
+    for frac in fractions:
+        cut = tmp_path / f"cut{frac:.2f}.rrd"
+        cut.write_bytes(data[:int(frac * len(data))])
+        yield frac, cut
+
+
 def test_a_recording_cut_anywhere_is_read_without_an_internal_error(tmp_path, capsys):
     """A file cut short at any byte (a full disk, a copy stopped midway): inspect reads
     the complete messages and answers, or says there is nothing to inspect (trial:
     a cut before the run info's K broke the decisions' reshape with an internal
     error). Where t_r is not recorded yet, the verdict does not compare with NaN."""
-    full = tmp_path / "full.rrd"
-    fabricate_run([RerunSink(full, record_every_rows=8)], H=H, W=W, S=S, n_scans=2)
-    data = full.read_bytes()
     answered = 0
-    for frac in np.linspace(0.05, 0.95, 19):
-        cut = tmp_path / f"cut{frac:.2f}.rrd"
-        cut.write_bytes(data[:int(frac * len(data))])
+    for frac, cut in _cut_copies(tmp_path, np.linspace(0.05, 0.95, 19)):
         rc, out, err = _inspect(capsys, cut, "--pixel", "10,10")
         assert rc in (0, 2), (frac, rc, err)
         assert not any("internal error" in e for e in err), (frac, err)
@@ -511,13 +518,8 @@ def test_a_recording_cut_anywhere_exports_what_it_holds_or_says_it_is_cut(tmp_pa
     """export of a file cut short: the GIF of the snapshots it holds, or, where the cut
     lies before any, that the recording is cut short (a trial read "no reference
     snapshots recorded" of a copy stopped midway)."""
-    full = tmp_path / "full.rrd"
-    fabricate_run([RerunSink(full, record_every_rows=8)], H=H, W=W, S=S, n_scans=2)
-    data = full.read_bytes()
     exported = 0
-    for frac in np.linspace(0.1, 0.9, 9):
-        cut = tmp_path / f"cut{frac:.2f}.rrd"
-        cut.write_bytes(data[:int(frac * len(data))])
+    for frac, cut in _cut_copies(tmp_path, np.linspace(0.1, 0.9, 9)):
         rc = main(["export", str(cut), "--gif", str(tmp_path / "o.gif")])
         err = capsys.readouterr().err
         assert rc in (0, 2) and "internal error" not in err, (frac, err)
