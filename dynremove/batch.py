@@ -324,8 +324,7 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
             other = [q.name for q in entries if q.is_file() and q.name not in kept
                      and not io.is_video_file(q)]
             if other:  # (as ``run`` on the folder says)
-                notes.append(f"{name_of(d)}: skipped {len(other)} non-image file(s): "
-                             + io.listing(other))
+                notes.append(io.skipped_note(name_of(d), other))
             subs = [q.name for q in entries if q.is_dir() and q.name.lower() not in SKIP_DIRS
                     and q.resolve() not in skip]
             if subs:

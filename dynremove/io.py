@@ -130,9 +130,13 @@ def is_image_file(path: Path) -> bool:
         return False
 
 
-def listing(names: list[str], n: int = 5) -> str:
-    """The first ``n`` names, comma-separated, and "…" when there are more (notes)."""
+def _listing(names: list[str], n: int = 5) -> str:
     return ", ".join(names[:n]) + (" …" if len(names) > n else "")
+
+
+def skipped_note(where: str | os.PathLike, names: list[str]) -> str:
+    """The note on the files of a folder that are not images (``run`` and ``batch``)."""
+    return f"{where}: skipped {len(names)} non-image file(s): " + _listing(names)
 
 
 # what ``dynremove run`` writes beside its report.json (``batch.write_outputs``)
@@ -237,9 +241,9 @@ def _subfolder_hint(args: Sequence[str | os.PathLike]) -> str:
                     if (n := _n_images(r)) >= 2]
             if sets:
                 return (f"; it holds sets of images one level down, such as "
-                        f"{listing(sets, 3)}: give one of them, or run them all with "
+                        f"{_listing(sets, 3)}: give one of them, or run them all with "
                         f"'dynremove batch {a} --out DIR'")
-    return f"; give a folder of images, such as {listing(found, 3)}" if found else ""
+    return f"; give a folder of images, such as {_listing(found, 3)}" if found else ""
 
 
 def _photo_subfolders(folder: Path) -> list[Path]:
@@ -298,10 +302,9 @@ def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
                 else:
                     skipped.append(q.name)
             if skipped:
-                notes.append(f"{p}: skipped {len(skipped)} non-image file(s): "
-                             + listing(skipped))
+                notes.append(skipped_note(p, skipped))
             if videos:
-                notes.append(f"{p}: skipped {len(videos)} video(s): {listing(videos)} "
+                notes.append(f"{p}: skipped {len(videos)} video(s): {_listing(videos)} "
                              "(give a video alone to take frames from it)")
             if not imgs and len(args) > 1:
                 raise InputError(f"{p}: is a folder with no images in it "

@@ -422,10 +422,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     gains = ([exposure.mean_gain(st.curves[k], images[srcs[k]]) for k in range(len(srcs))]
              if st.curves is not None else [np.ones(3)] * len(srcs))
     scaled = [] if st.curves is None else list(np.flatnonzero(exposure.changed(st.curves)))
+    # each source's overall factor: the geometric mean of its B, G, R gains
+    factors = [float(np.exp(np.log(g).mean())) for g in gains]
     if scaled:
         def level(k):
             g = gains[k]
-            m = float(np.exp(np.log(g).mean()))
+            m = factors[k]
             bgr = "B/G/R ×" + "/".join(f"{v:.2f}" for v in g)
             if np.abs(np.log(g) - np.log(m)).max() > abs(np.log(m)):
                 # the channels part more than the whole moves: a colour cast (a
@@ -438,13 +440,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                     "its levels before comparing: " + ", ".join(level(k) for k in scaled)
                     + " (--exposure-match 0 turns this off)")
         warnings.warn(msgs[-1], stacklevel=2)
-        m_all = [float(np.exp(np.log(g).mean())) for g in gains]
-        if m_all and np.median(m_all) <= DARK_REFERENCE:
+        if factors and np.median(factors) <= DARK_REFERENCE:
             # the others' colours squeezed into the reference's few levels: its
             # differences shrink as much, and the thresholds (ΔE, t_r) see less (a
             # fresh-user trial's reference at ×0.25 kept its bottle)
             msgs.append(f"the reference is much darker than the other photos (their levels "
-                        f"×{np.median(m_all):.2f} to match it): what moved differs less in "
+                        f"×{np.median(factors):.2f} to match it): what moved differs less in "
                         "its few levels, so less of it may be found; a brighter photo as "
                         "--ref may do better")
             warnings.warn(msgs[-1], stacklevel=2)

@@ -312,7 +312,7 @@ def _print_table(out: dict) -> None:
               f"run each), .rrd {out['rrd_mb']:.1f} MiB")
     if "kernel_vs_reference" in out:
         k = out["kernel_vs_reference"]
-        cw, ch = k.get("crop_size", (k["crop_px"], 1))
+        cw, ch = k["crop_size"]
         print(f"one scan of a {cw}x{ch} crop ({k['crop_px']} px): numba "
               f"{k['numba_s'] * 1e3:.1f} ms, "
               f"reference {k['reference_s']:.2f} s -> {k['speedup']:.0f}x")
