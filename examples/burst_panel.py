@@ -3,10 +3,12 @@
 Usage::
 
     python examples/burst_panel.py [DATA_DIR] [--out examples/bursts_panel.png]
+    python examples/burst_panel.py --views 1,3,4 --out examples/bursts_three_panel.jpg
 
 DATA_DIR defaults to ``$DYNREMOVE_DATA`` or ``../shared/data``; the bursts are the
-``bursts/<set>/frames`` folders below it (reference: the middle frame). Each row is
-one burst, scaled to 360 px high.
+``bursts/<set>/frames`` folders below it (reference: the middle frame of those
+used). ``--views`` keeps only those frames of each burst (0-based, in name order):
+three photos, the sparse hand-held case. Each row is one burst, scaled to 360 px high.
 """
 
 from __future__ import annotations
@@ -38,7 +40,14 @@ def main(argv: list[str] | None = None) -> int:
                     default=os.environ.get("DYNREMOVE_DATA", "../shared/data"))
     ap.add_argument("--out", default="examples/bursts_panel.png")
     ap.add_argument("--height", type=int, default=360, help="row height (px)")
+    ap.add_argument("--views", default=None,
+                    help="only these frames of each burst, 0-based, e.g. 1,3,4 (default: all)")
     args = ap.parse_args(argv)
+    try:
+        keep = None if args.views is None else [int(v) for v in args.views.split(",")]
+    except ValueError:
+        print(f"--views {args.views!r}: give frame numbers, e.g. 1,3,4", file=sys.stderr)
+        return 2
     root = Path(args.data) / "bursts"
     sets = sorted(p.parent for p in root.glob("*/frames"))
     if not sets:
@@ -47,14 +56,21 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for s in sets:
         iset = io.load_image_set([s / "frames"])
-        ref = len(iset.images) // 2
+        images, names = iset.images, iset.names
+        if keep is not None:
+            if max(keep) >= len(images) or min(keep) < 0:
+                print(f"{s.name}: --views {args.views} outside 0..{len(images) - 1}",
+                      file=sys.stderr)
+                return 2
+            images, names = [images[k] for k in keep], [names[k] for k in keep]
+        ref = len(images) // 2
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            res = remove_dynamic(iset.images, ref=ref, names=iset.names)
-            med, _ = median_baseline(iset.images, ref, align="homography")
+            res = remove_dynamic(images, ref=ref, names=names)
+            med, _ = median_baseline(images, ref, align="homography")
         h = args.height
         tiles = []
-        for img, text in ((iset.images[ref], f"{s.name}: reference {iset.names[ref]}"),
+        for img, text in ((images[ref], f"{s.name}: reference {names[ref]}"),
                           (res.clean, "dynremove (default)"), (med, "median stack")):
             w = round(img.shape[1] * h / img.shape[0])
             tiles.append(_label(cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA), text))

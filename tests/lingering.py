@@ -33,11 +33,18 @@ def warp_mover(sc, frm, to):
     return cv2.warpPerspective(sc.images[frm], h_ft, size), mask
 
 
-def paste_at_same_spot(sc, frm, to):
-    """The scene's images with view ``frm``'s mover standing still in the views ``to``."""
+def paste_at_same_spot(sc, frm, to, *, dx=0):
+    """The scene's images with view ``frm``'s mover standing still in the views ``to``
+    (or, with ``dx``, moved by that many pixels to the right there: one that barely
+    moved)."""
     out = [im.copy() for im in sc.images]
+    shift = np.float32([[1, 0, dx], [0, 1, 0]])
     for k in to:
         img, mask = warp_mover(sc, frm, k)
+        if dx:
+            size = mask.shape[::-1]
+            img = cv2.warpAffine(img, shift, size)
+            mask = cv2.warpAffine(mask.astype(np.uint8), shift, size) > 0
         out[k][mask] = img[mask]
     return out
 

@@ -26,6 +26,9 @@ that the scan flagged with doubled content.
    sources, agreeing, show the scene's common colours behind it, L takes the
    region; there the sources that still show it never fill, and the witnesses'
    consensus decides even where the set has much parallax.
+   With three photos (``select_minority_one``), one source that saw the
+   scene where the other still shows the reference's content completes a
+   mover that the scans found in part: L takes the rest of it.
 2. **Background candidates.** Every source is sampled through its field,
    re-interpolated across the rest of L (``fields.background_field``); where
    the set has parallax, found instead by a plane + parallax sweep for the
@@ -99,6 +102,10 @@ _EXPLAIN_CAP = 3
 # 10.1 / 11.6 % (19.1 without), J unchanged.
 _FOLLOWED_SHARE = 0.3
 _RING_OK = 0.6  # share of a lingering region's surroundings a witness sees as the reference
+# With two sources, one witness (``select_minority_one``): a lingering region must be
+# at least this share of the image and lie in L on at least this share of its area
+_ONE_WITNESS_FRAC = 0.002
+_ONE_WITNESS_IN_L = 0.2
 
 
 @dataclass
@@ -482,8 +489,9 @@ def attach_shadow(region: npt.NDArray[np.uint8], dark: npt.NDArray[np.bool_]
 
 def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray,
                         flow_agree: np.ndarray, mask: np.ndarray, ratio: float, *,
-                        found=None, min_frac: float = 5e-4, tau: float = 10.0,
-                        bins: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                        found=None, one_witness: bool = False, min_frac: float = 5e-4,
+                        tau: float = 10.0, bins: int = 12
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A mover that lingered in most photos, seen free in a minority of the sources.
 
     The scans' majority rule calls such an object static: the reference and the
@@ -520,6 +528,18 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
        witnesses must see its surroundings (a ring 3–10 px out) as the reference does on
        ``_RING_OK`` of it: across a wide baseline a whole neighbourhood differs,
        and such sources witness nothing about what the reference hides.
+    5. **Three photos** (``one_witness``, for two sources; not in the paper). Two
+       witnesses cannot be had, and a cup moved by a few centimetres between
+       two of the three shots is then seen free in one source only: the scans
+       flag the part of it that both sources see past and leave the rest
+       (``bursts/tim6`` as three photos: a half-removed, translucent cup).
+       One witness counts where the other source still shows the reference's
+       content (near it in colour, or its flow found it), a region must be
+       ``_ONE_WITNESS_FRAC`` of the image and lie in L on ``_ONE_WITNESS_IN_L``
+       of its area (the scans found part of the mover: a single witness is
+       weak evidence, and across a wide baseline a misaligned view "witnesses"
+       static 3-D structure), and the caller takes only its part outside L
+       (inside L the fill decides as before).
 
     Parameters
     ----------
@@ -535,6 +555,8 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
         The current dynamic map (excluded from the colour model and the rings).
     ratio : float
         ``Params.select_minority`` (>= 1).
+    one_witness : bool
+        Step 5: one witness suffices (the caller sets it for two sources).
 
     Returns
     -------
@@ -549,7 +571,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
         surroundings): the only ones that may fill it.
     """
     S, H, W = geo_ok.shape
-    n_wit = min_witnesses(S)
+    n_wit = 1 if one_witness else min_witnesses(S)
     out = np.zeros((H, W), bool)
     none = (out, out, np.zeros((S, H, W), bool))
     if S < 2:
@@ -559,8 +581,12 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
 
     raw = np.zeros((H, W), bool)
 
+    # one witness only where a source still shows the reference's content: the
+    # split of a mover that lingered in one of two sources (step 5)
+    split = (near | flow_agree).any(0) if one_witness else True
+
     def witnessed():
-        ys, xs = np.nonzero(dis.sum(0) >= 2)
+        ys, xs = np.nonzero((dis.sum(0) >= n_wit) & split)
         d = dis[:, ys, xs]  # (S, n)
         v = lab_w[:, ys, xs]  # (S, n, 3)
         agree = (pairwise_delta_e(v) < tau) & d[:, None] & d[None]
@@ -609,7 +635,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     dark = (cand > 0) & darker(lab_r, wit, tau)
     grown = attach_shadow(grown, dark & smooth_gain(lab_r[..., 0], wit[..., 0], dark, tau))
     n, comp, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
-    keep = stats[:, cv2.CC_STAT_AREA] >= min_frac * H * W
+    keep = stats[:, cv2.CC_STAT_AREA] >= (_ONE_WITNESS_FRAC if one_witness else min_frac) * H * W
     keep[0] = False
     # the witnesses must see the region's surroundings as the reference does:
     # where their whole neighbourhood differs (another side of a wide baseline),
@@ -629,6 +655,8 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
         ring_ok = agree_r[:, ya:yb, xa:xb][:, ring].mean(1)
         good = is_wit & (ring_ok >= _RING_OK)
         keep[c] = good.sum() >= n_wit
+        if one_witness and keep[c]:
+            keep[c] = mask[ya:yb, xa:xb][R].mean() >= _ONE_WITNESS_IN_L
         if keep[c]:
             wit_map[:, ya:yb, xa:xb] |= good[:, None, None] & R[None]
     region = keep[comp]
@@ -1008,9 +1036,22 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # inside what the scans (or the growth) found, only the pixels that the
         # witnesses themselves dispute change treatment; outside it, what is added
         # is at least 5 px wide (a rim along a mover's outline is not a mover)
+        disc5 = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))
         added = cv2.morphologyEx((region_m & ~mask).astype(np.uint8), cv2.MORPH_OPEN,
-                                 cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))) > 0
+                                 disc5) > 0
         minority = added | (region_m & mask & witnessed)
+        if P.select_minority_one and S == 2:
+            # three photos: the rest of a mover the scans found in part, seen free
+            # in one source only; what the scans missed, and nothing inside L (there
+            # a single witness overruled the other source's static evidence: on the
+            # 3-view composites, a misaligned view against 3-D structure)
+            region_1, _, wit_1 = _minority_witnesses(
+                lab_r, lab_ws, geo_ok, flow_agree, mask, P.select_minority,
+                found=found if mode == "parallax" else None, one_witness=True, tau=tau)
+            added_1 = cv2.morphologyEx((region_1 & ~mask & ~minority).astype(np.uint8),
+                                       cv2.MORPH_OPEN, disc5) > 0
+            minority |= added_1
+            wit_map |= wit_1 & added_1[None]
         del lab_ws, geo_ok, flow_agree
         mask = mask | minority
         region = dilate_disc(mask, P.select_margin_px)
