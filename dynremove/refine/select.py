@@ -52,6 +52,9 @@ that the scan flagged with doubled content.
    the sources agree. Where the sets' parallax is large (median
    ``parallax_px`` > ``select_parallax_px``), the consensus may also keep the
    reference inside L: the scan's flags there are mostly 3-D structure.
+   With two or three photos no majority can be counted: the colour model
+   decides whether the reference keeps its pixel (with three, it does where
+   both sources' candidates have the movers' colours and it has not).
    A region of L that the cut replaced almost whole (``select_complete``) is
    a mover: its fragments kept as the reference are replaced too, so that no
    piece of it stays in the photo; one it kept almost whole is static: its
@@ -1185,6 +1188,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         if S == 1:  # two photos: which one shows the mover is not known; the colour
             # model must say the reference does and the source does not
             ref_cost = np.where((p_mover[0] > 0.5) & (p_mover[1] < 0.5), ref_cost, 0.0)
+        elif S == 2:  # three photos: both sources may show a mover there (the same
+            # walker, photographed before and after): where both candidates have the
+            # movers' colours and the reference has not, the reference stays
+            both = ((p_mover[1:] > 0.5) | ~usable[1:]).all(0) & usable[1:].any(0)
+            ref_cost = np.where(both & (p_mover[0] < 0.5), 0.0, ref_cost)
         D[0] = np.where(suspect, ref_cost, D[0])
         cons = np.where(suspect[..., None], cons_s, cons)
     D[1:] += P.select_kappa + P.select_gamma * p_mover[1:]
@@ -1201,7 +1209,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # none may, the pixel is still replaced, and inpainted (``no_src`` below)
     D[1:][own & ((D[1:] < _FORBIDDEN) & ~own).any(0)[None]] = _FORBIDDEN
     # and there the reference shows a mover that the flow followed into the sources
-    D[0] = np.where(own.any(0) & in_core, np.maximum(D[0], 2 * _DE_CAP), D[0])
+    # (with three photos, only where its colour is the movers': a source's copy of
+    # the mover, moved, is followed onto the scene beside the reference's mover)
+    followed_here = own.any(0) & in_core
+    if S == 2:
+        followed_here &= p_mover[0] >= 0.5
+    D[0] = np.where(followed_here, np.maximum(D[0], 2 * _DE_CAP), D[0])
     D[0, ~reg] = 0.0
 
     # what the cut weighs (for the debugger)
