@@ -571,7 +571,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "plane between the photos, the movers' own matches included: as 3-D "
                    "parallax, an edge the mover hides may come out misplaced)"
                    if selection.consensus_mode == "parallax" else "")
-                + "; --select-minority 0 turns this step off")
+                + ("; --no-select-minority-one turns off its three-photo rule (one photo "
+                   "that saw the background is enough), --select-minority 0 the whole step"
+                   if len(srcs) == 2 and params.select_minority_one else
+                   "; --select-minority 0 turns this step off"))
             warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and selection.consensus_mode == "scan" and dyn.any():
         note = _knee_note(views, params.select_parallax_px)

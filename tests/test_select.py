@@ -491,6 +491,9 @@ def test_three_photos_a_mover_that_barely_moved_in_one_is_removed_whole():
     off = remove_dynamic(ims, ref=ref,
                          params=preset("default").replace(select_minority_one=False))
     assert (_de(off.clean, sc.background)[gt] <= 10).mean() <= shown - 0.2
+    # the note says which photo saw the scene, and how to turn the rule off
+    note = [w for w in r.warnings if "a mover that lingered" in w]
+    assert len(note) == 1 and "--no-select-minority-one" in note[0], r.warnings
     # and nothing else: no damage where the reference showed the background
     right = _de(sc.images[ref], sc.background) <= 10
     assert ((_de(r.clean, sc.background) > 10) & right & ~dilate_disc(gt, 5)).mean() <= 0.005
