@@ -401,10 +401,16 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                             "analysed, where the photos were larger than that"))
         few = _seen_by_fewer_than_two(views, H, W) if len(views) >= 2 else 0.0
         if few >= 0.25:
-            msgs.append(f"{100 * few:.0f} % of the reference is seen by fewer than two other "
-                        "photos (the camera moved far between them): there the run cannot "
-                        "tell which photo shows a mover and keeps the reference; photos that "
-                        "overlap more, or more photos, cover it")
+            # (with three photos, "fewer than two other photos" read as "not both";
+            # and the run does not keep the reference there: one photo alone is
+            # compared with it, a fresh-user trial found a parkour runner half removed)
+            seen_by = ("only one of the two other photos, or neither" if len(views) == 2
+                       else "fewer than two other photos")
+            msgs.append(f"{100 * few:.0f} % of the reference is seen by {seen_by} (the "
+                        "camera moved far between them): there one photo alone, or none, is "
+                        "compared with it, so a mover may stay, whole or in part, and a "
+                        "static part may be refilled; photos that overlap more, or more "
+                        "photos, cover it")
         if len(srcs) == 1:
             msgs.append("only 2 photos: where they disagree, either may show the mover; the "
                         "reference is kept there unless the colours of the detected region "
