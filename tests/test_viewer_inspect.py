@@ -357,8 +357,9 @@ def test_noise_candidates_are_not_counted_in_the_cluster():
     assert "dropped by the L clean-up (its opening, a disc of 3 px radius: --patch-size " \
            "13 // 4" in text, text
     small = dict(dropped, clean_rule="small")
-    assert "(its region was under --min-region-px 64 px after the opening)" in \
-        vd.format_pixel_history(small)
+    assert ("(its region was under --min-region-px 64 px after the opening; a smaller "
+            "--min-region-px keeps such regions)") in vd.format_pixel_history(small)
+    assert "--no-clean-mask keeps the scans' map as it is" in vd.format_pixel_history(dropped)
     readded = dict(dropped, stages={"scan": True, "clean": False, "votes": False,
                                     "snap": True})
     text = vd.format_pixel_history(readded)

@@ -220,9 +220,11 @@ def clean_rule_words(h: dict[str, Any]) -> str:
                 f"{p} // 4, erased it: the scans' map around it is a mesh or a strip "
                 "thinner than the disc; where the set is flat, a majority filter keeps "
                 "such a mesh that hangs on a solid part, not where it is 3-D: there it "
-                "kept static 3-D structure)")
+                "kept static 3-D structure; --no-clean-mask keeps the scans' map as it is, "
+                "over the whole photo)")
     if h.get("clean_rule") == "small" and n:
-        return f" (its region was under --min-region-px {n} px after the opening)"
+        return (f" (its region was under --min-region-px {n} px after the opening; a "
+                "smaller --min-region-px keeps such regions)")
     return ""
 
 

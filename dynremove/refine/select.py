@@ -173,7 +173,9 @@ class Selection:
 
 REASONS = {0: "not considered", 1: "chosen",
            2: "combined (agrees with the chosen one: averaged with it)",
-           3: "its own mover", 4: "outside its frame or no content",
+           3: "its own mover, by colour (its sample has the colours of the movers found "
+              "in the reference, and differs from the fill's colour consensus)",
+           4: "outside its frame or no content",
            5: "disagrees with the fill's colour consensus",
            6: "agrees with the fill's colour consensus, but not with the source chosen "
               "here, so not averaged with it",
