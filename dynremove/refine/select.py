@@ -539,12 +539,12 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
        flag the part of it that both sources see past and leave the rest
        (``bursts/tim6`` as three photos: a half-removed, translucent cup).
        One witness counts where the other source still shows the reference's
-       content (near it in colour, or its flow found it), a region must be
-       ``_ONE_WITNESS_FRAC`` of the image and lie in L on ``_ONE_WITNESS_IN_L``
-       of its area (the scans found part of the mover: a single witness is
-       weak evidence, and across a wide baseline a misaligned view "witnesses"
-       static 3-D structure), and the caller takes only its part outside L
-       (inside L the fill decides as before).
+       content (near it in colour, or its flow found it), and a region must
+       lie in L on ``_ONE_WITNESS_IN_L`` of its area: the scans found part of
+       the mover (a single witness is weak evidence, and across a wide baseline
+       a misaligned view "witnesses" static 3-D structure). The caller raises
+       ``min_frac`` to ``_ONE_WITNESS_FRAC`` and takes only the region's part
+       outside L (inside L the fill decides as before).
 
     Parameters
     ----------
@@ -640,7 +640,7 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     dark = (cand > 0) & darker(lab_r, wit, tau)
     grown = attach_shadow(grown, dark & smooth_gain(lab_r[..., 0], wit[..., 0], dark, tau))
     n, comp, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
-    keep = stats[:, cv2.CC_STAT_AREA] >= (_ONE_WITNESS_FRAC if one_witness else min_frac) * H * W
+    keep = stats[:, cv2.CC_STAT_AREA] >= min_frac * H * W
     keep[0] = False
     # the witnesses must see the region's surroundings as the reference does:
     # where their whole neighbourhood differs (another side of a wide baseline),
@@ -1052,7 +1052,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # 3-view composites, a misaligned view against 3-D structure)
             region_1, _, wit_1 = _minority_witnesses(
                 lab_r, lab_ws, geo_ok, flow_agree, mask, P.select_minority,
-                found=found if mode == "parallax" else None, one_witness=True, tau=tau)
+                found=found if mode == "parallax" else None, one_witness=True,
+                min_frac=_ONE_WITNESS_FRAC, tau=tau)
             added_1 = cv2.morphologyEx((region_1 & ~mask & ~minority).astype(np.uint8),
                                        cv2.MORPH_OPEN, disc5) > 0
             minority |= added_1
