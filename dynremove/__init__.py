@@ -18,11 +18,11 @@ Layout (imports go one way down, ``tests/test_layers.py``): ``params``,
 
 import os
 
-# numba's OpenMP threads wait for work asleep, not spinning: the scan's waves meet at
-# a barrier a few thousand times a pass, and with another process on the cores a
+# numba's OpenMP threads wait for work asleep, not spinning: the scan starts a
+# parallel loop a few dozen times a pass, and with another process on the cores a
 # spinning thread holds the core that the thread it waits for needs (a pass of
-# 1.3 s took 6-16 s on a busy 2-core machine). Read when numba first starts its
-# threads; a value the user set wins.
+# 1.3 s took 6-16 s on a busy 2-core machine when it met at a barrier a few thousand
+# times a pass). Read when numba first starts its threads; a value the user set wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 

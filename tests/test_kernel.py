@@ -163,11 +163,11 @@ def test_steps_are_unique_and_ordered(small_scene):
     ("paper", {"write": "pixel", "max_scans": 2}),
     ("default", {"update": False, "candidate_set": False}),
 ])
-def test_the_wavefront_scan_equals_the_sequential_scan(name, variant):
-    """Unrecorded, the scan visits row segments in waves on all cores
-    (``_kernels._scan`` in waves); the state it leaves is the sequential scan's
-    (the recorded one) byte for byte: L, the reference's pixels and features, N,
-    C, the M maps and the counts."""
+def test_the_scan_on_all_cores_equals_the_sequential_scan(name, variant):
+    """Unrecorded, the scan visits its rows in a pipeline on all cores
+    (``_kernels._scan``, each row R px behind the one above); the state it
+    leaves is the sequential scan's (the recorded one) byte for byte: L, the
+    reference's pixels and features, N, C, the M maps and the counts."""
     import numba
 
     from dynremove.evaluation import synth
@@ -179,7 +179,7 @@ def test_the_wavefront_scan_equals_the_sequential_scan(name, variant):
     params = preset(name).replace(**variant)
     st0, _ = prepare(scene.images, scene.ref_index, params)
     runs = {}
-    for sink in (NullSink(), MemorySink()):  # the waves; one pixel at a time
+    for sink in (NullSink(), MemorySink()):  # the pipeline; one pixel at a time
         st = st0.copy()
         L, Ms, summ = run_scans(st, params, sink=sink)
         runs[type(sink).__name__] = (st, L, Ms, summ)

@@ -57,8 +57,8 @@ def for_each_source(fn: Callable[[int], T], n: int, *,
 def one_thread_per_worker() -> None:
     """In a worker process of ``eval --jobs`` or ``batch --jobs`` (the parallelism
     comes from the processes): OpenCV and numba on one thread each, so that two
-    workers do not run four threads on two cores (the scan's waves, whose threads
-    meet at a barrier a few thousand times a pass, lose the most to that)."""
+    workers do not run four threads on two cores (the scan's row pipeline, whose
+    threads wait for each other's rows, loses the most to that)."""
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
 

@@ -31,6 +31,8 @@ import math
 import numba
 import numpy as np
 
+from dynremove.method.scan._atomics import cpu_yield, fetch_add, load_acquire, store_release
+
 # --- indices into pf (float64) ------------------------------------------------
 LAM1, LAM2, LAM3, LAM4, LAM5, LAM6, LAM7, LAM8 = 0, 1, 2, 3, 4, 5, 6, 7
 SIG_C, SIG_G, SIG_E, SIG_H, T_R, EPS, SIFT_UNIT = 8, 9, 10, 11, 12, 13, 14
@@ -1151,7 +1153,11 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                 counts[0] = e + 1
 
 
-# --- the same scan on all cores: a wavefront of row segments (exact) ---------------
+# --- the same scan on all cores: a pipeline of rows (exact) ----------------------
+
+
+# pixels a row visits between two publications of its progress
+_SPAN = 8
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1171,7 +1177,7 @@ def _reach(pi):
 @numba.njit(cache=True, nogil=True, parallel=True)
 def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
           N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
-          use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1, rec, waves,
+          use_pre, preM, preB, preK, dirty, pf, pi, scan, direction, r0, r1, rec, pipeline,
           dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f,
           counts, stats):
     """Visit rows r0..r1−1 (in visiting order) of one scan; mutate the state in place.
@@ -1201,46 +1207,63 @@ def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
     every replacement; every correspondence update. ``counts`` = [decisions,
     replacements, updates] written (may exceed capacity: overflow). ``stats`` (G, 3)
     int64: row g += [dynamic, replaced, undecided] of thread g (row 0 when not
-    ``waves``).
+    ``pipeline``).
 
-    Without ``waves``: one pixel at a time, in the visiting order (events when
-    ``rec``), on one thread. With ``waves`` (and not ``rec``: no events), on all
-    cores, the same state byte for byte: a row is cut into segments of T = R + 1 px
-    (``_reach``), and segment j of visiting row i runs at wave t = j + 2i, the
-    segments of a wave at once. Each visit's predecessors in the sequential order
-    that it depends on are in earlier waves: its left neighbour, and the row above
-    as far as R px to its right (segment j + 1 of row i − 1, wave t − 1; the rows
-    further up are further ahead). Two segments of one wave are at least T + 1 > R
-    px apart, so they touch no common state, and a visit that runs before a
-    sequential predecessor (a segment two or more to the right, rows up) is one
-    that it does not touch either. The waves' segments are dealt to the threads in
-    turn, so that the expensive segments of one mover (adjacent rows) go to
-    different threads.
+    Without ``pipeline``: one pixel at a time, in the visiting order (events when
+    ``rec``), on one thread. With ``pipeline`` (and not ``rec``: no events), on all
+    cores, the same state byte for byte, as a pipeline of rows: each thread claims
+    the next visiting row (``_atomics.fetch_add``) and visits it in spans of
+    ``_SPAN`` px, publishing after each how far it has got (``store_release``);
+    pixel x of row i waits (``cpu_yield``) until row i − 1 is done as far as
+    x + R (``_reach``, read with ``load_acquire``). So each visit's predecessors
+    in the sequential order that it depends on are done before it: its left
+    neighbour, and the row above as far as R px to its right (the rows further up
+    are further ahead still). A visit of row i − 1 that runs after one of row i at
+    x is more than R px to its right, so the two touch no common state. Rows are
+    claimed in order, so the lowest unfinished row never waits and a thread that
+    runs alone (the others busy elsewhere) visits the rows in turn: no deadlock.
+    Where a mover makes a row expensive, the next row follows R px behind on
+    the other core instead of waiting at a barrier.
     """
     H, W = gray.shape
     S = N.shape[0]
     g_in, g_out = _edge_bounds(pf)
-    # one visit order for both: without waves, a wave is one whole row (the
-    # parallel loop then runs once, on one thread), so that the two share one
-    # compilation of the visits (each parallel loop compiles its calls anew)
-    G = stats.shape[0] if waves else 1
-    T = _reach(pi) + 1 if waves else W
-    nseg = (W + T - 1) // T
     nrow = r1 - r0
-    for t in range(nseg + 2 * (nrow - 1)):
-        i_lo = max(0, (t - nseg + 2) // 2)  # j = t − 2i < nseg
-        i_hi = min(nrow - 1, t // 2)  # j ≥ 0
-        n_t = i_hi - i_lo + 1
-        if n_t <= 0:  # (without waves, every other wave: no row starts there)
-            continue
-        for g in numba.prange(G):
-            scratch = _scan_scratch(pi, S, fg_r.shape[2])
-            for k in range(g, n_t, G):
-                i = i_lo + k
-                j = t - 2 * i
+    if not pipeline:
+        scratch = _scan_scratch(pi, S, fg_r.shape[2])
+        for i in range(nrow):
+            _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
+                       N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
+                       use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan,
+                       direction, r0 + i, 0, W, rec, dec_i, dec_f, dec_cs, dec_cxy, dec_cB,
+                       dec_ccl, rep_i, rep_f, upd_i, upd_f, counts, stats[0], scratch)
+        return
+    G = stats.shape[0]
+    R = _reach(pi)
+    done = np.zeros(nrow, np.int64)  # pixels visited of each row, in visiting order
+    claim = np.zeros(1, np.int64)  # the next row to claim
+    for g in numba.prange(G):
+        scratch = _scan_scratch(pi, S, fg_r.shape[2])
+        while True:
+            i = fetch_add(claim, 0, 1)
+            if i >= nrow:
+                break
+            xi = 0
+            while xi < W:
+                lim = W
+                if i > 0:
+                    prev = load_acquire(done, i - 1)
+                    if prev < W:
+                        lim = prev - R  # pixel xi needs the row above done to xi + R
+                if lim <= xi:
+                    cpu_yield()
+                    continue
+                end = min(lim, xi + _SPAN)
                 _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s,
-                           fg_s, N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s,
-                           hm_s, use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan,
-                           direction, r0 + i, j * T, min(W, (j + 1) * T), rec, dec_i, dec_f,
-                           dec_cs, dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f,
-                           counts, stats[g], scratch)
+                           fg_s, N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r,
+                           hb_s, hm_s, use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out,
+                           scan, direction, r0 + i, xi, end, rec, dec_i, dec_f, dec_cs,
+                           dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f, counts,
+                           stats[g], scratch)
+                xi = end
+                store_release(done, i, xi)

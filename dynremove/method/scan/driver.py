@@ -156,16 +156,18 @@ class _Buffers:
 
 # precompute the scan's decisions on all cores (exact; off only to measure it)
 PRECOMPUTE = True
-# an unrecorded scan visits on all cores, in waves of row segments (exact; off only
+# an unrecorded scan visits on all cores, in a pipeline of rows (exact; off only
 # to measure it): ``_kernels._scan``
-WAVEFRONT = True
+PIPELINE = True
 
 
-def scan_in_waves(record: bool) -> bool:
-    """Whether a run's scan visits in waves on all cores (the same result): when it
-    is not recorded and numba has more than one thread. A recorded one visits one
-    pixel at a time, so that its events come in the visiting order."""
-    return WAVEFRONT and not record and numba.get_num_threads() > 1
+def scan_on_all_cores(record: bool) -> bool:
+    """Whether a run's scan visits its rows in a pipeline on all cores (the same
+    result): when it is not recorded and numba, compiling, has more than one thread. A
+    recorded one visits one pixel at a time, so that its events come in the
+    visiting order."""
+    return (PIPELINE and not record and numba.get_num_threads() > 1
+            and not numba.config.DISABLE_JIT)  # (its atomics exist only compiled)
 
 
 def compiled_kernels(record: bool) -> list:
@@ -212,11 +214,11 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
         hb_s[s], hm_s[s] = kn._gradient_bins(st.src_gray[s], nb)
     M_maps: list[np.ndarray] = []
     summaries: list[np.ndarray] = []
-    waves = kernel == "numba" and scan_in_waves(record)
+    pipeline = kernel == "numba" and scan_on_all_cores(record)
     if kernel == "numba":
         def scan_fn(*state, scan, direction, r0, r1, stats):
-            per_thread = np.zeros((numba.get_num_threads() if waves else 1, 3), np.int64)
-            kn._scan(*state, pf, pi, scan, direction, r0, r1, record, waves, *bufs.args(),
+            per_thread = np.zeros((numba.get_num_threads() if pipeline else 1, 3), np.int64)
+            kn._scan(*state, pf, pi, scan, direction, r0, r1, record, pipeline, *bufs.args(),
                      per_thread)
             stats += per_thread.sum(0)
     elif kernel == "reference":
@@ -245,8 +247,8 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
 
         t0 = time.perf_counter()
         # every decision from the scan's starting state, on all cores; the scan
-        # then recomputes only what its own updates invalidate (exact). The waves
-        # take them too: their segments then cost what the movers cost, and the
+        # then recomputes only what its own updates invalidate (exact). The pipeline
+        # takes them too: its rows then cost what the movers cost, and the
         # precompute balances the static pixels' share perfectly (row by row;
         # the paper preset's 4 scans at 7 × 854×480 went from 2.7 to 1.9 s)
         use_pre = kernel == "numba" and PRECOMPUTE
