@@ -690,3 +690,53 @@ def test_long_lines_are_wrapped_for_a_terminal_and_whole_when_piped(monkeypatch)
     assert " ".join(w.strip() for w in body) == line.strip()  # no word cut, none lost
     monkeypatch.setattr("sys.stdout.isatty", lambda: False)
     assert commands.for_terminal(text) == text
+
+
+# -- session 50 trial, items 3 and 4: the paper preset's patch writes and its scan cap -----
+@pytest.fixture(scope="module")
+def paper_rrd(tmp_path_factory):
+    """The paper preset (patch writes are the output) on a small synthetic scene,
+    recorded, with two scans."""
+    from dynremove import remove_dynamic
+    from dynremove.params import preset
+
+    scene = synth.make_scene(seed=2, n_views=4, size=(72, 96))
+    path = tmp_path_factory.mktemp("paper") / "paper.rrd"
+    with pytest.warns(UserWarning):
+        res = remove_dynamic(scene.images, ref=scene.ref_index, sink=RerunSink(path),
+                             params=preset("paper").replace(max_scans=2))
+    return scene, res, path
+
+
+def test_the_fill_line_of_a_patch_write_names_the_last_write_and_its_pixel(paper_rrd):
+    """Where later patches covered a pixel, the clean photo shows the last one's
+    source pixel, and the "fill:" line names that write and that pixel (a trial
+    read the first write at the pixel, from another source)."""
+    scene, res, path = paper_rrd
+    srcs = [i for i in range(len(scene.images)) if i != scene.ref_index]
+    ys, xs = np.nonzero(res.dynamic)
+    checked = 0
+    for y, x in list(zip(ys, xs))[:: max(1, len(ys) // 25)]:
+        h = vi.pixel_history(path, int(x), int(y))
+        writes = h["replacements"] + h["covered_by"]
+        if len(writes) < 2:
+            continue
+        last = max(writes, key=lambda r: r["step"])
+        sx, sy = last["src_x"] + x - last["x"], last["src_y"] + y - last["y"]
+        fill = next(ln for ln in vd.verdict_lines(h) if ln.startswith("fill:"))
+        assert f"{last['src_name']}'s pixel ({sx},{sy})" in fill, fill
+        assert f"step {last['step']}" in fill and f"last of {len(writes)} writes" in fill, fill
+        # what the clean photo shows is that source's pixel (the set's exposures match)
+        np.testing.assert_array_equal(res.clean[y, x], scene.images[srcs[last["src"]]][sy, sx])
+        checked += 1
+    assert checked >= 5, "the scene must have pixels that several patches wrote"
+
+
+def test_the_paper_preset_says_when_its_scans_stop_at_the_cap(paper_rrd):
+    """The paper's scans alternate until one calls no pixel dynamic; where
+    --max-scans stops them first, a note says so with the last scan's count."""
+    _, res, _ = paper_rrd
+    last = int(res.scans[-1]["n_dynamic"])
+    assert len(res.scans) == 2 and last > 0, "the scene must still flag pixels in scan 2"
+    note = next(w for w in res.warnings if w.startswith("the scans stopped"))
+    assert f"--max-scans 2 while the last still called {last} px dynamic" in note, note

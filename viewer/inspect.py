@@ -727,6 +727,10 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
         stages=stages, clean_rule=clean_rule,
         clean_params={k: params.get(k) for k in ("patch_size", "min_region_px")},
         gt=bool(gt[y, x]) if gt is not None and inside else None,
+        # the scans' writes are refilled after them (--fill select or median), or
+        # are the output (the paper preset); None in recordings without the params
+        refill=(str(params.get("fuse_combine", "median")) if params.get("fuse") else "")
+        if "fuse" in params else None,
         interrupted=_where_cut(load_store(path), root, x, y, H, W),
         photo=photo_size(info),
     )

@@ -270,7 +270,8 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                     f"{key['verdict']} in scan {key['scan']} (step {key['step']}): {why}")
             if len(scans) > 1:
                 head += "; then " + ", ".join(
-                    f"scan {sc['scan']} M {m_text(sc['M'])}" for sc in scans[1:])
+                    f"scan {sc['scan']} " + (f"M {m_text(sc['M'])}" if sc["M"] == sc["M"]
+                                             else "no cluster") for sc in scans[1:])
         n = key.get("overwritten_before")
         if n:
             head += (f"; its content had been overwritten by {n} neighbouring "
@@ -358,9 +359,24 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         else:
             lines.append("fill: reference kept" + (" (not in the final mask)"
                                                      if not h.get("final_dynamic") else ""))
-    elif h["replacements"]:
-        r = h["replacements"][-1]
-        lines.append(f"fill: patch from {r['src_name']} written at step {r['step']}")
+    elif h.get("refill") and h.get("final_dynamic"):
+        lines.append(f"fill: refilled after the scans by --fill median (the sources' "
+                     f"{h['refill']} at their matches), not by the scans' patch writes")
+    elif h["replacements"] or h.get("covered_by"):
+        # the scans' writes are the output (no fill after them): the last patch
+        # written over the pixel, centred on it or on a neighbour, is what it shows
+        # (a trial read the first write at the pixel while a later scan's patch
+        # from another source had covered it)
+        r = max(h["replacements"] + list(h.get("covered_by") or ()), key=lambda e: e["step"])
+        sx, sy = r["src_x"] + h["x"] - r["x"], r["src_y"] + h["y"] - r["y"]
+        if (r["x"], r["y"]) == (h["x"], h["y"]):
+            where = f"written here at step {r['step']} (scan {r['scan']})"
+        else:
+            where = (f"by the patch written around ({r['x']},{r['y']}) at step {r['step']} "
+                     f"(scan {r['scan']})")
+        n = len(h["replacements"]) + len(h.get("covered_by") or ())
+        lines.append(f"fill: {r['src_name']}'s pixel ({sx},{sy}), {where}"
+                     + (f": the last of {n} writes over this pixel" if n > 1 else ""))
     if h.get("gt") is not None:
         fin, gt = h.get("final_dynamic"), h["gt"]
         kind = ("correct" if fin == gt else "FALSE NEGATIVE (a mover left in)" if gt
