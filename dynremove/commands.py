@@ -186,6 +186,11 @@ def cmd_run(args: argparse.Namespace) -> int:
         writes.insert(0, (f"--record {args.record}", Path(args.record)))
     io.check_writes(writes, io.run_reads(args.images, gt=args.gt,
                                          valid_mask=getattr(args, "valid_mask", None)))
+    if (args.record and Path(args.record).suffix.lower() != ".rrd"
+            and not Path(args.record).is_dir()):  # (a folder: told so below)
+        # (a trial's --record x.txt wrote a recording under that name, silently)
+        raise InputError(f"--record {args.record}: a recording is an .rrd file (the viewer "
+                         "and `dynremove inspect` open .rrd files): give a name ending in .rrd")
     # the folders this run creates (the default out/<name> may create out/ too)
     created = [q for q in (Path(args.out), *Path(args.out).parents) if not q.exists()]
     try:

@@ -531,6 +531,17 @@ def test_record_path_that_is_a_folder_is_bad_input(tmp_path, capsys, scene):
     assert "is a folder" in err
 
 
+def test_record_name_that_is_not_an_rrd_is_bad_input(tmp_path, capsys, scene):
+    """A trial's --record x.txt wrote a recording under that name, which the viewer
+    does not offer to open: refused before any work, nothing written."""
+    write_set(tmp_path / "s", scene.images[:3])
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, tmp_path / "s", "--record", tmp_path / "x.txt", "--out", out)
+    line = assert_input_error(rc, err, "--record", out=out)
+    assert "give a name ending in .rrd" in line, line
+    assert not (tmp_path / "x.txt").exists()
+
+
 def test_record_below_a_file_names_the_file(tmp_path, capsys, scene):
     """Before: "cannot create its folder (File exists)"."""
     write_set(tmp_path / "s", scene.images[:3])
