@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import platform
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 import time
 import warnings
 from importlib.metadata import PackageNotFoundError, version
@@ -27,7 +27,7 @@ from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
 from dynremove.io import resolve_ref, size_hint
 from dynremove.params import DEFAULT, Params, preset
-from dynremove.refine.concurrency import for_each_source
+from dynremove.refine.concurrency import for_each_source, numba_threads_safe
 from dynremove.refine.duplicates import agreement_with_reference, duplicate_sources
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
@@ -214,7 +214,11 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
         return views, Ns
 
     with ThreadPoolExecutor(max_workers=1) as pool:
-        matching = pool.submit(match_sources)
+        if numba_threads_safe():
+            matching = pool.submit(match_sources)
+        else:  # (numba's workqueue layer: no parallel kernel beside another thread's)
+            matching = Future()
+            matching.set_result(match_sources())
         labs = [features.to_lab(im) for im in images]
         fc = [features.patch_mean(lab, patch_size=p) for lab in labs]  # f_c from the Lab
         # f_g written straight into the scan's arrays (the reference's, and the

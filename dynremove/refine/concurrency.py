@@ -9,6 +9,7 @@ sequential loop).
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -16,14 +17,40 @@ from typing import TypeVar
 
 import cv2
 import numba
+import numpy as np
 
 T = TypeVar("T")
+
+
+@numba.njit(cache=True, parallel=True)
+def _probe(a):
+    for i in numba.prange(a.shape[0]):
+        a[i] = i
+
+
+@functools.lru_cache(maxsize=1)
+def numba_threads_safe() -> bool:
+    """Whether several Python threads may launch numba's parallel kernels at once.
+
+    Not with numba's "workqueue" threading layer: the only one numba guarantees,
+    and the one a machine gets without OpenMP or TBB (numba's pip wheels on
+    macOS, a container without libgomp, ``NUMBA_THREADING_LAYER=workqueue``); it
+    aborts the whole process on concurrent launches (``SIGABRT``: 2 runs of 3 on
+    DAVIS camel, inside ``colour.delta_e`` on the fill's threads). numba picks
+    its layer at the first parallel launch, which this makes (a cached 2-element
+    kernel). Then the per-source work runs in turn (the same results).
+    """
+    if numba.config.DISABLE_JIT:
+        return True
+    _probe(np.zeros(2))
+    return numba.threading_layer() != "workqueue"
 
 
 def for_each_source(fn: Callable[[int], T], n: int, *,
                     on_done: Callable[[int], None] | None = None) -> list[T]:
     """``[fn(k) for k in range(n)]``, on threads when OpenCV may use more than one
-    (not inside an ``eval --jobs`` worker). ``fn`` must write only its own
+    (not inside an ``eval --jobs`` worker) and numba's parallel kernels may be
+    launched from threads at once (``numba_threads_safe``). ``fn`` must write only its own
     source's slots; exceptions propagate (the sources not yet started are
     cancelled). ``on_done(k)`` is called on the calling thread as each result
     arrives, in source order (progress).
@@ -33,7 +60,7 @@ def for_each_source(fn: Callable[[int], T], n: int, *,
     result loop that polls every 10 ms, ~0.2 s a run at 7 × 854×480.)
     """
     workers = min(n, os.cpu_count() or 1)
-    if n <= 1 or cv2.getNumThreads() <= 1 or workers <= 1:
+    if n <= 1 or cv2.getNumThreads() <= 1 or workers <= 1 or not numba_threads_safe():
         out = []
         for k in range(n):
             out.append(fn(k))
@@ -63,4 +90,4 @@ def one_thread_per_worker() -> None:
     numba.set_num_threads(1)
 
 
-__all__ = ["for_each_source", "one_thread_per_worker"]
+__all__ = ["for_each_source", "numba_threads_safe", "one_thread_per_worker"]
