@@ -1305,3 +1305,66 @@ def test_three_photos_that_overlap_little_are_told_truthfully(davis):
     assert "only one of the two other photos, or neither" in notes[0]
     assert "keeps the reference" not in notes[0]
     assert r.dynamic.any()  # (and it did replace part of it)
+
+
+# --------------------------------------------------------------------------- the rim
+def _rim_case():
+    """A replaced square (source 1) on a grey scene; round it a 1 px halo that departs
+    from the scene by ΔE 6 towards the mover's dark colour, and one 3 px further out."""
+    from dynremove.refine.colour import delta_e
+
+    H = W = 24
+    lab = np.zeros((H, W), np.intp)
+    lab[8:16, 8:16] = 1
+    scene = np.array([60.0, 0.0, 0.0], np.float32)
+    labs = np.broadcast_to(scene, (3, H, W, 3)).copy()  # reference, source 1, source 2
+    labs[0, 8:16, 8:16] = (20.0, 0.0, 0.0)  # the mover, in the reference
+    halo = dilate_disc(lab != 0, 1) & (lab == 0)
+    labs[0][halo] = (54.0, 0.0, 0.0)
+    far = dilate_disc(lab != 0, 4) & ~dilate_disc(lab != 0, 3)
+    labs[0][far] = (54.0, 0.0, 0.0)
+    assert np.allclose(delta_e(labs[0][halo], labs[1][halo]), 6.0)
+    free = np.ones((2, H, W), bool)
+    mover_p = np.where(lab != 0, 0.9, 0.1)
+    return lab, halo, far, free, labs, mover_p
+
+
+def test_the_rim_takes_a_mover_s_blurred_edge_where_its_source_is_free():
+    """The halo round a replaced mover takes the mover's source (within --select-tau
+    of the scene, so the cut kept it): no outline is left. Not past ``px``, not
+    where that source shows a mover of its own or differs by tau or more, not
+    outside ``allowed``, and not round a region without the movers' colours."""
+    from dynremove.refine.select import grow_into_rim
+
+    lab, halo, far, free, labs, mover_p = _rim_case()
+    allowed = np.ones(lab.shape, bool)
+    out = grow_into_rim(lab, allowed, free, labs, mover_p, 10.0, 2)
+    assert (out[halo] == 1).all()
+    assert (out[far] == 0).all()  # 3-4 px out: beyond the rim
+    assert (out[lab != 0] == 1).all() and set(np.unique(out)) == {0, 1}
+    # the source shows its own mover on the left side of the halo: kept there
+    busy = free.copy()
+    busy[0, :, :8] = False
+    out = grow_into_rim(lab, allowed, busy, labs, mover_p, 10.0, 2)
+    assert (out[halo & (np.arange(24) < 8)[None]] == 0).all()
+    assert (out[halo & (np.arange(24) >= 8)[None]] == 1).all()
+    # a departure of tau or more is the cut's to decide, not the rim's
+    assert (grow_into_rim(lab, allowed, free, labs, mover_p, 6.0, 2)[halo] == 0).all()
+    # outside the fill's region, or round static structure the scans flagged: nothing
+    assert grow_into_rim(lab, lab != 0, free, labs, mover_p, 10.0, 2) is lab
+    assert grow_into_rim(lab, allowed, free, labs, np.zeros_like(mover_p), 10.0, 2) is lab
+
+
+def test_the_rim_changes_nothing_away_from_the_replaced_region():
+    """The rim (--select-halo-px 2) against none (0) on a synthetic scene: the clean
+    photos differ only within the rim and the blend's ring round the mask."""
+    sc = synth.make_scene(seed=0, n_views=5, size=(120, 160))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        on = remove_dynamic(sc.images, ref=sc.ref_index)
+        off = remove_dynamic(sc.images, ref=sc.ref_index,
+                             params=preset("default").replace(select_halo_px=0))
+    changed = (on.clean != off.clean).any(-1)
+    near = dilate_disc(off.dynamic, 2)
+    # only the rim (within 2 px of the mask) and the blend's offset inside it change
+    assert not (changed & ~dilate_disc(near, 3)).any()

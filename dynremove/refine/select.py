@@ -753,6 +753,71 @@ def _cluster_median(cand_img, labs, lab, rep, free, tau):
     return out, members
 
 
+def grow_into_rim(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
+                  free: npt.NDArray[np.bool_], labs: npt.NDArray[np.float32],
+                  mover_p: npt.NDArray[np.floating], tau: float, px: int
+                  ) -> npt.NDArray[np.intp]:
+    """The cut's replaced region grown by a rim of ``px`` pixels round a mover.
+
+    A mover's edge is blurred over a few pixels (the lens, JPEG, its motion), and
+    the outermost of them differ from the scene by less than ``tau``: the cut
+    keeps them as the reference, and the clean photo shows a thin line of the
+    mover's colour round where it stood, the blend's ring lying on it too (tim6's
+    cup: a pale outline, the fill paler than the table). Here each kept pixel
+    within ``px`` of a replaced one (3×3 steps, ``grow_replaced``) takes that
+    neighbour's source where the source is free there and within ``tau`` of the
+    reference (the same scene, up to the halo), and the nearest replaced pixel
+    has the movers' colours (``mover_p`` ≥ 0.5: a mover's edge, not the edge of
+    static structure the scans flagged).
+
+    Measured (session 50, ``eval``): on the composites, whose pasted movers have
+    no blurred edge and whose damage leaves out the 5 px round the true mask,
+    damage 0.455 → 0.467 %, leftover 15.53 → 15.31 %, PSNR −0.04 dB; without the
+    colour condition damage rose to 0.494 %.
+
+    Parameters
+    ----------
+    lab : (h, w) int ndarray
+        The cut's labels (0: the reference, k: source k − 1).
+    allowed : (h, w) bool ndarray
+        Where the rim may go (the fill region, not what the static 3-D test kept).
+    free : (S, h, w) bool ndarray
+        Where each source shows no mover of its own and is inside its frame.
+    labs : (S + 1, h, w, 3) float32 ndarray
+        The candidates' blurred CIE Lab, the reference first.
+    mover_p : (h, w) float ndarray
+        The reference's probability of the movers' colours.
+    tau : float
+        CIE76 ΔE of agreement.
+    px : int
+        The rim's width (analysis pixels).
+
+    Returns
+    -------
+    lab : (h, w) int ndarray
+        A new label map where the rim applies (else ``lab`` itself).
+    """
+    near = grow_replaced(np.where(allowed | (lab != 0), lab, -1).astype(np.int16), px)
+    ys, xs = np.nonzero((lab == 0) & allowed & (near > 0))
+    if len(ys) == 0:
+        return lab
+    k = near[ys, xs].astype(np.intp)
+    ok = free[k - 1, ys, xs] & (delta_e(labs[k, ys, xs], labs[0, ys, xs]) < tau)
+    # the nearest replaced pixel (each replaced pixel its own label of the transform)
+    _, idx = cv2.distanceTransformWithLabels((lab == 0).astype(np.uint8), cv2.DIST_L2, 3,
+                                             labelType=cv2.DIST_LABEL_PIXEL)
+    zy, zx = np.nonzero(lab != 0)
+    lut = np.zeros(int(idx.max()) + 1, np.intp)
+    lut[idx[zy, zx]] = np.arange(len(zy))
+    j = lut[idx[ys, xs]]
+    ok &= mover_p[zy[j], zx[j]] >= 0.5
+    if not ok.any():
+        return lab
+    out = lab.copy()
+    out[ys[ok], xs[ok]] = k[ok]
+    return out
+
+
 def region_shares(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_]
                   ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float64]]:
     """The regions of ``core`` (8-connected; (h, w) int32, 0 outside) and the share
@@ -1237,13 +1302,16 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     if P.select_complete > 0:
         lab, region_rule = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
                                             P.select_complete_px, regions=(rcomp, rfrac))
-    rep = lab != 0
     movers = np.zeros((S, H, W), bool)
     d_cons = delta_e(labs[1:], cons)
     mv = (usable[1:] & (p_mover[1:] > 0.5) & (d_cons > tau)
           | copies | own)
     movers[:, y0:y1, x0:x1] = mv & reg[None]
     free = usable[1:] & ~mv
+    if P.select_halo_px > 0:
+        lab = grow_into_rim(lab, reg & ~explained[roi], free, labs, p_mover[0], tau,
+                            P.select_halo_px)
+    rep = lab != 0
     no_src = rep & in_core & ~free.any(0)
     # the band of the photo that no source's frame reaches (a reference at the end of
     # a pan), next to a mover the sources replaced: inpainted with it, so the mover
@@ -1352,6 +1420,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
 __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
            "Selection", "attach_shadow", "capped_growth", "complete_regions", "darker",
+           "grow_into_rim",
            "median_parallax_px", "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
            "mixture_detail", "region_shares", "select_fill"]
