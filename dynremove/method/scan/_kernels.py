@@ -661,9 +661,27 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
 
 
 @numba.njit(cache=True, nogil=True)
+def _patch_scratch(nb):
+    """The work arrays of ``_choose_patch_in``: the overlaps' offsets rg (2, 4), the
+    reference's g_c, g_h, count (2, 3), (2, nb), (2,) and q's (the same shapes)."""
+    return (np.empty((2, 4), np.int64), np.empty((2, 3)), np.empty((2, nb)),
+            np.empty(2, np.int64), np.empty((2, 3)), np.empty((2, nb)), np.empty(2, np.int64))
+
+
+@numba.njit(cache=True, nogil=True)
 def _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf, pi, x, y,
                   ndx0, ndy0, ndx1, ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g,
                   score, gc0, gc1, gh0, gh1):
+    """``_choose_patch_in`` with work arrays of its own."""
+    return _choose_patch_in(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf, pi,
+                            x, y, ndx0, ndy0, ndx1, ndy1, n, cs, cx, cy, labels, m, fhat_c,
+                            fhat_g, score, gc0, gc1, gh0, gh1, _patch_scratch(pi[HOG_BINS]))
+
+
+@numba.njit(cache=True, nogil=True)
+def _choose_patch_in(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf, pi, x, y,
+                     ndx0, ndy0, ndx1, ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g,
+                     score, gc0, gc1, gh0, gh1, bufs):
     """q* (Sec. 3.2.2) among the candidates of A_m; mirrors ``reference.choose_patch``.
 
     score(q) = Σ_i [λ6 S_e(g_c(w_q^i), g_c(w_r^i), σ_c) + λ7 S_e(g_h(…), g_h(…), σ_h)]
@@ -673,7 +691,9 @@ def _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf,
     W = its attainable maximum, as λ3 is in H: the top score stays the same.
     Patches within ``tie_tol`` of the best tie; the tie goes to the smallest
     λ4‖f̂_c − f_c‖² + λ5‖f̂_g − f_g‖² (q̂), first in candidate order.
-    Fills score[:n]; returns (index of q*, best score, number tied).
+    Fills score[:n]; returns (index of q*, best score, number tied). ``bufs``
+    from ``_patch_scratch`` (no allocation per pixel: none can fail inside the
+    scan's row pipeline, where a failing row would leave the next one waiting).
 
     The reference's side of an overlap depends on q only through which pixels
     fall outside q's source; for a q whose window lies inside its source it is
@@ -691,7 +711,7 @@ def _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf,
     use_hog = pi[USE_HOG] != 0
     # overlap t with the neighbour patch t: window offsets (ulo, uhi, vlo, vhi),
     # empty (uhi < ulo) where the neighbour is outside the image
-    rg = np.empty((2, 4), np.int64)
+    rg, ref_c, ref_h, ref_n, q_c, q_h, q_n = bufs
     for t in range(2):
         dxn = ndx0 if t == 0 else ndx1
         dyn = ndy0 if t == 0 else ndy1
@@ -702,12 +722,6 @@ def _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F, hasF, pf,
         if not (0 <= x + dxn < W and 0 <= y + dyn < H):
             rg[t, 1] = rg[t, 0] - 1
     # g_c, g_h and count per overlap: the reference's (for q inside its source), q's
-    ref_c = np.empty((2, 3))
-    ref_h = np.empty((2, nb))
-    ref_n = np.zeros(2, np.int64)
-    q_c = np.empty((2, 3))
-    q_h = np.empty((2, nb))
-    q_n = np.zeros(2, np.int64)
     _window_sums(lab, hb_r, hm_r, x, y, x, y, H, W, h, rg, nb, ref_c, ref_h, ref_n)
     for t in range(2):
         if ref_n[t] > 0:
@@ -996,12 +1010,14 @@ def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, pre
 def _scan_scratch(pi, S, G):
     """The work arrays of one visiting thread: those of ``_work_arrays`` (K = 2·S
     candidate slots, G = the SIFT length), the patch scores (K,), g_c and g_h of
-    two overlaps (3,), (nb,) ×2, and ``_write_patch``'s change box."""
+    two overlaps (3,), (nb,) ×2, ``_write_patch``'s change box and those of
+    ``_choose_patch_in`` (``_patch_scratch``)."""
     K = 2 * S
     nb = pi[HOG_BINS]
     half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
     return (_work_arrays(K, G), np.empty(K, np.float64), np.empty(3), np.empty(3),
-            np.empty(nb), np.empty(nb), np.empty((2 * half + 3, 2 * half + 3), np.uint8))
+            np.empty(nb), np.empty(nb), np.empty((2 * half + 3, 2 * half + 3), np.uint8),
+            _patch_scratch(nb))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -1009,18 +1025,23 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
                use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan, direction,
                vi, xi0, xi1, rec, dec_i, dec_f, dec_cs, dec_cxy, dec_cB, dec_ccl,
-               rep_i, rep_f, upd_i, upd_f, counts, stats, scratch):
+               rep_i, rep_f, upd_i, upd_f, counts, stats, scratch, done, row, R):
     """Visit the pixels xi0..xi1−1 of row vi (in visiting order: row vi counts from
     the top in a forward scan, from the bottom in a backward one, and so do the
     columns): the body of ``_scan``, which see for the state and events.
-    ``scratch`` from ``_scan_scratch``; g_in, g_out from ``_edge_bounds(pf)``."""
+    ``scratch`` from ``_scan_scratch``; g_in, g_out from ``_edge_bounds(pf)``.
+
+    In ``_scan``'s row pipeline (R ≥ 0): this is row ``row`` of ``done`` (int64,
+    the pixels visited of each row); pixel xi waits until the row above is done
+    beyond xi + R, and how far this row has got is published every ``_SPAN`` px
+    and at the end. R < 0: no waiting (``done`` and ``row`` unused)."""
     H, W = gray.shape
     S = N.shape[0]
     K = 2 * S
     nb = pi[HOG_BINS]
     as_set = pi[CAND_SET] != 0
     half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
-    work, score, gc0, gc1, gh0, gh1, chg = scratch
+    work, score, gc0, gc1, gh0, gh1, chg, pbufs = scratch
     (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
      nx_, ny_, ox_, oy_) = work
     # the two scan neighbours (x + dx, y + dy): left/up, or right/down
@@ -1029,7 +1050,19 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     else:
         ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
     y = vi if direction > 0 else H - 1 - vi
+    wait = R >= 0
+    lim = W if (not wait or row == 0) else -1  # columns below lim may be visited
+    pub = xi0
     for xi in range(xi0, xi1):
+        if wait:
+            while xi >= lim:  # the row above: done beyond xi + R (or whole)
+                prev = load_acquire(done, row - 1)
+                lim = W if prev >= W else prev - R
+                if xi >= lim:
+                    cpu_yield()
+            if xi - pub >= _SPAN:
+                store_release(done, row, xi)
+                pub = xi
         x = xi if direction > 0 else W - 1 - xi
         step = np.int64(scan) * H * W + np.int64(vi) * W + xi
         if use_pre:
@@ -1071,10 +1104,10 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
             stats[0] += 1
             L[y, x] = 1
             # ---- removal (Sec. 3.2.2) -----------------------------------------
-            ib, best, ntie = _choose_patch(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s, fg_s, F,
-                                           hasF, pf, pi, x, y, ndx0, ndy0, ndx1, ndy1,
-                                           n, cs, cx, cy, labels, m, fhat_c, fhat_g,
-                                           score, gc0, gc1, gh0, gh1)
+            ib, best, ntie = _choose_patch_in(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s,
+                                              fg_s, F, hasF, pf, pi, x, y, ndx0, ndy0, ndx1,
+                                              ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g,
+                                              score, gc0, gc1, gh0, gh1, pbufs)
             s = cs[ib]
             qx = cx[ib]
             qy = cy[ib]
@@ -1151,12 +1184,14 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                         dec_cB[e, q] = cB[i]
                         dec_ccl[e, q] = labels[i]
                 counts[0] = e + 1
+    if wait:
+        store_release(done, row, xi1)
 
 
 # --- the same scan on all cores: a pipeline of rows (exact) ----------------------
 
 
-# pixels a row visits between two publications of its progress
+# pixels a row of the pipeline visits between two publications of its progress
 _SPAN = 8
 
 
@@ -1212,10 +1247,12 @@ def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
     Without ``pipeline``: one pixel at a time, in the visiting order (events when
     ``rec``), on one thread. With ``pipeline`` (and not ``rec``: no events), on all
     cores, the same state byte for byte, as a pipeline of rows: each thread claims
-    the next visiting row (``_atomics.fetch_add``) and visits it in spans of
-    ``_SPAN`` px, publishing after each how far it has got (``store_release``);
-    pixel x of row i waits (``cpu_yield``) until row i − 1 is done as far as
-    x + R (``_reach``, read with ``load_acquire``). So each visit's predecessors
+    the next visiting row (``_atomics.fetch_add``) and visits it in one
+    ``_scan_span`` call (a call costs about 0.7 µs of reference counting),
+    publishing every ``_SPAN`` px how far it has got (``store_release``); pixel x
+    of row i waits (``cpu_yield``) until row i − 1 is done as far as x + R
+    (``_reach``, read with ``load_acquire``). A visit allocates nothing, so no
+    row can fail and leave the next one waiting. So each visit's predecessors
     in the sequential order that it depends on are done before it: its left
     neighbour, and the row above as far as R px to its right (the rows further up
     are further ahead still). A visit of row i − 1 that runs after one of row i at
@@ -1229,14 +1266,15 @@ def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
     S = N.shape[0]
     g_in, g_out = _edge_bounds(pf)
     nrow = r1 - r0
-    if not pipeline:
+    if not pipeline or rec:  # (events come in the visiting order: one thread)
         scratch = _scan_scratch(pi, S, fg_r.shape[2])
         for i in range(nrow):
             _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
                        N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
                        use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan,
                        direction, r0 + i, 0, W, rec, dec_i, dec_f, dec_cs, dec_cxy, dec_cB,
-                       dec_ccl, rep_i, rep_f, upd_i, upd_f, counts, stats[0], scratch)
+                       dec_ccl, rep_i, rep_f, upd_i, upd_f, counts, stats[0], scratch,
+                       stats[0], 0, -1)
         return
     G = stats.shape[0]
     R = _reach(pi)
@@ -1248,22 +1286,9 @@ def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
             i = fetch_add(claim, 0, 1)
             if i >= nrow:
                 break
-            xi = 0
-            while xi < W:
-                lim = W
-                if i > 0:
-                    prev = load_acquire(done, i - 1)
-                    if prev < W:
-                        lim = prev - R  # pixel xi needs the row above done to xi + R
-                if lim <= xi:
-                    cpu_yield()
-                    continue
-                end = min(lim, xi + _SPAN)
-                _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s,
-                           fg_s, N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r,
-                           hb_s, hm_s, use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out,
-                           scan, direction, r0 + i, xi, end, rec, dec_i, dec_f, dec_cs,
-                           dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f, counts,
-                           stats[g], scratch)
-                xi = end
-                store_release(done, i, xi)
+            _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s,
+                       fg_s, N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r,
+                       hb_s, hm_s, use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out,
+                       scan, direction, r0 + i, 0, W, rec, dec_i, dec_f, dec_cs,
+                       dec_cxy, dec_cB, dec_ccl, rep_i, rep_f, upd_i, upd_f, counts,
+                       stats[g], scratch, done, i, R)
