@@ -367,16 +367,17 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         # written over the pixel, centred on it or on a neighbour, is what it shows
         # (a trial read the first write at the pixel while a later scan's patch
         # from another source had covered it)
-        r = max(h["replacements"] + list(h.get("covered_by") or ()), key=lambda e: e["step"])
+        writes = h["replacements"] + list(h.get("covered_by") or ())
+        r = max(writes, key=lambda e: e["step"])
         sx, sy = r["src_x"] + h["x"] - r["x"], r["src_y"] + h["y"] - r["y"]
         if (r["x"], r["y"]) == (h["x"], h["y"]):
             where = f"written here at step {r['step']} (scan {r['scan']})"
         else:
             where = (f"by the patch written around ({r['x']},{r['y']}) at step {r['step']} "
                      f"(scan {r['scan']})")
-        n = len(h["replacements"]) + len(h.get("covered_by") or ())
         lines.append(f"fill: {r['src_name']}'s pixel ({sx},{sy}), {where}"
-                     + (f": the last of {n} writes over this pixel" if n > 1 else ""))
+                     + (f": the last of {len(writes)} writes over this pixel"
+                        if len(writes) > 1 else ""))
     if h.get("gt") is not None:
         fin, gt = h.get("final_dynamic"), h["gt"]
         kind = ("correct" if fin == gt else "FALSE NEGATIVE (a mover left in)" if gt

@@ -9,8 +9,13 @@ before it published its progress is seen by the row that read it. Each is one
 LLVM atomic instruction (``load atomic``, ``store atomic``, ``atomicrmw``).
 ``cpu_yield`` gives the core away while a thread waits (``sched_yield``), so a
 waiting thread never holds the core that the thread it waits for needs.
+Without compilation (``NUMBA_DISABLE_JIT=1``) they are the plain Python
+operations, on one thread.
 """
 
+import os
+
+import numba
 from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
@@ -74,3 +79,19 @@ def cpu_yield(typingctx):
         builder.call(fn, [])
         return context.get_dummy_value()
     return types.none(), codegen
+
+
+if numba.config.DISABLE_JIT:  # the same operations in Python (one thread: no race)
+    def load_acquire(arr, idx):  # noqa: F811
+        return arr[idx]
+
+    def store_release(arr, idx, val):  # noqa: F811
+        arr[idx] = val
+
+    def fetch_add(arr, idx, val):  # noqa: F811
+        old = arr[idx]
+        arr[idx] += val
+        return old
+
+    def cpu_yield():  # noqa: F811
+        os.sched_yield()

@@ -1266,18 +1266,12 @@ def _scan(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
     S = N.shape[0]
     g_in, g_out = _edge_bounds(pf)
     nrow = r1 - r0
-    if not pipeline or rec:  # (events come in the visiting order: one thread)
-        scratch = _scan_scratch(pi, S, fg_r.shape[2])
-        for i in range(nrow):
-            _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_s,
-                       N, C, F, hasF, L, Mmap, Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s,
-                       use_pre, preM, preB, preK, dirty, pf, pi, g_in, g_out, scan,
-                       direction, r0 + i, 0, W, rec, dec_i, dec_f, dec_cs, dec_cxy, dec_cB,
-                       dec_ccl, rep_i, rep_f, upd_i, upd_f, counts, stats[0], scratch,
-                       stats[0], 0, -1)
-        return
-    G = stats.shape[0]
-    R = _reach(pi)
+    # one visit loop for both, so that the visits compile once (each parallel loop
+    # compiles its calls anew): without the pipeline (or recorded: the events come
+    # in the visiting order) one thread claims the rows in turn and never waits
+    on_all = pipeline and not rec
+    G = stats.shape[0] if on_all else 1
+    R = _reach(pi) if on_all else -1
     done = np.zeros(nrow, np.int64)  # pixels visited of each row, in visiting order
     claim = np.zeros(1, np.int64)  # the next row to claim
     for g in numba.prange(G):
