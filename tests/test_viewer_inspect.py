@@ -610,8 +610,10 @@ def test_what_the_cut_weighed_is_told_with_the_consensus_or_the_suspect():
     assert "reference 0.0" in w and "cheapest source 42.6" in w and "3.24" in w \
         and "1.71" in w, w
     sel["support"] = {}
-    assert "--select-ref-cost" in vd.weighed_words(sel)
+    w = vd.weighed_words(sel)
+    assert "--select-ref-cost" in w and "here nothing" in w, w  # a three-photo rule set it to 0
     sel["data_cost"] = {"reference": 30.0}
+    assert "here nothing" not in vd.weighed_words(sel)
     assert "no source may fill it" in vd.weighed_words(sel)
     assert vd.weighed_words({}) is None
 

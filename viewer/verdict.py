@@ -484,6 +484,11 @@ def weighed_words(sel: dict[str, Any]) -> str | None:
     else:
         txt += ("; the reference was the suspect here: the consensus is the sources' own, "
                 "and keeping the reference costs --select-ref-cost")
+        if cost["reference"] == 0:
+            txt += (", here nothing: with two or three photos, where no majority says "
+                    "the reference shows the mover (the sources show movers of their own, "
+                    "or all the photos differ), the movers' colour model decides, and it "
+                    "kept the reference")
     return txt
 
 

@@ -54,7 +54,8 @@ that the scan flagged with doubled content.
    reference inside L: the scan's flags there are mostly 3-D structure.
    With two or three photos no majority can be counted: the colour model
    decides whether the reference keeps its pixel (with three, it does where
-   both sources' candidates have the movers' colours and it has not).
+   both sources' candidates have the movers' colours, or show the reference's
+   mover followed there, or where the three photos all differ, and it has not).
    A region of L that the cut replaced almost whole (``select_complete``) is
    a mover: its fragments kept as the reference are replaced too, so that no
    piece of it stays in the photo; one it kept almost whole is static: its
@@ -1258,9 +1259,17 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             ref_cost = np.where((p_mover[0] > 0.5) & (p_mover[1] < 0.5), ref_cost, 0.0)
         elif S == 2:  # three photos: both sources may show a mover there (the same
             # walker, photographed before and after): where both candidates have the
-            # movers' colours and the reference has not, the reference stays
-            both = ((p_mover[1:] > 0.5) | ~usable[1:]).all(0) & usable[1:].any(0)
-            ref_cost = np.where(both & (p_mover[0] < 0.5), 0.0, ref_cost)
+            # movers' colours, or the flow followed the reference's mover into them,
+            # and the reference has not the movers' colour, the reference stays
+            both = ((p_mover[1:] > 0.5) | own | ~usable[1:]).all(0) & usable[1:].any(0)
+            # ... and where the three photos all differ (each source shows something of
+            # its own there): no two of them outvote the reference, so its colour
+            # decides as with two photos (``bursts/shaky_desk6`` as desk1, desk2 and
+            # desk4: both sources' bottles stood on desk the reference shows, and the
+            # sources' consensus pasted one of them into the clean photo)
+            split = (usable[1:].all(0) & (dist[1, 2] >= tau) & (dist[0, 1] >= tau)
+                     & (dist[0, 2] >= tau))
+            ref_cost = np.where((both | split) & (p_mover[0] < 0.5), 0.0, ref_cost)
         D[0] = np.where(suspect, ref_cost, D[0])
         cons = np.where(suspect[..., None], cons_s, cons)
     D[1:] += P.select_kappa + P.select_gamma * p_mover[1:]
