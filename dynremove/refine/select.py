@@ -1289,6 +1289,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # (with three photos, only where its colour is the movers': a source's copy of
     # the mover, moved, is followed onto the scene beside the reference's mover)
     followed_here = own.any(0) & in_core
+    # ... but not where the reference has the scene's colour and every source followed
+    # there shows what the reference shows: the followed region, closed and grown in
+    # the source's frame, reaches past its mover onto the scene (``bursts/shaky_desk6``
+    # as desk1, desk2, desk5 and desk4: the reference lost to desk1's bottle there,
+    # and a piece of it was pasted onto the desk)
+    followed_here &= ~((p_mover[0] < 0.5) & ((dist[0, 1:] < tau) | ~own).all(0))
     if S == 2:
         followed_here &= p_mover[0] >= 0.5
     D[0] = np.where(followed_here, np.maximum(D[0], 2 * _DE_CAP), D[0])
