@@ -483,12 +483,14 @@ def weighed_words(sel: dict[str, Any]) -> str | None:
                 "best-supported source")
     else:
         txt += ("; the reference was the suspect here: the consensus is the sources' own, "
-                "and keeping the reference costs --select-ref-cost")
+                "and keeping the reference costs --select-ref-cost, or, where it agrees "
+                "with that consensus (ΔE under --select-tau), its distance to it plus "
+                "--select-gamma × its P(mover)")
         if cost["reference"] == 0:
-            txt += (", here nothing: with two or three photos, where no majority says "
-                    "the reference shows the mover (the sources show movers of their own, "
-                    "or all the photos differ), the movers' colour model decides, and it "
-                    "kept the reference")
+            txt += ("; here nothing: it agrees with the consensus in colour, or, with two "
+                    "or three photos, no majority says that it shows the mover (the "
+                    "sources show movers of their own, or all the photos differ) and "
+                    "the movers' colour model kept it")
     return txt
 
 
