@@ -591,13 +591,18 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         if note:
             msgs.append(note)
             warnings.warn(msgs[-1], stacklevel=2)
+    undecided = _undecided_note(summaries, ref_img.shape[0] * ref_img.shape[1], len(srcs))
+    if undecided:
+        msgs.append(undecided)
+        warnings.warn(msgs[-1], stacklevel=2)
     if not dyn.any():
         flagged = int(sum(int(sm["n_dynamic"]) for sm in summaries))
         msgs.append("nothing was found moving in the reference: the clean image is the "
                     "reference unchanged" + (
-                        f" (the scans flagged {flagged} px, in specks that the clean-up of "
-                        "L removed: thinner than its opening, or under --min-region-px "
-                        f"{params.min_region_px} px)" if flagged and params.clean_mask else ""))
+                        f" (the scans flagged {flagged} px, scattered in pieces that the "
+                        "clean-up of L removed: each thinner than its opening, or under "
+                        f"--min-region-px {params.min_region_px} px)"
+                        if flagged and params.clean_mask else ""))
         warnings.warn(msgs[-1], stacklevel=2)
     last = int(summaries[-1]["n_dynamic"]) if summaries else 0
     if params.max_scans > 1 and len(summaries) == params.max_scans and last > 0:
@@ -771,6 +776,27 @@ def _strays(views: list[geometry.TwoView]) -> list[int]:
     if not good or np.median(good) < 4 * geometry.MIN_MATCHES:
         return []
     return [k for k, v in enumerate(views) if not geometry.aligned(v)]
+
+
+def _undecided_note(summaries: list, n_px: int, n_sources: int, *,
+                    share: float = 0.5) -> str:
+    """The note on a first scan that left at least ``share`` of the reference's
+    ``n_px`` pixels undecided (no cluster of candidate matches formed: the scans call
+    none of them dynamic), or ''. A fresh-user trial ran two photos in which a cup
+    moved 150 px: 84 % of the photo was undecided, and the only notes were "only 2
+    photos" and "nothing was found moving ... in specks"."""
+    if not summaries or n_px <= 0:
+        return ""
+    frac = int(summaries[0]["n_undecided"]) / n_px
+    if frac < share:
+        return ""
+    why = ("with 2 photos a pixel's candidates come from the other photo alone, and "
+           "they must agree with each other" if n_sources == 1 else
+           "too few of the other photos agree about it: photos that overlap more, or "
+           "more photos, decide more")
+    return (f"the scans could not decide {100 * frac:.0f} % of the reference (no cluster "
+            f"of candidate matches formed there: {why}); they call no such pixel "
+            "dynamic, so a mover there may stay")
 
 
 def _knee_note(views: list[geometry.TwoView], limit: float) -> str:

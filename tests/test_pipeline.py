@@ -453,3 +453,31 @@ def test_a_black_and_white_reference_is_filled_in_gray():
     # a colour reference, or a set already all gray, is left alone (no note)
     assert gray_like_reference(sc.images, ref)[1] is None
     assert gray_like_reference(gray, ref)[1] is None
+
+
+def test_a_scan_that_decides_little_of_the_reference_says_so():
+    """Two photos of ``bursts/tim6`` (tim2, tim4) in which the cup moved 150 px: the
+    first scan formed no cluster of candidates at 84 % of the reference, so it flags
+    little and the cup stays; the run says that it could not decide most of the
+    photo, and why (a fresh-user trial had only "nothing was found moving")."""
+    from conftest import data_dir
+
+    from dynremove.pipeline import _undecided_note
+
+    # the note itself: from half of the photo up, worded by the number of sources
+    sm = [{"n_undecided": 600}]
+    assert _undecided_note(sm, 1000, 1).startswith("the scans could not decide 60 % ")
+    assert "with 2 photos" in _undecided_note(sm, 1000, 1)
+    assert "more photos" in _undecided_note(sm, 1000, 3)
+    assert _undecided_note([{"n_undecided": 400}], 1000, 3) == ""
+    assert _undecided_note([], 1000, 3) == ""
+    d = data_dir() / "bursts" / "tim6" / "frames"
+    if not d.is_dir():
+        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA to the shared data folder)")
+    ims = [cv2.imread(str(d / f"{n}.jpg")) for n in ("tim2", "tim4")]
+    with pytest.warns(UserWarning) as rec:
+        r = remove_dynamic(ims, ref=1)
+    said = [str(w.message) for w in rec if "could not decide" in str(w.message)]
+    assert len(said) == 1 and "with 2 photos" in said[0], [str(w.message) for w in rec]
+    undecided = int(r.scans[0]["n_undecided"]) / r.dynamic.size
+    assert undecided > 0.5 and f"{100 * undecided:.0f} %" in said[0]
