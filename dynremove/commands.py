@@ -401,7 +401,8 @@ def reference_note(ref_arg: str | None, ref: int, info: dict, names: list[str]) 
     n = int(info.get("n_distinct", len(names)))  # a photo given twice counts once
     other = info.get("other_middle", ref - 1)
     dup = f" of the {n} distinct ones" if n < len(names) else ""
-    middle = (f"the middle image{dup}" if n % 2 else
+    middle = (f"all {len(names)} files are the same photo" if n == 1 < len(names) else
+              f"the middle image{dup}" if n % 2 else
               f"the later of the two middle images{dup}; --ref {other} for the other"
               if n > 2 else f"the second{dup}; --ref {other} for the first")
     how = {"middle": middle, "auto": "chosen by --ref auto"}.get(

@@ -376,6 +376,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                                 f"{names[srcs[k]]} ({100 * agree[k]:.1f} % alike)"
                                 for k in np.flatnonzero(copy)))
                 drop(np.flatnonzero(copy))
+            elif copy.all():  # (kept: there is nothing else to compare with)
+                msgs.append("every other photo is a near-copy of the reference ("
+                            + ", ".join(f"{names[srcs[k]]} {100 * agree[k]:.1f} % alike"
+                                        for k in range(len(srcs)))
+                            + "): none shows the scene otherwise, so nothing can be found "
+                            "moving; photos taken further apart in time are needed")
         if params.near_copy_agree > 0 and len(srcs) > 2:
             dups = duplicate_sources(np.stack([images[s] for s in srcs]),
                                      [v.H for v in views], params.near_copy_agree)

@@ -433,6 +433,11 @@ def test_a_photo_given_twice_does_not_move_the_middle_reference(tmp_path):
     assert iset.names[i] == paths[3].name
     assert reference_note(None, i, info, iset.names).endswith(
         "the later of the two middle images of the 4 distinct ones; --ref 1 for the other)")
+    # one photo under three names: said so (a trial read "the middle image of the 1
+    # distinct ones")
+    assert reference_note(None, 0, {"n_distinct": 1, "chosen_by": "middle"},
+                          ["a.jpg", "b.jpg", "c.jpg"]).endswith(
+        "(index 0 of 0..2, all 3 files are the same photo)")
 
 
 def test_a_line_says_which_set_is_running(tmp_path, root, capsys):
