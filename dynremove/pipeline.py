@@ -403,6 +403,9 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             msgs.append(f"{len(weak)} of {len(views)} sources could not be aligned to the "
                         "reference: the result is unreliable (misaligned fill, missed or "
                         "false detections). " + (
+                            f"None aligns at the {W}x{H} analysed: too small to match "
+                            "(a larger --max-side, where the photos are larger)"
+                            if len(weak) == len(views) and max(H, W) < _SMALL_PX else
                             "None aligns: they may not show the reference's scene (check "
                             "the reference, --ref, and the photos), or overlap it too little"
                             if len(weak) == len(views) else
@@ -876,6 +879,11 @@ def _weak_reference_note(images, ref: int, srcs: list[int], views, names,
             f"{between}): if it is blurred, heavily compressed or shot otherwise, "
             "another reference aligns better (--ref auto takes the sharpest with the "
             "most matches)")
+
+
+# the long side under which a set that aligns nowhere is said to be too small (a trial
+# ran --max-side 50: 13-14 matches a photo, and the note blamed the photos)
+_SMALL_PX = 320
 
 
 def _few_matches_note(weak: list[tuple[str, int, int]], *, some_F: bool = False) -> str:

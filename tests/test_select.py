@@ -1002,6 +1002,22 @@ def test_a_reference_of_another_scene_says_so():
     assert res.clean.shape == ims[2].shape
 
 
+def test_photos_too_small_to_align_are_told_so():
+    """The same scene analysed at 50 px (a trial ran --max-side 50): no source aligns,
+    and the note names the size analysed, not the photos (it said that they may not
+    show the reference's scene)."""
+    from dynremove.evaluation import synth
+
+    sc = synth.make_scene(seed=3, n_views=3, size=(240, 320), n_objects=1)
+    ims = [cv2.resize(im, (50, 38), interpolation=cv2.INTER_AREA) for im in sc.images]
+    with pytest.warns(UserWarning) as caught:
+        remove_dynamic(ims, ref=1)
+    notes = [str(w.message) for w in caught]
+    assert any("None aligns at the 50x38 analysed: too small to match" in n
+               for n in notes), notes
+    assert not any("may not show the reference's scene" in n for n in notes)
+
+
 def test_a_collapsed_homography_is_not_an_alignment():
     """MAGSAC returned, for a photo blurred by σ 4 px, a homography on 21 inliers with
     det 2e-29 (inverting it crashed the run). A homography that collapses, mirrors or
