@@ -487,10 +487,10 @@ def weighed_words(sel: dict[str, Any]) -> str | None:
                 "with that consensus (ΔE under --select-tau), its distance to it plus "
                 "--select-gamma × its P(mover)")
         if cost["reference"] == 0:
-            txt += ("; here nothing: it agrees with the consensus in colour, or, with two "
-                    "or three photos, no majority says that it shows the mover (the "
-                    "sources show movers of their own, or all the photos differ) and "
-                    "the movers' colour model kept it")
+            txt += ("; here nothing: no majority of the photos says that it shows the "
+                    "mover (no two photos agree, or both sources of three show a mover, "
+                    "or, of two photos, the movers' colour model does not single it out), "
+                    "and it has not the movers' colour")
     return txt
 
 

@@ -54,10 +54,9 @@ that the scan flagged with doubled content.
    the sources agree. Where the sets' parallax is large (median
    ``parallax_px`` > ``select_parallax_px``), the consensus may also keep the
    reference inside L: the scan's flags there are mostly 3-D structure.
-   With two photos no majority can be counted, nor where no two photos agree:
-   the colour model decides whether the reference keeps its pixel (it does
-   where it has not the movers' colours; with three photos also where both
-   sources' candidates have them, or show the reference's mover followed there).
+   Where no majority can be counted (two photos; or no two photos agree; or,
+   of three, both sources show a mover), the colour model decides whether the
+   reference keeps its pixel (``reference_cost``).
    A region of L that the cut replaced almost whole (``select_complete``) is
    a mover: its fragments kept as the reference are replaced too, so that no
    piece of it stays in the photo; one it kept almost whole is static: its
@@ -834,6 +833,50 @@ def region_shares(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_]
     return comp, share
 
 
+def reference_cost(ref_cost: float, p_mover: npt.NDArray[np.floating],
+                   usable: npt.NDArray[np.bool_], agree: npt.NDArray[np.bool_],
+                   own: npt.NDArray[np.bool_]) -> npt.NDArray[np.float64]:
+    """The data cost of keeping the reference where it is the suspect (inside L), where
+    no majority of the photos can say that it shows the mover.
+
+    With two photos (one source) which one shows the mover is not known: the
+    colour model must say the reference does and the source does not, or keeping
+    the reference costs nothing. With more, where no two photos agree (each source
+    shows something of its own there, the reference a third thing), nothing
+    outvotes the reference, and it costs nothing where it has not the movers'
+    colour (``bursts/shaky_desk6`` as desk1, desk2 and desk4: both sources' bottles
+    stood on desk the reference shows, and the sources' consensus, one source,
+    pasted its bottle there; with desk6 too, a brown fleck on the desk's edge;
+    DAVIS J 0.5918 -> 0.5954, README, session 51). With three photos, also where
+    both sources show a mover (the same walker, photographed before and after):
+    both candidates have the movers' colours, or the flow followed the reference's
+    mover into them (``own``).
+
+    Parameters
+    ----------
+    ref_cost : float
+        ``Params.select_ref_cost``, the cost elsewhere.
+    p_mover : (S + 1, h, w) float ndarray
+        Each candidate's P(mover colour), the reference first.
+    usable : (S + 1, h, w) bool ndarray
+    agree : (S + 1, S + 1, h, w) bool ndarray
+        Pairs of usable candidates within ``select_tau`` (the diagonal: usable).
+    own : (S, h, w) bool ndarray
+        Where the flow followed the reference's mover into each source.
+
+    Returns
+    -------
+    (h, w) float64 ndarray
+    """
+    S = len(p_mover) - 1
+    if S == 1:
+        return np.where((p_mover[0] > 0.5) & (p_mover[1] < 0.5), ref_cost, 0.0)
+    keep = ((agree.sum((0, 1)) - usable.sum(0)) == 0) & (usable[1:].sum(0) >= 2)
+    if S == 2:
+        keep |= ((p_mover[1:] > 0.5) | own | ~usable[1:]).all(0) & usable[1:].any(0)
+    return np.where(keep & (p_mover[0] < 0.5), 0.0, ref_cost)
+
+
 def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
                      allowed: npt.NDArray[np.bool_], share: float, reach_px: int, *,
                      regions: tuple[np.ndarray, np.ndarray] | None = None
@@ -1255,26 +1298,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     if suspect.any():
         Ds, cons_s = consensus(support[1:], 1)
         D = np.where(suspect[None], Ds, D)
-        ref_cost = P.select_ref_cost
-        if S == 1:  # two photos: which one shows the mover is not known; the colour
-            # model must say the reference does and the source does not
-            ref_cost = np.where((p_mover[0] > 0.5) & (p_mover[1] < 0.5), ref_cost, 0.0)
-        else:
-            # where no two of the photos agree (each source shows something of its own
-            # there, the reference a third thing), nothing outvotes the reference: its
-            # colour decides, as with two photos (``bursts/shaky_desk6`` as desk1,
-            # desk2 and desk4: both sources' bottles stood on desk the reference
-            # shows, and the sources' consensus, one source, pasted its bottle there;
-            # with desk6 too, a brown fleck on the desk's edge; DAVIS J 0.5918 ->
-            # 0.5954, README, session 51)
-            keep = (((agree.sum((0, 1)) - usable.sum(0)) == 0)
-                    & (usable[1:].sum(0) >= 2))
-            if S == 2:  # three photos: both sources may show a mover there (the same
-                # walker, photographed before and after): where both candidates have
-                # the movers' colours, or the flow followed the reference's mover into
-                # them, and the reference has not the movers' colour, it stays
-                keep |= ((p_mover[1:] > 0.5) | own | ~usable[1:]).all(0) & usable[1:].any(0)
-            ref_cost = np.where(keep & (p_mover[0] < 0.5), 0.0, ref_cost)
+        ref_cost = reference_cost(P.select_ref_cost, p_mover, usable, agree, own)
         # where the reference agrees with the sources' consensus (ΔE under tau), it
         # costs what a source showing it would, less κ: its distance to it and its
         # movers'-colour term. The scans' flag that the sources contradict then
@@ -1283,7 +1307,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # and desk4); DAVIS J 0.5867 -> 0.5918, 12 composites damage 0.467 -> 0.460 %,
         # leftover 15.32 -> 15.34 % (README, session 51)
         ref_cost = np.minimum(ref_cost, np.where(
-            Ds[0] < tau, Ds[0] + P.select_gamma * p_mover[0], np.inf))
+            (Ds[0] < tau) & usable[1:].any(0), Ds[0] + P.select_gamma * p_mover[0], np.inf))
         D[0] = np.where(suspect, ref_cost, D[0])
         cons = np.where(suspect[..., None], cons_s, cons)
     D[1:] += P.select_kappa + P.select_gamma * p_mover[1:]
@@ -1452,4 +1476,4 @@ __all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LIN
            "grow_into_rim",
            "median_parallax_px", "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
-           "mixture_detail", "region_shares", "select_fill"]
+           "mixture_detail", "reference_cost", "region_shares", "select_fill"]
