@@ -370,7 +370,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                 np.asarray(images[ref]), np.stack([images[s] for s in srcs]),
                 [v.H for v in views])
             copy = agree >= params.near_copy_agree
-            if copy.any() and not copy.all() and len(srcs) > 1:
+            if copy.any() and not copy.all():
                 msgs.append("near-copies of the reference, not used as evidence (they would "
                             "out-vote the views that saw the background): " + ", ".join(
                                 f"{names[srcs[k]]} ({100 * agree[k]:.1f} % alike)"
