@@ -523,7 +523,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
 
     groups = [(1, "its match shows it"),
               (2, "found on the epipolar line"),
-              (3, "found on the epipolar line, but too few others are for that to count"),
+              (3, "found on the epipolar line, but too few others are for that to count "
+                  "while another source that sees it shows something else"),
               (4, "the match agrees, in the movers' colours"),
               (5, "not found: the match differs"
                   + (f", and nothing on the epipolar line is within ΔE {search_de:.1f}"
