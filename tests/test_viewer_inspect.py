@@ -633,6 +633,22 @@ def test_a_reference_kept_against_a_cheaper_source_is_told_as_the_seams_doing():
     assert "it was the cheapest label here" in vd.static_test_line(h)
 
 
+def test_one_source_s_epipolar_evidence_is_told_when_it_counted_alone():
+    """Session 52: the epipolar search's evidence counts from one source where no
+    other source contradicts it. Inspect says so where it did (one source found it
+    on its line, the other's match differs in the movers' colours), and not where two
+    sources found it (the rule of two)."""
+    def line(evidence):
+        h = dict(x=1, y=1, final_dynamic=False, source_names=list(evidence),
+                 selection=dict(evidence=evidence, static_need=1, explained=1,
+                                ref_mover_p=0.3, source=0, completed=0))
+        return vd.static_test_line(h)
+
+    alone = line({"a": 2, "b": 5})
+    assert "kept as static" in alone and "counts from one source here" in alone, alone
+    assert "counts from one source" not in line({"a": 2, "b": 2})
+
+
 def test_a_pixel_the_fill_added_names_the_rule_that_did():
     """A fresh-user trial read three rules offered for one pixel ("--select-grow-px,
     --select-complete, or at the frame's edge"). The region rule is named from the

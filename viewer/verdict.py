@@ -534,6 +534,12 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     parts = [f"{what}: {', '.join(who)}" for code, what in groups if (who := named(code))]
     counted = sum(c in (1, 2) for c in ev.values())
     passed = bool(sel.get("explained"))
+    if 2 in ev.values() and sum(c in (1, 2, 4) for c in ev.values()) < max(2, need):
+        # (``select_fill``: the epipolar search's weaker evidence counts from one
+        # source where no other source that sees the pixel contradicts it)
+        parts.append("the epipolar search's evidence counts from one source here, as no "
+                     "other source contradicts it: where their match differs, it shows "
+                     "the movers' colours")
     # ("3 of the 2 needed" read as a bug to a trial: more may count than are needed)
     evidence = (f"{counted} source{'s' if counted != 1 else ''} count as showing the "
                 f"reference's content here, {need} needed (" + "; ".join(parts) + ")")
