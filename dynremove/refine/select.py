@@ -285,9 +285,13 @@ def _reference_mover_probability(lab_ref: np.ndarray, L: np.ndarray,
     vouches for its own colours: its pixels' P(mover) is high because they are in
     L. Here a connected region (8-connected) holding at most ``_LEFT_OUT_SHARE`` of
     L's core is judged by the histogram of the other regions' core against the
-    same ring (GrabCut's model, as ``_mover_model``); the largest region, and L
-    of one region, keep the whole model's P, as do pixels outside L.
-    lab_ref : (H, W, 3) float32 Lab; L : (H, W) bool; model : ``_mover_model(lab_ref, L)``.
+    same ring (GrabCut's model, as ``_mover_model``). A region holding more than
+    that share, a region with no core (thinner than 5 px: it is not in the model
+    anyway), L of one region, and the pixels outside L keep the whole model's P;
+    where no region holds more than half of the core (or two hold half each),
+    every region is judged by the rest.
+    lab_ref : (H, W, 3) float32 Lab; L : (H, W) bool; model : ``_mover_model(lab_ref, L)``
+    of the same L (None: zeros, as ``_mover_probability``).
     """
     p = _mover_probability(model, lab_ref)
     if model is None:
@@ -1094,7 +1098,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     line_xy = (np.full((S, H, W, 2), np.nan, np.float32)  # ... and where it lies
                if mode == "parallax" and P.select_search_de > 0 else None)
     seen = np.zeros((S, H, W), bool)  # the flow match inside the source's content
-    # the flow sample's P(mover colour), and where the flow found the reference's colour
+    # the flow sample's P(mover colour) under the model of L as the refinement left it
+    # (not the model of L grown below), and where the flow found the reference's colour
     # off its epipolar line or beyond the parallax bound (it followed the content there)
     p_flow = np.zeros((S, H, W), np.float32)
     off_line = np.zeros((S, H, W), bool)
