@@ -200,13 +200,15 @@ def cmd_run(args: argparse.Namespace) -> int:
         if (out / "report.json").is_file():
             # (replaced only when this run writes: a run that fails leaves them)
             _note(args, f"{out} holds an earlier run's outputs (its report.json): this run "
-                  "replaces them")
+                  "replaces them once it has its own (a run that fails leaves them)")
         else:
             there = [n for n in (*io.RUN_OUTPUTS, "report.json") if (out / n).is_file()]
             if there:
                 _note(args, f"{out} holds {', '.join(there)}, not from a dynremove run (no "
                       "report.json beside): this run replaces "
-                      + ("it" if len(there) == 1 else "them"))
+                      + ("it" if len(there) == 1 else "them")
+                      + " once it has its own (a run that fails leaves "
+                      + ("it)" if len(there) == 1 else "them)"))
         return _run(args, params, out)
     except BaseException as e:
         for q in created:  # bad input or interrupted: leave no empty folder behind

@@ -631,14 +631,16 @@ def test_the_compile_note_says_what_this_run_compiles(monkeypatch, capsys, cache
 
 def test_a_run_into_an_earlier_runs_folder_says_it_replaces_it(folder, tmp_path, capsys):
     """A fresh-user trial: an existing --out folder was overwritten without a word.
-    The first run into a folder says nothing of it; the second notes the replacement."""
+    The first run into a folder says nothing of it; the second notes the replacement
+    (and, as a later trial read "replaces them" before an error, that only a run that
+    gets its results replaces them)."""
     out = tmp_path / "o"
     rc, _, err = run_cli(capsys, folder, "--out", out)
     assert rc == 0 and "earlier run's outputs" not in err
     rc, _, err = run_cli(capsys, folder, "--out", out)
     assert rc == 0
     assert f"note: {out} holds an earlier run's outputs (its report.json): this run " \
-           "replaces them" in err
+           "replaces them once it has its own (a run that fails leaves them)" in err
 
 
 def test_compare_is_checked_before_the_photos_are_read(tmp_path, capsys, monkeypatch):
