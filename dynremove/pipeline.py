@@ -558,8 +558,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             if selection.reasons is not None:
                 r = selection.reasons[:, ns]
                 n_fw = int(((r == FOLLOWED).any(0) & np.isin(r, (FOLLOWED, OUTSIDE, OWN_MOVER)).all(0)).sum())
-            why = (f", {n_fw} px of them because every photo shows its own copy of the mover there "
-                   "(it moved less than its size)" if n_fw >= 0.5 * n_ns else "")
+            # (a fresh-user trial on three photos of a static façade read of "the mover"
+            # where a pillar, standing off the wall, had been followed by the flow)
+            why = (f", {n_fw} px of them because every photo shows its own copy of the mover there, "
+                   "displaced (a mover that moved less than its size; or static structure "
+                   "standing off the rest, whose parallax the flow followed: look at it)"
+                   if n_fw >= 0.5 * n_ns else "")
             msgs.append(f"{n_ns} px ({'under 0.1' if share < 0.1 else f'{share:.1f}'} % of "
                         "the replaced region) were seen free by no source: inpainted "
                         f"(OpenCV Telea){why}")
@@ -589,7 +593,9 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                 f"{n_lg} px show a mover that lingered: {shown}; {said}"
                 + (f" (the keypoint matches depart {selection.parallax_px:.0f} px from one "
                    "plane between the photos, the movers' own matches included: as 3-D "
-                   "parallax, an edge the mover hides may come out misplaced)"
+                   "parallax, an edge the mover hides may come out misplaced; and what was "
+                   "taken for a mover may be static structure standing off the rest, which "
+                   "those photos show elsewhere: look at it)"
                    if selection.consensus_mode == "parallax" else "")
                 + ("; --no-select-minority-one turns off its three-photo rule (one photo "
                    "that saw the background is enough), --select-minority 0 the whole step"
