@@ -346,8 +346,11 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
-            lines.append("fill: reference kept, explained as static 3-D structure "
-                         "(parallax, not a mover)")
+            # ("parallax, not a mover" was read as a certainty by a trial where the
+            # one source that showed it had the mover lingering there too)
+            lines.append("fill: reference kept, explained as static 3-D structure: enough "
+                         "sources show its content as the geometry expects (a mover that "
+                         "stayed in place in those photos looks the same)")
         elif sel.get("completed") == 2:
             region = region_words(sel)
             lines.append("fill: reference kept — the photomontage took a source here, but "
