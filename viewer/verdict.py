@@ -420,8 +420,10 @@ _CASE_WORDS = {
 
 LEGEND = ("(M: how alike the pixel and the winning cluster A_m of its candidate matches "
           "are, Sec. 3.2.1; at or under t_r it is called dynamic. b_m: A_m's weight, the "
-          "sum of its candidates' confidences B_l. step: the visiting order, the viewer's "
-          "`step` timeline)")
+          "sum of its candidates' confidences B_l. Overwritten: each dynamic pixel's "
+          "chosen patch q* is written into the reference as the scan goes, with its f_c and "
+          "f_g (Sec. 3.2.2), so a pixel's M compares what its neighbours' writes left there. "
+          "step: the visiting order, the viewer's `step` timeline)")
 
 VOTES_LEGEND = ("(the border votes: the scan decides on whole patches, so its map overshoots "
                 "or stops short of an object's outline; along the map's border each pixel is "
