@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import re
 import warnings
 from pathlib import Path
 
@@ -484,6 +485,30 @@ def _line_words(de: float, at: str = "") -> str:
     if de >= SEARCH_CAP_DE - 0.05:
         return f"ΔE ≥ {SEARCH_CAP_DE:.0f}, nothing alike{at}"
     return f"ΔE {de:.1f}{at}"
+
+
+def test_where_the_fill_sampled_its_source_is_told(method_run):
+    """A fresh-user trial (session 52) could not check a filled pixel's colour: inspect
+    named the source, not where in it the fill sampled. The recording keeps that
+    position (``paths.RESULT_FILL_MATCH``: the chosen source's field at each replaced
+    pixel) and the fill line says "at (x, y) in it", as the fill's own fields say."""
+    res, path = method_run["res"], method_run["path"]
+    sel = res.selection
+    rec = vi.read_selection(path)
+    filled = (sel.label > 0) & ~sel.no_source
+    assert filled.any() and "fill_x" in rec and "fill_y" in rec
+    fx, fy = rec["fill_x"].astype(np.float64), rec["fill_y"].astype(np.float64)
+    assert (fx[~filled] == P.DE_NONE).all()
+    ys, xs = np.nonzero(filled)
+    i = len(ys) // 2
+    x, y = int(xs[i]), int(ys[i])
+    want = sel.fields[int(sel.label[y, x]) - 1][y, x]
+    np.testing.assert_allclose([fx[y, x] / P.XY_SCALE, fy[y, x] / P.XY_SCALE], want,
+                               atol=0.5 / P.XY_SCALE + 1e-6)
+    text = vd.format_pixel_history(vi.pixel_history(path, x, y))
+    got = re.search(r"fill: filled from source \S+ at \(([\d.]+), ([\d.]+)\) in it", text)
+    assert got, text
+    np.testing.assert_allclose([float(got[1]), float(got[2])], want, atol=0.1)
 
 
 def test_the_static_test_is_told(method_run):

@@ -516,7 +516,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
     its own frame: where the flow followed the reference's mover into it), ``offset``
     ((H, W, 3) int16, B/G/R levels the blend added to the chosen source, 0 where it
-    added none or no source filled; ``paths.RESULT_OFFSET``); absent
+    added none or no source filled; ``paths.RESULT_OFFSET``), ``fill_x``, ``fill_y``
+    (uint16, where the chosen source was sampled, in its pixels × XY_SCALE, DE_NONE
+    where no source filled; ``paths.RESULT_FILL_MATCH``); absent
     keys when the run had no selection step (or, for ``inpainted``, was recorded
     before it was logged)."""
     store, p = load_store(path), P.Paths(root)
@@ -565,6 +567,10 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     if rows:
         out["region_share"] = rows[0][1]
         out["region_rule"] = _static_values(store, p(P.RESULT_REGION_SHARE))
+    for axis in "xy":
+        rows = _image_rows(store, p(f"{P.RESULT_FILL_MATCH}/{axis}"), "DepthImage", index=None)
+        if rows:
+            out[f"fill_{axis}"] = rows[0][1]
     rows = _image_rows(store, p(P.RESULT_OFFSET), "Image", index=None)
     if rows and rows[0][1].ndim == 3:
         out["offset"] = rows[0][1][..., ::-1].astype(np.int16) - P.OFFSET_ZERO  # RGB -> BGR
@@ -708,6 +714,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.P_SCALE
         elif k in ("thresholds", "region_rule"):
             sel[k] = {n: (a[0] if isinstance(a, list) and a else a) for n, a in v.items()}
+        elif k in ("fill_x", "fill_y"):  # where the chosen source was sampled
+            sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.XY_SCALE
         elif k == "offset":  # B/G/R levels the blend added to the chosen source
             sel[k] = [int(c) for c in v[y, x]]
         else:

@@ -138,6 +138,10 @@ RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV 
 # OFFSET_ZERO + levels (clipped to 0..255): grey where it added nothing or no source filled
 RESULT_OFFSET = "result/selection/offset"
 OFFSET_ZERO = 128
+# where in the chosen source each replaced pixel was sampled (the source's field there),
+# in that source's pixels at the analysed size: fill_match/x and /y (uint16,
+# round(px · XY_SCALE), DE_NONE where the reference was kept, inpainted or off the frame)
+RESULT_FILL_MATCH = "result/selection/fill_match"
 # the static 3-D structure test inside L: per source, whether it shows the reference's
 # content (EVIDENCE codes) and the best CIE76 ΔE along its epipolar line (uint16,
 # round(ΔE · DE_SCALE), DE_NONE where not searched); how many sources had to show it;

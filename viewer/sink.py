@@ -63,6 +63,21 @@ _EVIDENCE_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 
                      6: (120, 120, 120, 120)}
 
 
+def _fill_match(sel: Any, c: int) -> np.ndarray:
+    """Coordinate ``c`` (0: x, 1: y) of where the fill sampled its chosen source at
+    each pixel (``Selection.fields`` of ``Selection.label``), in that source's pixels;
+    (H, W) float32, NaN where the reference was kept, the pixel inpainted, or the
+    sample off the source's frame (``paths.RESULT_FILL_MATCH``)."""
+    label = np.asarray(sel.label)
+    out = np.full(label.shape, np.nan, np.float32)
+    for k, f in enumerate(sel.fields):
+        at = label == k + 1
+        if sel.no_source is not None:
+            at &= ~np.asarray(sel.no_source, bool)
+        out[at] = np.asarray(f)[..., c][at]
+    return np.where(out >= 0, out, np.nan)
+
+
 def _quantised(x: np.ndarray, scale: int) -> np.ndarray:
     """(H, W) float → uint16 round(x · scale), P.DE_NONE where NaN (clipped below it)."""
     x = np.asarray(x, np.float32)
@@ -479,6 +494,11 @@ class RerunSink(StepColumns):
                 self.rec.log(self.p(P.RESULT_OFFSET), rr.Image(
                     np.clip(np.round(off) + P.OFFSET_ZERO, 0, 255).astype(np.uint8)),
                     static=True)
+            if getattr(sel, "fields", None) is not None and getattr(sel, "label", None) is not None:
+                for c, axis in enumerate("xy"):
+                    self.rec.log(self.p(f"{P.RESULT_FILL_MATCH}/{axis}"), rr.DepthImage(
+                        _quantised(_fill_match(sel, c), P.XY_SCALE),
+                        meter=float(P.XY_SCALE)), static=True)
             for k, mv in enumerate(np.asarray(sel.movers, bool)):
                 name = src_names[k] if k < len(src_names) else f"source{k}"
                 if getattr(sel, "followed", None) is not None and sel.followed[k].any():

@@ -343,7 +343,9 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                            "by more than light does, e.g. a shadow or a wrong source)"
                            if max(abs(c) for c in off) >= _LARGE_OFFSET else
                            " (the photos' exposure and light)"))
-            lines.append(f"fill: filled from source {_src_name(h, k - 1)}{why}"
+            fx, fy = sel.get("fill_x"), sel.get("fill_y")
+            at = f" at ({fx:.1f}, {fy:.1f}) in it" if fx is not None and fy is not None else ""
+            lines.append(f"fill: filled from source {_src_name(h, k - 1)}{at}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
             # ("parallax, not a mover" was read as a certainty by a trial where the
