@@ -342,7 +342,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                         + (" (a large correction: the ring there differs from this source "
                            "by more than light does, e.g. a shadow or a wrong source)"
                            if max(abs(c) for c in off) >= _LARGE_OFFSET else
-                           " (the photos' exposure and light)"))
+                           " (the photos' light differs there: exposure, glare or shade)"))
             fx, fy = sel.get("fill_x"), sel.get("fill_y")
             at = f" at ({fx:.1f}, {fy:.1f}) in it" if fx is not None and fy is not None else ""
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{at}{why}"
