@@ -203,7 +203,8 @@ def test_the_blends_offset_is_recorded_and_told(method_run):
     assert (told in words) == (mag[y, x] >= 1)
     # a large correction is not called light (a trial read -115 levels as light)
     assert ("a large correction" in words) == (mag[y, x] >= 40)
-    assert ("(the photos' light differs there: exposure, glare or shade)" in words) == (1 <= mag[y, x] < 40)
+    light = "(the photos' light differs there: exposure, glare or shade)"
+    assert (light in words) == (1 <= mag[y, x] < 40)
 
 
 def test_a_lingering_mover_is_logged_and_told(tmp_path):
