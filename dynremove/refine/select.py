@@ -206,6 +206,12 @@ _BINS = 12  # per Lab axis, in the movers' colour model
 # rest of L (``_reference_mover_probability``): 12 composites damage 0.460 -> 0.385 %,
 # DAVIS J 0.595 -> 0.611, with the one-source epipolar evidence (README, session 52)
 _LEFT_OUT_SHARE = 0.5
+# ... and leaves out, too, the other such regions whose colour histograms overlap its own
+# by more than this Bhattacharyya coefficient (among the _SIMILAR_MAX largest): the
+# door's two pillars of the 3-view entry-P10+kite-surf composites (seed 7) vouched for
+# each other, damage 1.69 and 2.57 % -> 0.84 and 0.82 % (README, session 52)
+_SIMILAR_BC = 0.5
+_SIMILAR_MAX = 40
 
 
 def _followed_mover(flow: npt.NDArray[np.float32], found: npt.NDArray[np.bool_],
@@ -289,7 +295,11 @@ def _reference_mover_probability(lab_ref: np.ndarray, L: np.ndarray,
     that share, a region with no core (thinner than 5 px: it is not in the model
     anyway), L of one region, and the pixels outside L keep the whole model's P;
     where no region holds more than half of the core (or two hold half each),
-    every region is judged by the rest.
+    every region is judged by the rest. The rest leaves out, too, the other
+    such regions whose colours overlap the region's (Bhattacharyya coefficient of
+    their core's colour histograms over ``_SIMILAR_BC``, among the
+    ``_SIMILAR_MAX`` largest): two false positives of one kind, the two pillars of a
+    door, do not vouch for each other either.
     lab_ref : (H, W, 3) float32 Lab; L : (H, W) bool; model : ``_mover_model(lab_ref, L)``
     of the same L (None: zeros, as ``_mover_probability``).
     """
@@ -316,8 +326,19 @@ def _reference_mover_probability(lab_ref: np.ndarray, L: np.ndarray,
     px_by = np.split(px[np.argsort(lbl, kind="stable")],
                      np.cumsum(np.bincount(lbl, minlength=n))[:-1])
     flat_lab, flat_p = lab_ref.reshape(-1, 3), p.reshape(-1)
+    h_by = {int(r): np.bincount(bins_by[r], minlength=nb).astype(np.float64) for r in left_out}
+    # the largest of them, and which pairs have overlapping colours
+    big = [int(r) for r in left_out[np.argsort(-counts[left_out], kind="stable")[:_SIMILAR_MAX]]]
+    root = np.stack([np.sqrt(h_by[r] / h_by[r].sum()) for r in big])
+    similar = (root @ root.T) > _SIMILAR_BC
+    np.fill_diagonal(similar, False)
+    rank = {r: i for i, r in enumerate(big)}
     for r in left_out:
-        h = h_all - np.bincount(bins_by[r], minlength=nb)
+        r = int(r)
+        h = h_all - h_by[r]
+        if r in rank:
+            for i in np.flatnonzero(similar[rank[r]]):
+                h = h - h_by[big[i]]
         h = cv2.GaussianBlur(h.reshape(_BINS, _BINS * _BINS), (3, 3), 0.7).ravel()
         hf = h / max(h.sum(), 1e-9)
         flat_p[px_by[r]] = ((hf + 1e-4) / (hf + hb + 2e-4))[
