@@ -996,6 +996,20 @@ def test_a_region_of_l_does_not_vouch_for_its_own_colours():
     assert all(whole[q].min() >= 0.5 and p[q].max() < 0.5 for q in pillars), \
         [(whole[q].min(), p[q].max()) for q in pillars]
     assert p[piece].min() >= 0.5
+    # a mover that a pole cut in two, its pieces all of L: judged by nothing (P 0.5);
+    # with two photos (``alike=False``, where 0.5 would keep the reference) each piece
+    # is judged by the other
+    img2 = np.full((140, 240, 3), (150, 140, 135), np.uint8)
+    img2[20:120, 40:100] = img2[20:120, 110:170] = (40, 40, 210)
+    L2 = np.zeros(img2.shape[:2], bool)
+    L2[20:120, 40:100] = L2[20:120, 110:170] = True
+    lab2 = blurred_lab(img2, 1.0)
+    m2 = _mover_model(lab2, L2)
+    halves = np.s_[30:110, 50:90], np.s_[30:110, 120:160]
+    together = _reference_mover_probability(lab2, L2, m2)
+    apart = _reference_mover_probability(lab2, L2, m2, alike=False)
+    assert all(together[q].max() <= 0.5 for q in halves)
+    assert all(apart[q].min() > 0.5 for q in halves)
     # with L of one region there is no rest to judge it by: the whole model's P
     one = np.zeros_like(L)
     one[20:90, 20:90] = True

@@ -206,10 +206,13 @@ _BINS = 12  # per Lab axis, in the movers' colour model
 # rest of L (``_reference_mover_probability``): 12 composites damage 0.460 -> 0.385 %,
 # DAVIS J 0.595 -> 0.611, with the one-source epipolar evidence (README, session 52)
 _LEFT_OUT_SHARE = 0.5
-# ... and leaves out, too, the other such regions whose colour histograms overlap its own
-# by more than this Bhattacharyya coefficient (among the _SIMILAR_MAX largest): the
-# door's two pillars of the 3-view entry-P10+kite-surf composites (seed 7) vouched for
-# each other, damage 1.69 and 2.57 % -> 0.84 and 0.82 % (README, session 52)
+# ... and, for the _SIMILAR_MAX largest such regions, leaves out too each other one of
+# them whose core's colour histogram overlaps its own by more than this Bhattacharyya
+# coefficient (pairwise, not transitively): the door's two pillars of the 3-view
+# entry-P10+kite-surf composites (seed 7) vouched for each other, damage 1.69 and
+# 2.57 % -> 0.84 and 0.82 % (README, session 52). Not with two photos: a mover cut in
+# two by a pole, its pieces all of L, would be judged by nothing (P 0.5), and there
+# the reference costs nothing unless its P is over 0.5 (``reference_cost``)
 _SIMILAR_BC = 0.5
 _SIMILAR_MAX = 40
 
@@ -282,7 +285,8 @@ def _mover_probability(model: np.ndarray | None, values: np.ndarray) -> np.ndarr
 
 
 def _reference_mover_probability(lab_ref: np.ndarray, L: np.ndarray,
-                                 model: np.ndarray | None) -> np.ndarray:
+                                 model: np.ndarray | None, *, alike: bool = True
+                                 ) -> np.ndarray:
     """P(mover | colour) of the reference's own pixels (H, W) float32, each region of
     L judged by the colours of the *rest* of L (leave one out).
 
@@ -295,11 +299,13 @@ def _reference_mover_probability(lab_ref: np.ndarray, L: np.ndarray,
     that share, a region with no core (thinner than 5 px: it is not in the model
     anyway), L of one region, and the pixels outside L keep the whole model's P;
     where no region holds more than half of the core (or two hold half each),
-    every region is judged by the rest. The rest leaves out, too, the other
-    such regions whose colours overlap the region's (Bhattacharyya coefficient of
-    their core's colour histograms over ``_SIMILAR_BC``, among the
-    ``_SIMILAR_MAX`` largest): two false positives of one kind, the two pillars of a
-    door, do not vouch for each other either.
+    every region is judged by the rest. For the ``_SIMILAR_MAX`` largest such
+    regions, the rest also leaves out each other one of them whose core's colour
+    histogram overlaps its own (Bhattacharyya coefficient over ``_SIMILAR_BC``;
+    pairwise, not transitive): two pillars of a door do not vouch for each other.
+    Where nothing is left, P is 1e-4 / (ring + 2e-4): 0.5 at colours the ring lacks
+    (the pieces of one mover that a pole cut in two, all of L); ``alike=False`` (two
+    photos, where 0.5 keeps the reference) leaves out the region alone.
     lab_ref : (H, W, 3) float32 Lab; L : (H, W) bool; model : ``_mover_model(lab_ref, L)``
     of the same L (None: zeros, as ``_mover_probability``).
     """
@@ -328,8 +334,10 @@ def _reference_mover_probability(lab_ref: np.ndarray, L: np.ndarray,
     flat_lab, flat_p = lab_ref.reshape(-1, 3), p.reshape(-1)
     h_by = {int(r): np.bincount(bins_by[r], minlength=nb).astype(np.float64) for r in left_out}
     # the largest of them, and which pairs have overlapping colours
-    big = [int(r) for r in left_out[np.argsort(-counts[left_out], kind="stable")[:_SIMILAR_MAX]]]
-    root = np.stack([np.sqrt(h_by[r] / h_by[r].sum()) for r in big])
+    big = ([int(r) for r in left_out[np.argsort(-counts[left_out], kind="stable")[:_SIMILAR_MAX]]]
+           if alike else [])
+    root = (np.stack([np.sqrt(h_by[r] / h_by[r].sum()) for r in big]) if big
+            else np.zeros((0, nb)))
     similar = (root @ root.T) > _SIMILAR_BC
     np.fill_diagonal(similar, False)
     rank = {r: i for i, r in enumerate(big)}
@@ -1259,7 +1267,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         return empty
     colours = _mover_model(lab_r, mask)  # L grown as above
     # (a region of L that is a minority of it is judged by the rest's colours)
-    p_ref = _reference_mover_probability(lab_r, mask, colours)
+    p_ref = _reference_mover_probability(lab_r, mask, colours, alike=S >= 2)
     # half of the sources that see the pixel (in their frame), at least min(2, S / 2):
     # near the image border, where some sources do not reach, the others decide;
     # and at most _EXPLAIN_CAP (from 7 sources up: see there)
