@@ -204,11 +204,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         else:
             there = [n for n in (*io.RUN_OUTPUTS, "report.json") if (out / n).is_file()]
             if there:
+                it = "it" if len(there) == 1 else "them"
                 _note(args, f"{out} holds {', '.join(there)}, not from a dynremove run (no "
-                      "report.json beside): this run replaces "
-                      + ("it" if len(there) == 1 else "them")
-                      + " once it has its own (a run that fails leaves "
-                      + ("it)" if len(there) == 1 else "them)"))
+                      f"report.json beside): this run replaces {it} once it has its own (a "
+                      f"run that fails leaves {it})")
         return _run(args, params, out)
     except BaseException as e:
         for q in created:  # bad input or interrupted: leave no empty folder behind

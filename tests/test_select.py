@@ -851,6 +851,29 @@ def test_the_sources_own_bottles_stay_out(frames):
     assert green(ref).sum() > 5000 and green(r.clean).sum() < 0.05 * green(ref).sum()
 
 
+def _entry_p10_composite(tmp_path, davis_set, seed):
+    """``static/entry-P10`` with a DAVIS set pasted in, 3 views, as ``dynremove
+    composite`` builds it with this set seed; run through the default. Returns
+    (images, reference index, result, true mask (H, W) bool, true background)."""
+    from dynremove import io
+    from dynremove.evaluation import composite
+    from dynremove.evaluation.evaluate import find_sets
+
+    root = _data_root()
+    if not ((root / "static" / "entry-P10").is_dir() and (root / "davis" / davis_set).is_dir()):
+        pytest.skip(f"no {root}/static/entry-P10 or davis/{davis_set} (set DYNREMOVE_DATA)")
+    info = composite.make_composite(root / "static" / "entry-P10", root / "davis",
+                                    tmp_path, seed=seed, n_views=3,
+                                    object_sets=find_sets(root / "davis", davis_set))
+    iset = io.load_image_set(sorted((tmp_path / "frames").iterdir()))
+    ri = info["ref_index"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = remove_dynamic(iset.images, ref=ri)
+    truth = cv2.imread(str(sorted((tmp_path / "masks").iterdir())[ri]), cv2.IMREAD_GRAYSCALE)
+    return iset.images, ri, r, truth > 127, cv2.imread(str(tmp_path / "background.png"))
+
+
 def test_a_pillar_that_one_source_sees_stays(tmp_path):
     """A composite of ``static/entry-P10`` (3 views, 3-D: the door's pillars stand
     ~25 px of parallax off the wall) and DAVIS bmx-trees, as ``dynremove
@@ -861,25 +884,8 @@ def test_a_pillar_that_one_source_sees_stays(tmp_path):
     with the wall behind it; now a region that is a minority of L is judged by the
     rest's colours, and the one source's evidence counts where the other shows
     a mover. The rider is still removed."""
-    from dynremove import io
-    from dynremove.evaluation import composite
-    from dynremove.evaluation.evaluate import find_sets
-
-    root = _data_root()
-    if not (root / "static" / "entry-P10").is_dir() or not (root / "davis" / "bmx-trees").is_dir():
-        pytest.skip(f"no {root}/static/entry-P10 or davis/bmx-trees (set DYNREMOVE_DATA)")
-    info = composite.make_composite(root / "static" / "entry-P10", root / "davis",
-                                    tmp_path, seed=967688993, n_views=3,
-                                    object_sets=find_sets(root / "davis", "bmx-trees"))
-    iset = io.load_image_set(sorted((tmp_path / "frames").iterdir()))
-    ri = info["ref_index"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        r = remove_dynamic(iset.images, ref=ri)
-    ref = iset.images[ri]
-    assert (_de(r.clean, ref)[262:470, 555:590] > 10).mean() < 0.3  # 0.48 before
-    truth = cv2.imread(str(sorted((tmp_path / "masks").iterdir())[ri]), cv2.IMREAD_GRAYSCALE)
-    mover = truth > 127
+    images, ri, r, mover, _ = _entry_p10_composite(tmp_path, "bmx-trees", 967688993)
+    assert (_de(r.clean, images[ri])[262:470, 555:590] > 10).mean() < 0.3  # 0.48 before
     assert (r.dynamic & mover).sum() / (r.dynamic | mover).sum() > 0.7  # J 0.75 before
 
 
@@ -890,25 +896,10 @@ def test_two_pillars_flagged_together_do_not_vouch_for_each_other(tmp_path):
     rest of L, each pillar was vouched for by the other, and both were refilled with
     the wall: 2.57 % of the photo damaged. Regions of one kind are now left out
     together."""
-    from dynremove import io
-    from dynremove.evaluation import composite, whole_photo
-    from dynremove.evaluation.evaluate import find_sets
+    from dynremove.evaluation import whole_photo
 
-    root = _data_root()
-    if not ((root / "static" / "entry-P10").is_dir()
-            and (root / "davis" / "kite-surf_s3").is_dir()):
-        pytest.skip(f"no {root}/static/entry-P10 or davis/kite-surf_s3 (set DYNREMOVE_DATA)")
-    info = composite.make_composite(root / "static" / "entry-P10", root / "davis",
-                                    tmp_path, seed=1868869221, n_views=3,
-                                    object_sets=find_sets(root / "davis", "kite-surf_s3"))
-    iset = io.load_image_set(sorted((tmp_path / "frames").iterdir()))
-    ri = info["ref_index"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        r = remove_dynamic(iset.images, ref=ri)
-    truth = cv2.imread(str(sorted((tmp_path / "masks").iterdir())[ri]), cv2.IMREAD_GRAYSCALE)
-    bg = cv2.imread(str(tmp_path / "background.png"))
-    damage = whole_photo.damage_percent(iset.images[ri], r.clean, bg, truth > 127)
+    images, ri, r, mover, bg = _entry_p10_composite(tmp_path, "kite-surf_s3", 1868869221)
+    damage = whole_photo.damage_percent(images[ri], r.clean, bg, mover)
     assert damage < 1.5, damage  # 2.57 % before, 0.82 % now
 
 

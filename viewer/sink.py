@@ -69,11 +69,11 @@ def _fill_match(sel: Any, c: int) -> np.ndarray:
     (H, W) float32, NaN where the reference was kept, the pixel inpainted, or the
     sample off the source's frame (``paths.RESULT_FILL_MATCH``)."""
     label = np.asarray(sel.label)
+    if sel.no_source is not None:
+        label = np.where(np.asarray(sel.no_source, bool), 0, label)
     out = np.full(label.shape, np.nan, np.float32)
     for k, f in enumerate(sel.fields):
         at = label == k + 1
-        if sel.no_source is not None:
-            at &= ~np.asarray(sel.no_source, bool)
         out[at] = np.asarray(f)[..., c][at]
     return np.where(out >= 0, out, np.nan)
 

@@ -263,13 +263,19 @@ def _followed_mover(flow: npt.NDArray[np.float32], found: npt.NDArray[np.bool_],
     return dilate_disc(fill_holes(m > 0), 2)
 
 
+def _core_and_ring(L: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The movers' colour model's two samples of L (H, W) bool: its core (L eroded
+    by 5×5) and a ring around it (4 to 30 px), both (H, W) bool."""
+    core = cv2.erode(L.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    return core, dilate_disc(L, 30) & ~dilate_disc(L, 4)
+
+
 def _mover_model(lab_ref: np.ndarray, L: np.ndarray) -> np.ndarray | None:
     """The movers' colour model, as GrabCut's: P(mover | Lab bin) (``_BINS``³,)
     float64 from the histograms of the reference's Lab ``lab_ref`` (H, W, 3) in
     L's core (L eroded by 5×5) against a ring around L (4 to 30 px); None when
     either is empty. Built once per L, read by ``_mover_probability``."""
-    core = cv2.erode(L.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    ring = dilate_disc(L, 30) & ~dilate_disc(L, 4)
+    core, ring = _core_and_ring(L)
     if not core.any() or not ring.any():
         return None
     hf, hb = _lab_hist(lab_ref[core], _BINS), _lab_hist(lab_ref[ring], _BINS)
@@ -315,8 +321,7 @@ def _reference_mover_probability(lab_ref: np.ndarray, L: np.ndarray,
     n, comp = cv2.connectedComponents(L.astype(np.uint8), connectivity=8)
     if n <= 2:
         return p
-    core = cv2.erode(L.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    ring = dilate_disc(L, 30) & ~dilate_disc(L, 4)
+    core, ring = _core_and_ring(L)
     hb = _lab_hist(lab_ref[ring], _BINS)
     nb = _BINS ** 3
     cc, bins = comp[core], _lab_bins(lab_ref[core], _BINS)
