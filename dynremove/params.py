@@ -125,6 +125,7 @@ class Params:
     select_complete: float = 0.7  # decide each region of L whole where the fill decided most of it, a share in (0.5, 1]: a region replaced at least this much is a mover (its kept pieces within --select-complete-px are replaced too); one replaced less than 1 - this is static (its replaced pieces keep the reference); in between, as the fill chose (0 = off)
     select_complete_px: int = 6  # how far (analysis px) --select-complete's replacement reaches from a region's replaced pixels (0: none; the static rule still applies)
     select_halo_px: int = 2  # the replaced region also takes a rim this wide (analysis px) of kept pixels next to it where the chosen source is free and within --select-tau of the reference and the nearest replaced pixel has the movers' colours: a mover's blurred edge, which the cut keeps as close enough to the scene, left its outline (0 = off)
+    select_misfit_levels: float = 20.0  # a replaced region whose fill the blend had to shift by more than this (B/G/R levels: the median over the region of its largest channel's offset) to meet the photo around it, while the reference there lacks the movers' colours (mean P under 0.6), keeps the reference: the fill shows other content than the scene there, a static part flagged in error (0 = off)
     select_sweep: bool = False  # in a 3-D set (see --select-parallax-px), matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
     seed: int = 0  # seeds RANSAC/MAGSAC so runs are reproducible
@@ -174,7 +175,8 @@ class Params:
             raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
                      "select_parallax_px", "select_margin_px", "select_search_de",
-                     "select_search_support_de", "select_complete_px", "select_halo_px"):
+                     "select_search_support_de", "select_complete_px", "select_halo_px",
+                     "select_misfit_levels"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.fuse_combine not in ("median", "medoid"):

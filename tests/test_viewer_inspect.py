@@ -600,6 +600,23 @@ def test_the_region_rule_is_told_with_its_share_or_as_a_margin_pixel():
     assert "--select-complete-px 6 px" in vd.region_words(h["selection"])
 
 
+def test_a_region_kept_because_its_fill_did_not_fit_is_told_so():
+    """Code 3 of ``completed`` (``select.misfit_regions``): the fill line says the
+    reference was kept because the blend would have shifted the fill by more than
+    light does, with what it would have added, and the static test line agrees."""
+    h = {"final_dynamic": False, "source_names": ["a.png", "b.png"], "replacements": [],
+         "gt": None, "x": 1, "y": 1, "t_r": 0.3, "decisions": [],
+         "selection": {"source": 0, "completed": 3, "offset": [43, 33, 35],
+                       "evidence": {"a.png": 0, "b.png": 0}, "static_need": 2,
+                       "explained": 0, "ref_mover_p": 0.8}}
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")][0]
+    assert fill.startswith("fill: reference kept") and "--select-misfit-levels" in fill \
+        and "+43/+33/+35" in fill and "mean P(mover) under 0.6" in fill, fill
+    static = vd.static_test_line(h)
+    assert "the fill did not fit the photo around its region" in static, static
+    assert vd.outcome_line(h) == "kept (not in the final mask)"
+
+
 def test_what_the_cut_weighed_is_told_with_the_consensus_or_the_suspect():
     """Where the photomontage kept the reference as the cheapest label, inspect gives
     the two data costs and, where the reference took part in the fill's colour

@@ -506,7 +506,8 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     ``explained`` (L kept as static 3-D structure), ``seams``, ``lingering`` (a mover
     that most photos show, found by two or more sources that saw the background),
     ``completed`` (1: kept by the graph cut, replaced because its region of L was
-    replaced almost whole; 2: the reverse), ``region_share`` (uint16: the share of
+    replaced almost whole; 2: the reverse; 3: kept, as its region's fill did not fit the
+    photo around it, ``select.misfit_regions``), ``region_share`` (uint16: the share of
     the pixel's region of L the graph cut replaced × P_SCALE, DE_NONE outside; with
     ``region_rule``, the run's --select-complete and --select-complete-px),
     ``line_de``, ``line_x``, ``line_y`` (per source, uint16: the epipolar search's

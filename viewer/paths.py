@@ -122,7 +122,8 @@ RESULT_MOVERS = "result/selection/movers"  # per source: where it shows a mover 
 RESULT_REASONS = "result/selection/reasons"  # per source: why it did or did not fill
 RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure
 RESULT_LINGERING = "result/selection/lingering"  # a mover most photos show, seen free by 2+
-RESULT_COMPLETED = "result/selection/completed"  # 1/2: replaced/kept with its region of L
+# 1/2: replaced/kept with its region of L; 3: kept, its fill did not fit the photo around it
+RESULT_COMPLETED = "result/selection/completed"
 # the share of each pixel's region of L that the graph cut replaced (uint16,
 # round(share · P_SCALE), DE_NONE outside the regions), --select-complete and
 # --select-complete-px as values

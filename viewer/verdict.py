@@ -11,6 +11,7 @@ from typing import Any
 
 from dynremove.events import CASE_BOTH_IN_CLUSTER, CASE_GEOMETRY, CASE_ONE_IN_CLUSTER
 from dynremove.refine.parallax import SEARCH_CAP_DE as _LINE_CAP
+from dynremove.refine.select import MISFIT_MOVER_P
 
 # a blend offset from this many levels up (any channel) is told as more than light
 _LARGE_OFFSET = 40
@@ -361,6 +362,18 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                             else "this pixel, in the fill's margin outside L, only continued "
                             "the source of a region of L that keeps the reference whole "
                             "(--select-complete): it keeps it too"))
+        elif sel.get("completed") == 3:
+            off = sel.get("offset")
+            would = (" (it would have added B/G/R " + "/".join(f"{c:+d}" for c in off)
+                     + " levels here)" if off and max(abs(c) for c in off) >= 1 else "")
+            lines.append("fill: reference kept — the photomontage took a source here, but "
+                         "the blend would have had to shift that region's fill by more than "
+                         "light does to meet the photo around it (--select-misfit-levels)"
+                         + would + ", while the reference's pixels in that region have, "
+                         f"on the whole, not the movers' colours (mean P(mover) under "
+                         f"{MISFIT_MOVER_P:g}): "
+                         "the source shows other content than the scene here, a static "
+                         "part flagged in error")
         else:
             lines.append("fill: reference kept" + (" (not in the final mask)"
                                                      if not h.get("final_dynamic") else ""))
@@ -580,6 +593,10 @@ def static_test_line(h: dict[str, Any]) -> str | None:
         return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
                 "photomontage took a source here, but the reference is kept with the rest "
                 "of its region of L, which the photomontage kept (--select-complete)")
+    if sel.get("completed") == 3:
+        return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
+                "photomontage took a source here, but the reference is kept: the fill did "
+                "not fit the photo around its region (--select-misfit-levels)")
     region, weighed = region_words(sel), weighed_words(sel)
     cost = sel.get("data_cost") or {}
     dearer = ("reference" in cost and "best_source" in cost

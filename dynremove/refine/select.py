@@ -62,8 +62,11 @@ that the scan flagged with doubled content.
    piece of it stays in the photo; one it kept almost whole is static: its
    replaced fragments keep the reference (``complete_regions``).
 5. **Blend** (``montage.offset_blend``): exposure and white-balance
-   differences leave no edge. Pixels of L that no source shows free are
-   inpainted (OpenCV Telea) and reported.
+   differences leave no edge. A replaced region that the blend had to shift
+   by more than light does (``select_misfit_levels``), where the reference
+   lacks the movers' colours, keeps the reference (``misfit_regions``): its
+   fill shows other content than the scene there. Pixels of L that no source
+   shows free are inpainted (OpenCV Telea) and reported.
 """
 
 from __future__ import annotations
@@ -91,6 +94,11 @@ _FORBIDDEN = 1e6  # data cost of a label that may not be used
 _UNSEEN_PX = 12  # pixels no source sees, this near a replaced mover, are inpainted with it
 _UNSEEN_CORE_PX = 48  # ... and its own pixels of L that no source sees, this far in
 _DE_CAP = 40.0  # colour distances are capped here in the data cost
+# ``misfit_regions``: a region whose reference has the movers' colours at this mean
+# P(mover) or more is replaced whatever its offset (a true mover whose only free
+# source was lit otherwise: DAVIS bmx-trees, kite-surf, parkour and motocross-jump_s3
+# lost most of their movers to the offset alone)
+MISFIT_MOVER_P = 0.6
 # A pixel of L that this many sources explain (a geometrically valid flow match of
 # its colour) is static, however many photos there are: with 8-10 wide-baseline
 # views the far ones rarely match 3-D structure, and "half of the sources" left
@@ -139,7 +147,8 @@ class Selection:
     lingering: npt.NDArray[np.bool_] | None = None
     # where the graph cut's choice was overruled by its region's (``complete_regions``,
     # ``select_complete``), uint8: 1 replaced with a region replaced almost whole, 2
-    # kept with a region kept almost whole, 0 elsewhere
+    # kept with a region kept almost whole, 3 (MISFIT_KEPT) kept because its region's
+    # fill did not fit the photo around it (``misfit_regions``), 0 elsewhere
     completed: npt.NDArray[np.uint8] | None = None
     # the share of each pixel's region of L that the graph cut replaced, before that
     # rule (``region_shares``), float32 in [0, 1]; NaN outside the regions
@@ -169,7 +178,8 @@ class Selection:
     followed: npt.NDArray[np.bool_] | None = None
     # (H, W, 3) float32, B/G/R levels: what the blend added to the chosen source's
     # value (``montage.offset_blend``: the photos' exposure and light around the
-    # region); NaN where no source filled the pixel (kept, or inpainted)
+    # region); NaN where no source filled the pixel (kept, or inpainted), but where
+    # ``misfit_regions`` kept the reference (``completed`` 3): what it would have added
     offset: npt.NDArray[np.float32] | None = None
 
 
@@ -184,6 +194,9 @@ REASONS = {0: "not considered", 1: "chosen",
            7: "still shows the mover that lingered here",
            8: "shows the reference's mover, moved here (the flow followed it)"}
 OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
+# ``Selection.completed``: the region rule's codes (1 replaced, 2 kept with its region
+# of L) and ``misfit_regions``' (kept: its fill did not fit the photo around it)
+MISFIT_KEPT = 3
 OWN_MOVER, FOLLOWED = 3, 8  # the codes of a source showing a mover of its own: by colour,
 # or the reference's mover where the flow followed it
 
@@ -909,6 +922,78 @@ def grow_into_rim(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
     return out
 
 
+def misfit_regions(replaced: npt.NDArray[np.bool_], offset: npt.NDArray[np.float32],
+                   p_ref: npt.NDArray[np.float32], max_levels: float, *,
+                   max_p: float = MISFIT_MOVER_P) -> npt.NDArray[np.bool_]:
+    """Replaced regions whose fill does not fit the photo around them: to keep.
+
+    The blend (``montage.offset_blend``) adds to the chosen source what makes
+    it meet the reference on the region's ring: the photos' exposure and light,
+    a few levels. Where it must add more than ``max_levels`` (the median over
+    the region of the largest channel's |offset|), the source shows other
+    content than the scene around the region continues into: a near-camera
+    bollard or kerb whose match lies tens of pixels off, a window that
+    reflects something else. Where the reference there does not show the
+    movers' colours either (its mean P(mover) under ``max_p``), the region is
+    static scene that the detection flagged in error, and its fill would only
+    damage the photo: the reference is kept.
+
+    Parameters
+    ----------
+    replaced : (h, w) bool ndarray
+        The pixels the fill replaced; its 8-connected regions are judged.
+    offset : (h, w, 3) float32 ndarray
+        The blend's offset, B/G/R levels; NaN where no source's value was
+        written (inpainted pixels: they go with their region).
+    p_ref : (h, w) float32 ndarray
+        The reference's P(mover colour) (``_reference_mover_probability``).
+    max_levels : float
+        > 0.
+    max_p : float
+
+    Returns
+    -------
+    misfit : (h, w) bool ndarray
+        The pixels of the regions to keep as the reference shows them.
+
+    Examples
+    --------
+    Two replaced squares: the first filled with an offset of 3 levels (light),
+    the second with one of 60 (other content), both with the scene's colours:
+
+    >>> import numpy as np
+    >>> rep = np.zeros((8, 16), bool); rep[2:6, 1:5] = rep[2:6, 10:14] = True
+    >>> off = np.full((8, 16, 3), np.nan, np.float32)
+    >>> off[2:6, 1:5] = 3.0; off[2:6, 10:14] = -60.0
+    >>> keep = misfit_regions(rep, off, np.full((8, 16), 0.2, np.float32), 20.0)
+    >>> int(keep[:, :8].sum()), int(keep[:, 8:].sum())
+    (0, 16)
+    """
+    out = np.zeros(replaced.shape, bool)
+    n, comp = cv2.connectedComponents(replaced.astype(np.uint8), connectivity=8)
+    if n <= 1:
+        return out
+    idx = comp.ravel()
+    mag = np.abs(offset).reshape(-1, 3).max(1)  # NaN where no source's value
+    ok = (idx > 0) & np.isfinite(mag)
+    # the median |offset| of each region: one sort by (region, magnitude)
+    r_ok, m_ok = idx[ok], mag[ok]
+    order = np.lexsort((m_ok, r_ok))
+    r_s, m_s = r_ok[order], m_ok[order]
+    lo = np.searchsorted(r_s, np.arange(n), "left")
+    hi = np.searchsorted(r_s, np.arange(n), "right")
+    cnt = hi - lo
+    has = cnt > 0
+    med = np.full(n, np.nan)
+    med[has] = 0.5 * (m_s[lo[has] + (cnt[has] - 1) // 2] + m_s[lo[has] + cnt[has] // 2])
+    p = np.nan_to_num(p_ref, nan=0.0).ravel()
+    p_mean = np.bincount(idx, weights=p, minlength=n) / np.maximum(
+        np.bincount(idx, minlength=n), 1)
+    bad = has & (np.nan_to_num(med, nan=0.0) > max_levels) & (p_mean < max_p)
+    bad[0] = False
+    return bad[comp]
+
+
 def region_shares(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_]
                   ) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float64]]:
     """The regions of ``core`` (8-connected; (h, w) int32, 0 outside) and the share
@@ -1523,6 +1608,22 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         fy, fx = np.nonzero(rep_b & ~no_src)
         offset[fy + y0, fx + x0] = (clean[fy + y0, fx + x0].astype(np.float32)
                                     - cand_img[lab_b[fy, fx], fy, fx])
+        if P.select_misfit_levels > 0:
+            # a region whose fill the blend had to shift by more than light does,
+            # where the reference lacks the movers' colours: static scene whose
+            # fill shows other content; it keeps the reference (12 composites:
+            # damage 0.389 -> 0.291 %, leftover 15.40 -> 15.42 %; DAVIS J 0.6115 ->
+            # 0.6182; README, session 53)
+            misfit = misfit_regions(rep, offset[roi], p_mover[0], P.select_misfit_levels)
+            if misfit.any():
+                lab, lab_b = np.where(misfit, 0, lab), np.where(misfit, 0, lab_b)
+                rep, rep_b = lab != 0, rep_b & ~misfit
+                no_src &= ~misfit
+                unseen &= ~misfit
+                region_rule[misfit] = MISFIT_KEPT
+                clean[roi][misfit] = reference[roi][misfit]
+                members[:, y0:y1, x0:x1] &= ~misfit[None]  # (``offset`` keeps what
+                # the blend would have added there: the debugger shows why)
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
@@ -1582,9 +1683,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      offset=offset)
 
 
-__all__ = ["EVIDENCE", "FOLLOWED", "OUTSIDE", "OWN_MOVER", "REASONS", "STILL_LINGERING",
+__all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "OUTSIDE", "OWN_MOVER",
+           "REASONS", "STILL_LINGERING",
            "Selection", "attach_shadow", "capped_growth", "complete_regions", "darker",
            "grow_into_rim",
            "median_parallax_px", "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
-           "mixture_detail", "reference_cost", "region_shares", "select_fill"]
+           "misfit_regions", "mixture_detail", "reference_cost", "region_shares",
+           "select_fill"]
