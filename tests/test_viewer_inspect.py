@@ -103,6 +103,22 @@ def test_no_doubled_pixel_prefix():
     assert text == "pixel (3, 4): no scan of this recording reached it", text
 
 
+def test_a_patch_write_names_its_ties_not_its_candidates():
+    """``n_patches`` of a write counts A_m's patches tied at the best score; a trial
+    read "(the only candidate patch)" beside "4 of 12 candidates" as a contradiction.
+    One patch at the best score is "the best of A_m's patches"; several, a tie-break."""
+    w = dict(scan=0, step=7, x=3, y=4, src=1, src_name="b.png", src_x=5, src_y=6,
+             score=0.66, tie_break=False, n_patches=1)
+    h = dict(x=3, y=4, t_r=0.3, decisions=[], scans=[], replacements=[w], covered_by=[],
+             updates=[], source_names=["a.png", "b.png"], final_dynamic=None, gt=None,
+             stages={}, size=(H, W))
+    text = vd.format_pixel_history(h)
+    assert "(the best of A_m's patches)" in text and "only candidate" not in text, text
+    w.update(tie_break=True, n_patches=3)
+    text = vd.format_pixel_history(h)
+    assert "a tie-break among the 3 patches of A_m with that score" in text, text
+
+
 # -- 2. interrupted recordings: decided on what they hold ---------------------------------
 def _run_cut_at(step, sig, tmp_path, capsys, monkeypatch, code):
     """``dynremove run --record`` on a small synthetic set, interrupted by ``sig`` raised

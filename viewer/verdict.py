@@ -662,9 +662,12 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
                                  "its \"fill:\" line above is what the clean photo shows)"
                                  if "source" in (h.get("selection") or {}) else "")
                               + f", patch score {r['score']:.2f}"
-                              + (" (tie-break)" if r["tie_break"] else "")
-                              + (f" among {r['n_patches']} patches" if r["n_patches"] != 1
-                                 else " (the only candidate patch)")))
+                              # (n_patches counts A_m's patches tied at the best score,
+                              # not its candidates: "the only candidate patch" beside
+                              # "4 of 12 candidates" read as a contradiction to a trial)
+                              + (f" (a tie-break among the {r['n_patches']} patches of "
+                                 "A_m with that score)" if r["n_patches"] > 1
+                                 else " (the best of A_m's patches)")))
     by_scan: dict[int, list[dict]] = {}
     for r in h["covered_by"]:
         by_scan.setdefault(r["scan"], []).append(r)
