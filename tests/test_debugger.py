@@ -224,7 +224,7 @@ def test_a_lingering_mover_is_logged_and_told(tmp_path):
     h = vi.pixel_history(path, int(xs[i]), int(ys[i]))
     words = " ".join(vd.verdict_lines(h))
     assert "a mover that lingered" in words
-    assert "still shows the mover that lingered here" in words
+    assert "still shows what the reference shows here: the mover that lingered" in words
 
 
 def test_the_region_rule_is_logged_and_told(tmp_path):

@@ -191,7 +191,11 @@ REASONS = {0: "not considered", 1: "chosen",
            5: "disagrees with the fill's colour consensus",
            6: "agrees with the fill's colour consensus, but not with the source chosen "
               "here, so not averaged with it",
-           7: "still shows the mover that lingered here",
+           # ("still shows the mover that lingered here" read as a fact to a trial on a
+           # static sign that the lingering rule took: the witnesses decide it)
+           7: "still shows what the reference shows here: the mover that lingered, as "
+              "the sources that saw past it say (static structure standing off the "
+              "rest would look the same)",
            8: "shows the reference's mover, moved here (the flow followed it)"}
 OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
 # ``Selection.completed``: the region rule's codes (1 replaced, 2 kept with its region
