@@ -1510,7 +1510,8 @@ def test_completion_removes_the_fragments_of_a_real_mover(davis, tmp_path):
                        whole_photo.damage_percent(ls.images[ls.ref], r.clean, ls.background, gt))
     done = runs[0.7][0].selection.completed == 1
     assert done.sum() >= 500 and (done & gt).sum() >= 0.85 * done.sum()
-    assert not runs[0.0][0].selection.completed.any()
+    # (the region rule's codes: 3 is the misfit rule's, which does not depend on it)
+    assert not np.isin(runs[0.0][0].selection.completed, (1, 2)).any()
     assert runs[0.7][1] <= runs[0.0][1] - 1.0  # leftover, % of the goat
     assert runs[0.7][2] <= runs[0.0][2] + 0.02  # damage, % of the photo
 
