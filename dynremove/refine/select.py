@@ -935,9 +935,9 @@ def misfit_regions(replaced: npt.NDArray[np.bool_], offset: npt.NDArray[np.float
     it meet the reference on the region's ring: the photos' exposure and light,
     a few levels. Where it must add more than ``max_levels`` (the median over
     the region of the largest channel's |offset|), the source shows other
-    content than the scene around the region continues into: a near-camera
-    bollard or kerb whose match lies tens of pixels off, a window that
-    reflects something else. Where the reference there does not show the
+    content than the scene around the region continues into (a near-camera
+    bollard or kerb whose match lies tens of pixels off, matched to the
+    pavement beside it). Where the reference there does not show the
     movers' colours either (its mean P(mover) under ``max_p``), the region is
     static scene that the detection flagged in error, and its fill would only
     damage the photo: the reference is kept.
