@@ -103,6 +103,42 @@ def test_no_doubled_pixel_prefix():
     assert text == "pixel (3, 4): no scan of this recording reached it", text
 
 
+def test_a_failure_region_says_what_made_most_of_it_so():
+    """``--failures`` tags each region with its cause (a trial could not find the
+    regions a rule had kept): a missed region that the fill by selection kept
+    because its fill did not fit, one never flagged, one the clean-up dropped, and a
+    false positive the border votes added, each by the most of its pixels."""
+    import numpy as np
+
+    from viewer import inspect as vi
+
+    H_, W_ = 8, 8
+    region = np.zeros((H_, W_), bool)
+    region[2:6, 2:6] = True  # 16 px
+    st = {n: np.zeros((H_, W_), bool) for n in vi.STAGE_ORDER}
+    for n in ("scan", "clean", "votes", "snap"):
+        st[n][region] = True
+    comp = np.zeros((H_, W_), np.uint8)
+    comp[2:6, 2:5] = 3  # 12 of the 16 kept by the misfit rule
+    why, share = vi.failure_cause("FN", region, st, {"completed": comp})
+    assert (why, share) == ("misfit", 0.75)
+    words = vd.failure_words(why, share)
+    assert words.startswith("75 % of it kept: its fill did not fit") and \
+        "--select-misfit-levels" in words, words
+    assert vi.failure_cause("FN", region, {n: np.zeros((H_, W_), bool)
+                                           for n in vi.STAGE_ORDER}, {}) == ("never", 1.0)
+    st2 = {n: np.zeros((H_, W_), bool) for n in vi.STAGE_ORDER}
+    st2["scan"][region] = True
+    why, share = vi.failure_cause("FN", region, st2, {})
+    assert (why, share) == ("dropped:clean", 1.0)
+    assert vd.failure_words(why, share) == "dropped by the L clean-up"
+    st3 = {n: np.zeros((H_, W_), bool) for n in vi.STAGE_ORDER}
+    for n in ("votes", "snap", "select"):
+        st3[n][region] = True
+    assert vi.failure_cause("FP", region, st3, {}) == ("added:votes", 1.0)
+    assert vi.failure_cause("FP", region, {}, {}) == (None, 0.0)
+
+
 def test_a_patch_write_names_its_ties_not_its_candidates():
     """``n_patches`` of a write counts A_m's patches tied at the best score; a trial
     read "(the only candidate patch)" beside "4 of 12 candidates" as a contradiction.

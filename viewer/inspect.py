@@ -809,6 +809,64 @@ def outside_message(info: dict[str, Any], x: int, y: int) -> str:
     return msg
 
 
+# ``failure_cause``'s causes, in the words ``verdict.format_failures`` prints
+FAILURE_CAUSES = {
+    "never": "never flagged (the scans and the steps after them left it)",
+    "scan": "flagged by the scans",
+    "explained": "kept as static 3-D structure (the sources show its content where the "
+                 "geometry expects)",
+    "misfit": "kept: its fill did not fit the photo around it (--select-misfit-levels)",
+    "region": "kept with its region of L (--select-complete)",
+    "lingering": "added as a mover that lingered (--select-minority)",
+}
+
+
+def failure_cause(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
+                  sel: dict[str, np.ndarray]) -> tuple[str | None, float]:
+    """Why a failure region of ``failures`` is what it is, by the most of its pixels.
+
+    For a missed region ("FN"): never flagged, dropped by the step after the last
+    one that had it (``STAGE_ORDER``), or, where the fill by selection dropped it,
+    kept as static 3-D structure, kept because its fill did not fit
+    (``completed`` 3), or kept with its region of L (``completed`` 2). For a false
+    positive ("FP"): flagged by the scans, or added by the first step that had it
+    (a mover that lingered, where the fill by selection added it so).
+    Returns (a key of ``FAILURE_CAUSES``, or "dropped:<stage>" / "added:<stage>",
+    and the share of the region's pixels it holds); (None, 0.0) without stages.
+    """
+    names = [n for n in STAGE_ORDER if n in stages]
+    if not names or not region.any():
+        return None, 0.0
+    have = np.stack([stages[n][region] for n in names])  # (stages, n px)
+    n_px = have.shape[1]
+    causes = np.empty(n_px, dtype=object)
+    comp = sel.get("completed")
+    if kind == "FN":
+        ever = have.any(0)
+        causes[~ever] = "never"
+        last = len(names) - 1 - np.argmax(have[::-1], axis=0)  # the last stage with it
+        for i in np.flatnonzero(ever):
+            causes[i] = "dropped:" + (names[min(last[i] + 1, len(names) - 1)])
+        if "select" in names:
+            by_sel = ever & (causes == "dropped:select")
+            expl = sel.get("explained")
+            for key, hit in (
+                    ("explained", expl[region].astype(bool) if expl is not None else None),
+                    ("misfit", comp[region] == 3 if comp is not None else None),
+                    ("region", comp[region] == 2 if comp is not None else None)):
+                if hit is not None:
+                    causes[by_sel & hit] = key
+    else:
+        first = np.argmax(have, axis=0)  # the first stage with it (all have it at the end)
+        causes[:] = ["scan" if f == 0 else "added:" + names[f] for f in first]
+        ling = sel.get("lingering")
+        if ling is not None:
+            causes[(causes == "added:select") & ling[region].astype(bool)] = "lingering"
+    keys, counts = np.unique(causes.astype(str), return_counts=True)
+    j = int(np.argmax(counts))
+    return str(keys[j]), float(counts[j] / n_px)
+
+
 def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[str, Any]]:
     """Worst false-positive / false-negative regions of the final L vs ground truth.
 
@@ -816,7 +874,8 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     pixels, largest first. Each entry: ``kind`` ("FP"/"FN"), ``area``, ``bbox``
     (x, y, w, h), ``centroid``, ``pixel`` (the most interior pixel, a good
     ``--probe``), ``n_decisions`` (recorded decisions inside) and ``worst``
-    (the recorded decision inside whose M was most confidently wrong, or None);
+    (the recorded decision inside whose M was most confidently wrong, or None),
+    ``why`` and ``why_share`` (``failure_cause``: what made most of it so);
     all in pixels of the analysis image, of size ``size`` (H, W); when the photos
     were analysed at another size, ``photo`` (W, H) and ``photo_pixel`` (``pixel``
     in the photo), else None.
@@ -837,6 +896,8 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
         raise InputError(f"{path}: --failures compares the final mask with a ground-truth "
                          "mask, and this run was recorded without one (no --gt): " + fix)
     dec = read_events(path, "decisions", root=root)
+    stages = read_stages(path, root=root)
+    sel = read_selection(path, root=root)
     H, W = L.shape
     scan_dirs = [(m["scan"], m["direction"]) for m in read_scan_maps(path, root=root)] or \
         [(int(s), 1 if s % 2 == 0 else -1) for s in np.unique(dec["scan"]).tolist()] or [(0, 1)]
@@ -860,7 +921,10 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
                              M=float(finite[j]["M"]), scan=int(finite[j]["scan"]),
                              step=int(finite[j]["step"]))
             qx, qy = x0 + int(px), y0 + int(py)
-            out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh),
+            region = np.zeros((H, W), bool)
+            region[y0:y0 + hh, x0:x0 + w] = comp > 0
+            why, share = failure_cause(kind, region, stages, sel)
+            out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh), why=why, why_share=share,
                             centroid=(float(cents[i][0]), float(cents[i][1])),
                             pixel=(qx, qy), n_decisions=len(d_in), worst=worst,
                             size=(H, W), photo=photo_size(info),

@@ -727,11 +727,26 @@ def _analysis_note(size: tuple[int, int], photo: tuple[int, int]) -> str:
 # -- failures ----------------------------------------------------------------------
 
 
+def failure_words(why: str, share: float) -> str:
+    """``inspect.failure_cause``'s cause in words, with the share of the region it
+    holds where that is not all of it (a trial could not tell which flagged regions
+    a rule had kept, nor why)."""
+    from viewer.inspect import FAILURE_CAUSES
+
+    verb, _, stage = why.partition(":")
+    if verb in ("dropped", "added") and stage:
+        words = (f"{verb} by {_STAGE_WORDS.get(stage, stage)}"
+                 + (" (it kept the reference)" if why == "dropped:select" else ""))
+    else:
+        words = FAILURE_CAUSES.get(why, why)
+    return words if share >= 0.995 else f"{100 * share:.0f} % of it {words}"
+
+
 def format_failures(items: list[dict[str, Any]]) -> str:
     """One line per failure region."""
     lines = ["region (kind, area, box: top-left x,y and width x height), a pixel in it, "
              "the steps at which each scan visited that pixel (one per scan; jump to them "
-             "on the `step` timeline):"]
+             "on the `step` timeline), and what made most of the region so:"]
     for e in items:
         x0, y0, w, h = e["bbox"]
         steps = ", ".join(str(s) for s in e.get("steps", []))
@@ -743,6 +758,8 @@ def format_failures(items: list[dict[str, Any]]) -> str:
         if e["worst"]:
             s += (f"; worst M {e['worst']['M']:.2f} at ({e['worst']['x']},{e['worst']['y']})"
                   f" step {e['worst']['step']}")
+        if e.get("why"):
+            s += f"; {failure_words(e['why'], e.get('why_share', 1.0))}"
         lines.append(s)
     if items and items[0].get("photo"):
         lines.append(f"({_analysis_note(items[0]['size'], items[0]['photo'])}: --pixel "
