@@ -591,11 +591,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                        f"and it was filled from {_names([names[srcs[k]] for k in used])}"))
             msgs.append(
                 f"{n_lg} px show a mover that lingered: {shown}; {said}"
-                + (f" (the keypoint matches depart {selection.parallax_px:.0f} px from one "
-                   "plane between the photos, the movers' own matches included: as 3-D "
-                   "parallax, an edge the mover hides may come out misplaced; and what was "
-                   "taken for a mover may be static structure standing off the rest, which "
-                   "those photos show elsewhere: look at it)"
+                # (shorter than it was: a trial found the 600-character note hard to act on)
+                + (f" (a 3-D set, its keypoint matches {selection.parallax_px:.0f} px off one "
+                   "plane: what was taken for a mover may be static structure standing off "
+                   "the rest, and an edge a mover hides may come out misplaced: look at it)"
                    if selection.consensus_mode == "parallax" else "")
                 + ("; --no-select-minority-one turns off its three-photo rule (one photo "
                    "that saw the background is enough), --select-minority 0 the whole step"
