@@ -809,18 +809,6 @@ def outside_message(info: dict[str, Any], x: int, y: int) -> str:
     return msg
 
 
-# ``failure_cause``'s causes, in the words ``verdict.format_failures`` prints
-FAILURE_CAUSES = {
-    "never": "never flagged (the scans and the steps after them left it)",
-    "scan": "flagged by the scans",
-    "explained": "kept as static 3-D structure (the sources show its content where the "
-                 "geometry expects)",
-    "misfit": "kept: its fill did not fit the photo around it (--select-misfit-levels)",
-    "region": "kept with its region of L (--select-complete)",
-    "lingering": "added as a mover that lingered (--select-minority)",
-}
-
-
 def failure_cause(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
                   sel: dict[str, np.ndarray]) -> tuple[str | None, float]:
     """Why a failure region of ``failures`` is what it is, by the most of its pixels.
@@ -831,40 +819,36 @@ def failure_cause(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
     (``completed`` 3), or kept with its region of L (``completed`` 2). For a false
     positive ("FP"): flagged by the scans, or added by the first step that had it
     (a mover that lingered, where the fill by selection added it so).
-    Returns (a key of ``FAILURE_CAUSES``, or "dropped:<stage>" / "added:<stage>",
+    Returns (a key of ``verdict.FAILURE_CAUSES``, or "dropped:<stage>" / "added:<stage>",
     and the share of the region's pixels it holds); (None, 0.0) without stages.
     """
     names = [n for n in STAGE_ORDER if n in stages]
     if not names or not region.any():
         return None, 0.0
     have = np.stack([stages[n][region] for n in names])  # (stages, n px)
-    n_px = have.shape[1]
-    causes = np.empty(n_px, dtype=object)
-    comp = sel.get("completed")
     if kind == "FN":
-        ever = have.any(0)
-        causes[~ever] = "never"
-        last = len(names) - 1 - np.argmax(have[::-1], axis=0)  # the last stage with it
-        for i in np.flatnonzero(ever):
-            causes[i] = "dropped:" + (names[min(last[i] + 1, len(names) - 1)])
-        if "select" in names:
-            by_sel = ever & (causes == "dropped:select")
-            expl = sel.get("explained")
-            for key, hit in (
-                    ("explained", expl[region].astype(bool) if expl is not None else None),
-                    ("misfit", comp[region] == 3 if comp is not None else None),
-                    ("region", comp[region] == 2 if comp is not None else None)):
-                if hit is not None:
-                    causes[by_sel & hit] = key
+        # dropped by the step after the last one that had it
+        last = len(names) - 1 - np.argmax(have[::-1], axis=0)
+        dropped = np.array(["dropped:" + n for n in names])
+        causes = dropped[np.minimum(last + 1, len(names) - 1)].astype(object)
+        causes[~have.any(0)] = "never"
+        by_sel = causes == "dropped:select"
+        comp, expl = sel.get("completed"), sel.get("explained")
+        if expl is not None:
+            causes[by_sel & expl[region].astype(bool)] = "explained"
+        if comp is not None:
+            causes[by_sel & (comp[region] == 3)] = "misfit"
+            causes[by_sel & (comp[region] == 2)] = "region"
     else:
-        first = np.argmax(have, axis=0)  # the first stage with it (all have it at the end)
-        causes[:] = ["scan" if f == 0 else "added:" + names[f] for f in first]
+        # added by the first step that had it (all have it at the end)
+        added = np.array(["scan"] + ["added:" + n for n in names[1:]])
+        causes = added[np.argmax(have, axis=0)].astype(object)
         ling = sel.get("lingering")
         if ling is not None:
             causes[(causes == "added:select") & ling[region].astype(bool)] = "lingering"
     keys, counts = np.unique(causes.astype(str), return_counts=True)
     j = int(np.argmax(counts))
-    return str(keys[j]), float(counts[j] / n_px)
+    return str(keys[j]), float(counts[j] / len(causes))
 
 
 def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[str, Any]]:
@@ -921,10 +905,7 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
                              M=float(finite[j]["M"]), scan=int(finite[j]["scan"]),
                              step=int(finite[j]["step"]))
             qx, qy = x0 + int(px), y0 + int(py)
-            region = np.zeros((H, W), bool)
-            region[y0:y0 + hh, x0:x0 + w] = comp > 0
-            why, share = failure_cause(kind, region, stages, sel)
-            out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh), why=why, why_share=share,
+            out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh), _labels=(lab, i),
                             centroid=(float(cents[i][0]), float(cents[i][1])),
                             pixel=(qx, qy), n_decisions=len(d_in), worst=worst,
                             size=(H, W), photo=photo_size(info),
@@ -932,4 +913,8 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
                             steps=[visit_step(sc, qx, qy, H, W, direction=dr)
                                    for sc, dr in scan_dirs]))
     out.sort(key=lambda e: -e["area"])
-    return out[:top]
+    out = out[:top]
+    for e in out:  # (only the regions returned: a run may have hundreds)
+        lab, i = e.pop("_labels")
+        e["why"], e["why_share"] = failure_cause(e["kind"], lab == i, stages, sel)
+    return out

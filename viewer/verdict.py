@@ -727,12 +727,22 @@ def _analysis_note(size: tuple[int, int], photo: tuple[int, int]) -> str:
 # -- failures ----------------------------------------------------------------------
 
 
+# ``inspect.failure_cause``'s causes, in words
+FAILURE_CAUSES = {
+    "never": "never flagged (the scans and the steps after them left it)",
+    "scan": "flagged by the scans",
+    "explained": "kept as static 3-D structure (the sources show its content where the "
+                 "geometry expects)",
+    "misfit": "kept: its fill did not fit the photo around it (--select-misfit-levels)",
+    "region": "kept with its region of L (--select-complete)",
+    "lingering": "added as a mover that lingered (--select-minority)",
+}
+
+
 def failure_words(why: str, share: float) -> str:
     """``inspect.failure_cause``'s cause in words, with the share of the region it
     holds where that is not all of it (a trial could not tell which flagged regions
     a rule had kept, nor why)."""
-    from viewer.inspect import FAILURE_CAUSES
-
     verb, _, stage = why.partition(":")
     if verb in ("dropped", "added") and stage:
         words = (f"{verb} by {_STAGE_WORDS.get(stage, stage)}"

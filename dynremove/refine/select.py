@@ -973,10 +973,9 @@ def misfit_regions(replaced: npt.NDArray[np.bool_], offset: npt.NDArray[np.float
     >>> int(keep[:, :8].sum()), int(keep[:, 8:].sum())
     (0, 16)
     """
-    out = np.zeros(replaced.shape, bool)
     n, comp = cv2.connectedComponents(replaced.astype(np.uint8), connectivity=8)
     if n <= 1:
-        return out
+        return np.zeros(replaced.shape, bool)
     idx = comp.ravel()
     mag = np.abs(offset).reshape(-1, 3).max(1)  # NaN where no source's value
     ok = (idx > 0) & np.isfinite(mag)
@@ -988,12 +987,12 @@ def misfit_regions(replaced: npt.NDArray[np.bool_], offset: npt.NDArray[np.float
     hi = np.searchsorted(r_s, np.arange(n), "right")
     cnt = hi - lo
     has = cnt > 0
-    med = np.full(n, np.nan)
+    med = np.zeros(n)
     med[has] = 0.5 * (m_s[lo[has] + (cnt[has] - 1) // 2] + m_s[lo[has] + cnt[has] // 2])
     p = np.nan_to_num(p_ref, nan=0.0).ravel()
     p_mean = np.bincount(idx, weights=p, minlength=n) / np.maximum(
         np.bincount(idx, minlength=n), 1)
-    bad = has & (np.nan_to_num(med, nan=0.0) > max_levels) & (p_mean < max_p)
+    bad = has & (med > max_levels) & (p_mean < max_p)
     bad[0] = False
     return bad[comp]
 
