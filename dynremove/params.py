@@ -25,6 +25,8 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 CORRESPONDENCE_METHODS = ("homography+flow", "homography", "flow", "gated")
 WRITE_MODES = ("patch", "pixel")
 FILL_MODES = ("select", "median")
@@ -132,6 +134,9 @@ class Params:
     candidate_set: bool = True  # P as a set (the paper): a repeated (s, x, y) candidate counts once
 
     def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):  # a value of another type fails below with
+            if f.default is not dataclasses.MISSING and f.default is not None:
+                _check_type(f.name, getattr(self, f.name), type(f.default))  # Python's words
         if self.patch_size < 3 or self.patch_size % 2 == 0:
             raise ValueError(f"patch_size must be odd and >= 3, got {self.patch_size}")
         for f in dataclasses.fields(self):  # NaN passes every comparison below
@@ -208,6 +213,27 @@ class Params:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+def _check_type(name: str, value: object, kind: type) -> None:
+    """Raise ValueError unless ``value`` fits a field whose default is a ``kind``:
+    a bool for a switch, an int (not a bool) for a count, a number for a real, a
+    str for a choice (NumPy scalars too)."""
+    if kind is bool:
+        ok = isinstance(value, (bool, np.bool_))
+        what = "True or False"
+    elif kind is int:
+        ok = isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+        what = "an int"
+    elif kind is float:
+        ok = (isinstance(value, (int, float, np.integer, np.floating))
+              and not isinstance(value, (bool, np.bool_)))
+        what = "a number"
+    else:
+        ok = isinstance(value, kind)
+        what = f"a {kind.__name__}"
+    if not ok:
+        raise ValueError(f"{name} must be {what}, got {value!r} ({type(value).__name__})")
 
 
 # Chosen on the even-indexed DAVIS sets, checked on the odd ones (README "Results"):

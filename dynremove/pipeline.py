@@ -33,7 +33,7 @@ from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
 from dynremove.refine.select import (FOLLOWED, OUTSIDE, OWN_MOVER, STILL_LINGERING, Selection,
-                                     median_parallax_px, select_fill)
+                                     median_parallax_px, select_fill, unconfirmed_fill)
 from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
@@ -121,15 +121,50 @@ def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
     return resolve_ref(ref, names)
 
 
+def _array_hint(i: int, im: object) -> str:
+    """What is wrong with ``im`` (image ``i`` of the API's input) as an (H, W, 3)
+    uint8 BGR array, and the line of code that fixes it: one sentence."""
+    if im is None:
+        return (f"image {i} is None (cv2.imread returns None for a file it could not "
+                "read: check that path)")
+    if not isinstance(im, np.ndarray):
+        kind = f"{type(im).__module__}.{type(im).__qualname__}".removeprefix("builtins.")
+        if kind.startswith("PIL."):
+            return (f"image {i} is a {kind}: pass np.asarray(img.convert('RGB'))[..., ::-1] "
+                    "(an (H, W, 3) uint8 array in BGR order, as cv2.imread gives)")
+        return (f"image {i} is of type {kind}, not an array: pass (H, W, 3) uint8 BGR arrays "
+                "(as cv2.imread gives)")
+    got = f"got {im.shape} {im.dtype}"
+    if im.ndim == 2 or (im.ndim == 3 and im.shape[2] == 1):
+        return (f"image {i}: expected (H, W, 3) uint8, {got}: a gray image; pass "
+                "cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)")
+    if im.ndim == 3 and im.shape[2] == 4:
+        return (f"image {i}: expected (H, W, 3) uint8, {got}: with an alpha channel; pass "
+                "img[..., :3] (BGRA to BGR, as the command line does)")
+    if im.ndim != 3 or im.shape[2] != 3:
+        return f"image {i}: expected (H, W, 3) uint8, {got}"
+    if im.dtype == np.uint16:
+        return (f"image {i}: expected (H, W, 3) uint8, {got}: 16-bit; pass "
+                "(img >> 8).astype(np.uint8)")
+    if np.issubdtype(im.dtype, np.floating):
+        top = float(np.nanmax(im)) if im.size else 0.0
+        fix = ("(img * 255).round().astype(np.uint8)" if top <= 1.0 else
+               "img.clip(0, 255).round().astype(np.uint8)")
+        return (f"image {i}: expected (H, W, 3) uint8, {got} (largest value {top:.3g}); "
+                f"pass {fix}")
+    return f"image {i}: expected (H, W, 3) uint8, {got}; pass img.astype(np.uint8) if its values are 0-255"
+
+
 def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
-    """Raise InputError unless images are ≥ 2 same-size (H, W, 3) uint8 arrays."""
+    """Raise InputError unless images are ≥ 2 same-size (H, W, 3) uint8 arrays; the
+    message names the first bad image and the line of code that converts it."""
     if len(images) < 2:
         raise InputError(f"need at least 2 images, got {len(images)}")
-    shape = images[0].shape
     for i, im in enumerate(images):
         if not isinstance(im, np.ndarray) or im.dtype != np.uint8 or im.ndim != 3 or im.shape[2] != 3:
-            raise InputError(f"image {i}: expected (H, W, 3) uint8, got "
-                             f"{getattr(im, 'shape', None)} {getattr(im, 'dtype', None)}")
+            raise InputError(_array_hint(i, im))
+    shape = images[0].shape
+    for i, im in enumerate(images):
         if im.shape != shape:
             raise InputError(f"image {i} is {im.shape[1]}x{im.shape[0]}, image 0 is "
                              f"{shape[1]}x{shape[0]}: all images must have the same size"
@@ -140,6 +175,8 @@ def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
         raise InputError(f"reference index {ref} out of range 0..{len(images) - 1}")
 
 
+# the share of a fill that, resting on one photo the others contradict, gets a note
+UNCONFIRMED_SHARE = 0.5
 # a reference this dark against the other photos' median level (×) gets a note
 DARK_REFERENCE = 0.5
 
@@ -289,10 +326,16 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    valid_masks: Sequence[np.ndarray] | None = None) -> Result:
     """Detect the moving objects in the reference and replace them (Algorithm 1).
 
+    The images are analysed at the size given (the command line analyses photos
+    larger than 1280 px at that size, ``--max-side``): to do the same, read them with
+    ``dynremove.io.load_image_set(paths, max_side=1280)`` (EXIF orientation, 16-bit,
+    alpha and gray handled as the command line does; its ``.images``, ``.paths``).
+
     Parameters
     ----------
-    images : sequence of (H, W, 3) uint8 BGR ndarrays
-        The set; all the same size.
+    images : sequence (or iterable) of (H, W, 3) uint8 BGR ndarrays
+        The set; all the same size (as ``cv2.imread`` gives; a stacked (N, H, W, 3)
+        array too).
     ref : int or str, optional
         The reference: an index (negative counts from the end, as in Python), a
         name of ``names``, or ``"auto"`` (the sharpest image with the most keypoint
@@ -307,8 +350,19 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         Pixels whose every decision is recorded, static or not.
     sample_static : float
         Fraction of static decisions recorded (deterministic sample).
+    names : sequence of str, optional
+        One per image, in order: how notes, warnings and a recording name them, and
+        what a str ``ref`` may name (default ``image0``, ``image1``, ...).
+    preset_name : str
+        The preset's name as the recording and ``Result.params`` report it.
     kernel : {"numba", "reference"}
         The compiled scan or the slow readable one (tests).
+    chunk_rows : int, optional
+        Rows the compiled scan visits between two returns to Python (progress,
+        Ctrl-C); the default suits the image size. The result does not depend on it.
+    progress : callable (stage: str, fraction: float) -> None, optional
+        Told each stage's start (0.0), progress and end (1.0): "features",
+        "geometry", ..., "scan 0", ..., "fill by selection".
     valid_masks : sequence of (H, W) bool ndarrays, optional
         Per image, where it has content (False: transparent or empty border of a
         pre-aligned frame). Never flagged in the reference (the input is kept
@@ -317,19 +371,45 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     Returns
     -------
     Result
+        ``clean`` (H, W, 3) uint8 and ``dynamic`` (H, W) bool, at the input's size;
+        ``warnings``: the run's notes as sentences (each also issued as a
+        ``UserWarning``); ``timings``: seconds per stage (they add up to
+        ``"total"``); ``scans``: one record per scan (``SCAN_SUMMARY_DTYPE``'s
+        fields: scan, direction, n_dynamic, n_replaced, n_undecided, seconds).
+        The notes name the command line's flags; the same setting here is the
+        ``Params`` field of that name with underscores (``--select-minority 0``:
+        ``params={"select_minority": 0}``).
 
     Raises
     ------
     InputError
-        Fewer than 2 images, images of different sizes or not (H, W, 3) uint8, a
-        ``ref`` that names nothing or is out of range, an unknown preset, Params
-        field or a bad value, a probe outside the image.
+        Fewer than 2 images; an image that is not an (H, W, 3) uint8 array (the
+        message says which, and the line of code that converts it: gray, BGRA,
+        16-bit, float, None from a failed ``cv2.imread``, a PIL image); images of
+        different sizes; ``names`` not one per image; a ``ref`` that names nothing
+        or is out of range; an unknown preset, Params field, a value of the wrong
+        type or range; a probe outside the image; an unknown ``kernel``.
     TypeError
         ``params`` of another type.
     """
     params = api_params(params)
+    if isinstance(images, np.ndarray) or not isinstance(images, Sequence):
+        # a stacked (N, H, W, 3) array, a generator, a map: read once, as a list
+        try:
+            images = list(images)
+        except TypeError:
+            raise InputError("images must be a sequence of (H, W, 3) uint8 BGR arrays, got "
+                             f"{type(images).__name__}") from None
     validate_images(images, 0)
-    names = list(names) if names is not None else [f"image{i}" for i in range(len(images))]
+    if kernel not in ("numba", "reference"):
+        raise InputError(f"kernel must be 'numba' or 'reference', got {kernel!r}")
+    if names is None:
+        names = [f"image{i}" for i in range(len(images))]
+    else:
+        names = [str(n) for n in names]
+        if len(names) != len(images):
+            raise InputError(f"names: {len(names)} given for {len(images)} images: "
+                             "give one name per image, in the same order")
     ref = api_ref(ref, images, names)
     images, gray_note = gray_like_reference(images, ref)
     sink = NullSink() if sink is None else sink
@@ -600,6 +680,21 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "that saw the background is enough), --select-minority 0 the whole step"
                    if len(srcs) == 2 and params.select_minority_one else
                    "; --select-minority 0 turns this step off"))
+            warnings.warn(msgs[-1], stacklevel=2)
+    if selection is not None and dyn.any():
+        # most of the fill resting on one photo that the others contradict: three
+        # photos whose movers overlap (a fresh-user trial on tim6 as tim3, tim4, tim5
+        # found half a cup left and nothing said; measured on the composites, the
+        # bursts and DAVIS: at most 29 % of a fill, 89 % on that one)
+        n_rep = int((dyn & ~selection.no_source).sum())
+        n_un = int(unconfirmed_fill(selection, dyn).sum())
+        if n_rep >= 5e-4 * dyn.size and n_un >= UNCONFIRMED_SHARE * n_rep:
+            msgs.append(f"{100 * n_un / n_rep:.0f} % of the replaced region ({n_un} px) was "
+                        "filled from one photo alone, where the other photos show a mover "
+                        "of their own or something else: nothing confirms the fill there, "
+                        "and parts of a mover may remain or be pasted in (look at it: "
+                        "coverage.png counts one photo there; more photos, or photos taken "
+                        "further apart in time, let the fill be cross-checked)")
             warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and selection.consensus_mode == "scan" and dyn.any():
         note = _knee_note(views, params.select_parallax_px)

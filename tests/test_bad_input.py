@@ -489,6 +489,63 @@ def test_tiny_images_api():
         remove_dynamic([np.zeros((H, W), np.uint8)] * 3, ref=0)
 
 
+def _bad_images(scene):
+    """Each way an API user's images go wrong, with the words that must name the fix."""
+    from PIL import Image
+
+    im = scene.images[0]
+    return {
+        "failed imread": ([im, None, im], "image 1 is None (cv2.imread returns None"),
+        "not arrays": ([1, 2, 3], "image 0 is of type int, not an array"),
+        "PIL": ([Image.fromarray(im[..., ::-1])] * 3, "np.asarray(img.convert('RGB'))[..., ::-1]"),
+        "float 0-1": ([im.astype(np.float32) / 255] * 3, "(img * 255).round().astype(np.uint8)"),
+        "float 0-255": ([im.astype(np.float64)] * 3, "img.clip(0, 255).round().astype(np.uint8)"),
+        "gray": ([im[..., 1]] * 3, "cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)"),
+        "BGRA": ([np.dstack([im, im[..., :1]])] * 3, "img[..., :3]"),
+        "16-bit": ([im.astype(np.uint16) << 8] * 3, "(img >> 8).astype(np.uint8)"),
+    }
+
+
+@pytest.mark.parametrize("case", ["failed imread", "not arrays", "PIL", "float 0-1",
+                                  "float 0-255", "gray", "BGRA", "16-bit"])
+def test_an_api_image_of_the_wrong_kind_is_told_how_to_convert_it(scene, case):
+    images, words = _bad_images(scene)[case]
+    with pytest.raises(InputError) as e:
+        remove_dynamic(images)
+    assert words in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_api_arguments_are_checked_before_the_run(scene, monkeypatch):
+    """names of another length, an unknown kernel, a params value of the wrong type:
+    one-line InputErrors, raised before any work (a names list one short failed with
+    an IndexError after the whole run, while writing a note)."""
+    from dynremove import pipeline
+
+    monkeypatch.setattr(pipeline, "_prepare", lambda *a, **k: pytest.fail("the run started"))
+    three = scene.images[:3]
+    with pytest.raises(InputError, match=r"^names: 1 given for 3 images"):
+        remove_dynamic(three, names=["a"])
+    with pytest.raises(InputError, match=r"^kernel must be 'numba' or 'reference', got 'cuda'"):
+        remove_dynamic(three, kernel="cuda")
+    with pytest.raises(InputError, match=r"^params: t_r must be a number, got 'abc' \(str\)"):
+        remove_dynamic(three, params={"t_r": "abc"})
+    with pytest.raises(InputError, match=r"^params: patch_size must be an int, got 13.5"):
+        remove_dynamic(three, params={"patch_size": 13.5})
+    with pytest.raises(InputError, match=r"^params: snap must be True or False, got 1 "):
+        remove_dynamic(three, params={"snap": 1})
+
+
+def test_api_takes_a_generator_or_a_stacked_array(scene):
+    """Any iterable of images runs, and as the list of them does."""
+    three = list(scene.images[:3])
+    p = {"max_scans": 1}
+    a = remove_dynamic(three, params=p)
+    b = remove_dynamic((im for im in three), params=p)
+    c = remove_dynamic(np.stack(three), params=p)
+    assert np.array_equal(a.clean, b.clean) and np.array_equal(a.clean, c.clean)
+    assert np.array_equal(a.dynamic, c.dynamic)
+
+
 @pytest.mark.parametrize("max_side", ["-5", "4"])
 def test_bad_max_side(tmp_path, capsys, scene, max_side):
     write_set(tmp_path / "s", scene.images[:3])

@@ -203,7 +203,7 @@ def test_the_blends_offset_is_recorded_and_told(method_run):
     assert (told in words) == (mag[y, x] >= 1)
     # a large correction is not called light (a trial read -115 levels as light)
     assert ("a large correction" in words) == (mag[y, x] >= 40)
-    light = "(the photos' light differs there: exposure, glare or shade)"
+    light = f"({vd._LIGHT_OR_REST})"
     assert (light in words) == (1 <= mag[y, x] < 40)
 
 
@@ -510,7 +510,7 @@ def test_where_the_fill_sampled_its_source_is_told(method_run):
     np.testing.assert_allclose([fx[y, x] / P.XY_SCALE, fy[y, x] / P.XY_SCALE], want,
                                atol=0.5 / P.XY_SCALE + 1e-6)
     text = vd.format_pixel_history(vi.pixel_history(path, x, y))
-    got = re.search(r"fill: filled from source \S+ at \(([\d.]+), ([\d.]+)\) in it", text)
+    got = re.search(r"fill: filled from source \S+ at \(([\d.]+), ([\d.]+)\) in it \(where", text)
     assert got, text
     np.testing.assert_allclose([float(got[1]), float(got[2])], want, atol=0.1)
 

@@ -139,6 +139,31 @@ def test_a_failure_region_says_what_made_most_of_it_so():
     assert vi.failure_cause("FP", region, {}, {}) == (None, 0.0)
 
 
+def test_a_failure_region_lists_its_causes_and_shows_the_first():
+    """A region made by two causes names both with their shares, largest first (a
+    trial read "38 % of it never flagged" as the whole story), and the pixel it
+    offers to explain has the cause named first (the trial's pixel had been dropped
+    by the clean-up, the line said "never flagged")."""
+    import numpy as np
+
+    from viewer import inspect as vi
+
+    H_, W_ = 12, 20
+    region = np.zeros((H_, W_), bool)
+    region[2:10, 2:18] = True  # 128 px
+    st = {n: np.zeros((H_, W_), bool) for n in vi.STAGE_ORDER}
+    st["scan"][2:10, 2:7] = True  # 40 px the clean-up dropped, the other 88 never flagged
+    shares, per_px = vi.failure_causes("FN", region, st, {})
+    assert shares == [("never", 88 / 128), ("dropped:clean", 40 / 128)]
+    assert per_px.shape == (128,) and (per_px == "dropped:clean").sum() == 40
+    e = dict(kind="FN", area=128, bbox=(2, 2, 16, 8), pixel=(4, 5), n_decisions=0,
+             worst=None, steps=[], why=shares[0][0], why_share=shares[0][1],
+             why_more=shares[1:])
+    line = vd.format_failures([e]).splitlines()[1]
+    assert line.endswith("; 69 % of it never flagged (the scans and the steps after them "
+                         "left it); 31 % of it dropped by the L clean-up"), line
+
+
 def test_a_patch_write_names_its_ties_not_its_candidates():
     """``n_patches`` of a write counts A_m's patches tied at the best score; a trial
     read "(the only candidate patch)" beside "4 of 12 candidates" as a contradiction.
@@ -395,7 +420,12 @@ def test_noise_candidates_are_not_counted_in_the_cluster():
            "winner cluster 0" in text, text
     all_noise = dict(d, n_clusters=0, win_cluster=-1,
                      candidates=[dict(c, cluster=-1) for c in d["candidates"]])
-    assert vd.candidate_counts(all_noise) == "6 candidates: all noise"
+    # no cluster: where the candidates were is all there is to read (session 54's
+    # trial probed an undecided pixel and read only "2 candidates: all noise")
+    told = vd.candidate_counts(all_noise)
+    assert told.startswith("6 candidates: all noise (") and all(
+        f"{c['src_name']} ({c['x']},{c['y']}) B_l {c['B']:.2f}" in told
+        for c in d["candidates"]), told
     # a pixel the border votes added gets their meaning in one line (a fresh-user
     # trial found "static in scan 0 … added by the border votes" puzzling)
     h_votes = dict(h, stages={"scan": False, "clean": False, "votes": True, "snap": True})
@@ -678,6 +708,13 @@ def test_what_the_cut_weighed_is_told_with_the_consensus_or_the_suspect():
     w = vd.weighed_words(sel)
     assert "reference 0.0" in w and "cheapest source 42.6" in w and "3.24" in w \
         and "1.71" in w, w
+    # in plain words, as the trial of session 54 asked; the three-photo tie said so
+    assert "in short: the other photos do not agree with one another" in w \
+        and "three photos" not in w, w
+    assert "two sources that disagree with each other cannot outvote" in \
+        vd.weighed_words(sel, 2)
+    assert "in short" not in vd.weighed_words(
+        {**sel, "support": {"reference": 0.5, "sources": 2.0}})
     sel["support"] = {}
     w = vd.weighed_words(sel)
     assert "--select-ref-cost" in w and "here nothing" in w, w  # a three-photo rule set it to 0

@@ -811,6 +811,15 @@ def outside_message(info: dict[str, Any], x: int, y: int) -> str:
 
 def failure_cause(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
                   sel: dict[str, np.ndarray]) -> tuple[str | None, float]:
+    """The largest of ``failure_causes``: (its key, its share); (None, 0.0) without
+    stages."""
+    shares, _ = failure_causes(kind, region, stages, sel)
+    return shares[0] if shares else (None, 0.0)
+
+
+def failure_causes(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
+                   sel: dict[str, np.ndarray]
+                   ) -> tuple[list[tuple[str, float]], np.ndarray | None]:
     """Why a failure region of ``failures`` is what it is, by the most of its pixels.
 
     For a missed region ("FN"): never flagged, dropped by the step after the last
@@ -819,12 +828,14 @@ def failure_cause(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
     (``completed`` 3), or kept with its region of L (``completed`` 2). For a false
     positive ("FP"): flagged by the scans, or added by the first step that had it
     (a mover that lingered, where the fill by selection added it so).
-    Returns (a key of ``verdict.FAILURE_CAUSES``, or "dropped:<stage>" / "added:<stage>",
-    and the share of the region's pixels it holds); (None, 0.0) without stages.
+    Returns ``[(cause, share), ...]``, largest share first (a cause: a key of
+    ``verdict.FAILURE_CAUSES``, or "dropped:<stage>" / "added:<stage>"; its share of
+    the region's pixels), and each pixel's cause ((n,) object array over
+    ``region``'s pixels, row-major); ``([], None)`` without stages.
     """
     names = [n for n in STAGE_ORDER if n in stages]
     if not names or not region.any():
-        return None, 0.0
+        return [], None
     have = np.stack([stages[n][region] for n in names])  # (stages, n px)
     if kind == "FN":
         # dropped by the step after the last one that had it
@@ -847,8 +858,9 @@ def failure_cause(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
         if ling is not None:
             causes[(causes == "added:select") & ling[region].astype(bool)] = "lingering"
     keys, counts = np.unique(causes.astype(str), return_counts=True)
-    j = int(np.argmax(counts))
-    return str(keys[j]), float(counts[j] / len(causes))
+    order = np.argsort(-counts, kind="stable")
+    return ([(str(keys[j]), float(counts[j] / len(causes))) for j in order],
+            causes.astype(str))
 
 
 def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[str, Any]]:
@@ -859,7 +871,9 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     (x, y, w, h), ``centroid``, ``pixel`` (the most interior pixel, a good
     ``--probe``), ``n_decisions`` (recorded decisions inside) and ``worst``
     (the recorded decision inside whose M was most confidently wrong, or None),
-    ``why`` and ``why_share`` (``failure_cause``: what made most of it so);
+    ``why`` and ``why_share`` (``failure_cause``: the cause of the largest share of
+    it; ``pixel`` is then the most interior pixel of that share), ``why_more`` (the
+    other causes holding 5 % of it or more, as ``[(cause, share), ...]``);
     all in pixels of the analysis image, of size ``size`` (H, W); when the photos
     were analysed at another size, ``photo`` (W, H) and ``photo_pixel`` (``pixel``
     in the photo), else None.
@@ -916,5 +930,20 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     out = out[:top]
     for e in out:  # (only the regions returned: a run may have hundreds)
         lab, i = e.pop("_labels")
-        e["why"], e["why_share"] = failure_cause(e["kind"], lab == i, stages, sel)
+        region = lab == i
+        shares, per_px = failure_causes(e["kind"], region, stages, sel)
+        e["why"], e["why_share"] = shares[0] if shares else (None, 0.0)
+        e["why_more"] = [(c, f) for c, f in shares[1:] if f >= 0.05]
+        if shares and e["why_share"] < 0.995:
+            # the pixel to explain shows the cause named first (a trial's pixel was
+            # dropped by the clean-up where the line said "never flagged")
+            x0, y0, w, hh = e["bbox"]
+            mine = np.zeros(region.shape, bool)
+            mine[region] = per_px == e["why"]
+            sub = mine[y0:y0 + hh, x0:x0 + w].astype(np.uint8)
+            dist = cv2.distanceTransform(np.pad(sub, 1), cv2.DIST_L2, 3)[1:-1, 1:-1]
+            py, px = np.unravel_index(int(np.argmax(dist)), dist.shape)
+            qx, qy = x0 + int(px), y0 + int(py)
+            e["pixel"], e["photo_pixel"] = (qx, qy), analysis_to_photo(info, qx, qy)
+            e["steps"] = [visit_step(sc, qx, qy, H, W, direction=dr) for sc, dr in scan_dirs]
     return out

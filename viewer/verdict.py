@@ -15,6 +15,9 @@ from dynremove.refine.select import MISFIT_MOVER_P
 
 # a blend offset from this many levels up (any channel) is told as more than light
 _LARGE_OFFSET = 40
+# what a small blend offset answers: the words of the fill line
+_LIGHT_OR_REST = ("the photos' light differing there, exposure, glare or shade, needs "
+                  "this; so does part of a mover left in the reference around the region")
 
 
 def _label(v: bool | None) -> str:
@@ -125,7 +128,13 @@ def candidate_counts(d: dict[str, Any]) -> str:
         else:
             parts.append(f"{by[c]} in cluster {c}")
     if by.get(-1):
-        parts.append(("all" if by[-1] == n else str(by[-1])) + " noise")
+        noise = ("all" if by[-1] == n else str(by[-1])) + " noise"
+        if win < 0:
+            # no cluster: where they were is all there is to read (a trial's probe of
+            # an undecided pixel said only "2 candidates: all noise")
+            noise += " (" + ", ".join(f"{m['src_name']} ({m['x']},{m['y']}) B_l {m['B']:.2f}"
+                                      for m in cands if m["cluster"] < 0) + ")"
+        parts.append(noise)
     return head + ": " + ", ".join(parts)
 
 
@@ -275,9 +284,11 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                                              else "no cluster") for sc in scans[1:])
         n = key.get("overwritten_before")
         if n:
-            head += (f"; its content had been overwritten by {n} neighbouring "
-                     f"patch{'es' if n > 1 else ''} before its turn (first at step "
-                     f"{key['first_overwritten']})")
+            # ("in the scan's working copy": a trial read it as the clean photo's pixel
+            # changing, at a pixel the clean photo keeps)
+            head += (f"; its content in the scan's working copy had been overwritten by {n} "
+                     f"neighbouring patch{'es' if n > 1 else ''} before its turn (first at "
+                     f"step {key['first_overwritten']})")
         elif n == 0:
             head += "; no neighbouring patch had overwritten it before its turn"
         lines.append(head)
@@ -341,11 +352,17 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                 why += ("; the blend added B/G/R " + "/".join(f"{c:+d}" for c in off)
                         + " levels to it, to meet the reference around the region"
                         + (" (a large correction: the ring there differs from this source "
-                           "by more than light does, e.g. a shadow or a wrong source)"
+                           "by more than light does, e.g. a shadow, a wrong source, or part "
+                           "of a mover left in the reference around the region)"
                            if max(abs(c) for c in off) >= _LARGE_OFFSET else
-                           " (the photos' light differs there: exposure, glare or shade)"))
+                           # (a trial read the light as the cause where the ring was the
+                           # rest of a cup the fill had left: both ask for an offset)
+                           f" ({_LIGHT_OR_REST})"))
             fx, fy = sel.get("fill_x"), sel.get("fill_y")
-            at = f" at ({fx:.1f}, {fy:.1f}) in it" if fx is not None and fy is not None else ""
+            # (where the fill's field across L leads, not the flow's match that the
+            # static 3-D test reads: a trial read the two as a contradiction)
+            at = (f" at ({fx:.1f}, {fy:.1f}) in it (where the fill's field across L leads)"
+                  if fx is not None and fy is not None else "")
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{at}{why}"
                          + (f" (others: {others})" if others else ""))
         elif sel.get("explained"):
@@ -485,22 +502,32 @@ def region_words(sel: dict[str, Any]) -> str | None:
     return f"{head} ({tail})"
 
 
-def weighed_words(sel: dict[str, Any]) -> str | None:
+def weighed_words(sel: dict[str, Any], n_sources: int = 0) -> str | None:
     """What the graph cut weighed at a pixel of the fill's region: the data costs of
     the reference and of the cheapest source, and the supports of the fill's colour
     consensus that set them; None where the recording has no costs there."""
     cost, sup = sel.get("data_cost") or {}, sel.get("support") or {}
     if "reference" not in cost:
         return None
-    txt = f"data cost of the reference {cost['reference']:.1f}, " + (
-        f"of the cheapest source {cost['best_source']:.1f} (ΔE to the consensus, plus "
-        "--select-kappa and --select-gamma × its P(mover))" if "best_source" in cost
-        else "no source may fill it")
+    # (a trial read the κ and γ terms as the reference's too)
+    txt = f"data cost of the reference {cost['reference']:.1f} (its ΔE to the consensus), " + (
+        f"of the cheapest source {cost['best_source']:.1f} (its ΔE to the consensus, plus "
+        "--select-kappa and --select-gamma × its P(mover), which only a source pays)"
+        if "best_source" in cost else "no source may fill it")
     if "reference" in sup and "sources" in sup:
         txt += (f"; the consensus: the reference's support {sup['reference']:.2f} (its "
                 "weight 1 − P(mover), plus each source that agrees with it or votes it "
                 f"static by flow or epipolar line) against {sup['sources']:.2f} for the "
-                "best-supported source")
+                "best-supported source (each weight, 0–1, counts a photo)")
+        if sup["reference"] >= sup["sources"]:
+            # (a trial had to read the code to learn why a cup stayed: the sources of a
+            # three-photo set disagreed, one showing the table, one its own cup)
+            txt += ("; in short: the other photos do not agree with one another on "
+                    "anything else here, so what the reference shows has the most "
+                    "backing and stays" + (" (with three photos, two sources that "
+                                           "disagree with each other cannot outvote the "
+                                           "reference; more photos can)"
+                                           if n_sources == 2 else ""))
     else:
         txt += ("; the reference was the suspect here: the consensus is the sources' own, "
                 "and keeping the reference costs --select-ref-cost, or, where it agrees "
@@ -541,12 +568,12 @@ def static_test_line(h: dict[str, Any]) -> str | None:
         return [n + (on_line(n) if code in (2, 3, 5) and n in de else "")
                 for n, c in ev.items() if c == code]
 
-    groups = [(1, "its match shows it"),
+    groups = [(1, "its flow match shows it"),
               (2, "found on the epipolar line"),
               (3, "found on the epipolar line, but too few others are for that to count "
                   "while another source that sees it shows something else"),
-              (4, "the match agrees, in the movers' colours"),
-              (5, "not found: the match differs"
+              (4, "its flow match agrees, in the movers' colours"),
+              (5, "not found: its flow match differs"
                   + (f", and nothing on the epipolar line is within ΔE {search_de:.1f}"
                      if isinstance(search_de, float) and search_de == search_de
                      and any(n in de for n, c in ev.items() if c == 5) else "")),
@@ -597,7 +624,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
         return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
                 "photomontage took a source here, but the reference is kept: the fill did "
                 "not fit the photo around its region (--select-misfit-levels)")
-    region, weighed = region_words(sel), weighed_words(sel)
+    region = region_words(sel)
+    weighed = weighed_words(sel, len(h.get("source_names") or []))
     cost = sel.get("data_cost") or {}
     dearer = ("reference" in cost and "best_source" in cost
               and cost["reference"] > cost["best_source"])
@@ -754,9 +782,12 @@ def failure_words(why: str, share: float) -> str:
 
 def format_failures(items: list[dict[str, Any]]) -> str:
     """One line per failure region."""
-    lines = ["region (kind, area, box: top-left x,y and width x height), a pixel in it, "
-             "the steps at which each scan visited that pixel (one per scan; jump to them "
-             "on the `step` timeline), and what made most of the region so:"]
+    lines = ["region (kind, area, box: top-left x,y and width x height), a pixel in it "
+             "(of the share named first below), the steps at which each scan visited that "
+             "pixel (one per scan; jump to them on the `step` timeline), the recorded "
+             "decision in it that looked most as the region wrongly is (a missed region's "
+             "highest M, a false alarm's lowest: at or under t_r a scan calls a pixel "
+             "dynamic), and what made the region so, its largest shares first:"]
     for e in items:
         x0, y0, w, h = e["bbox"]
         steps = ", ".join(str(s) for s in e.get("steps", []))
@@ -766,10 +797,11 @@ def format_failures(items: list[dict[str, Any]]) -> str:
              + (f" (photo {ph[0]},{ph[1]})" if ph else "")
              + f"  steps {steps}; {e['n_decisions']} recorded decisions")
         if e["worst"]:
-            s += (f"; worst M {e['worst']['M']:.2f} at ({e['worst']['x']},{e['worst']['y']})"
-                  f" step {e['worst']['step']}")
+            s += (f"; {'highest' if e['kind'] == 'FN' else 'lowest'} M {e['worst']['M']:.2f} at "
+                  f"({e['worst']['x']},{e['worst']['y']}) step {e['worst']['step']}")
         if e.get("why"):
             s += f"; {failure_words(e['why'], e.get('why_share', 1.0))}"
+            s += "".join(f"; {failure_words(c, f)}" for c, f in e.get("why_more", []))
         lines.append(s)
     if items and items[0].get("photo"):
         lines.append(f"({_analysis_note(items[0]['size'], items[0]['photo'])}: --pixel "

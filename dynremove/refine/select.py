@@ -203,6 +203,20 @@ OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of th
 MISFIT_KEPT = 3
 OWN_MOVER, FOLLOWED = 3, 8  # the codes of a source showing a mover of its own: by colour,
 # or the reference's mover where the flow followed it
+DISAGREES = 5  # a source whose sample differs from the fill's colour consensus
+
+
+def unconfirmed_fill(sel: "Selection", replaced: npt.NDArray[np.bool_]
+                     ) -> npt.NDArray[np.bool_]:
+    """Pixels of ``replaced`` (H, W) bool filled from one source alone while another
+    source that reaches them shows a mover of its own there or disagrees with the
+    fill (``reasons`` OWN_MOVER, FOLLOWED or DISAGREES): nothing confirms the fill
+    there. (H, W) bool; all False without the per-source reasons."""
+    if sel.reasons is None or sel.members is None:
+        return np.zeros(replaced.shape, bool)
+    single = replaced & ~sel.no_source & (sel.label > 0) & (sel.members.sum(0) == 1)
+    against = np.isin(sel.reasons, (OWN_MOVER, FOLLOWED, DISAGREES)).any(0)
+    return single & against
 
 # Inside L, whether each source shows the reference's content as static (a pixel of
 # L is kept as static 3-D structure where enough of them do: ``Selection.explained``)
