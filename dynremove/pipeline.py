@@ -317,7 +317,7 @@ def _prepare(images: Sequence[np.ndarray], ref: int, params: Params, clock: _Clo
 
 
 def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None,
-                   params: Params | str | dict | None = DEFAULT,
+                   params: Params | str | dict | None = None,
                    sink: EventSink | None = None,
                    probes: Sequence[tuple[int, int]] = (), sample_static: float = 0.0,
                    names: Sequence[str] | None = None, preset_name: str = "custom",
