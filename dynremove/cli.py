@@ -289,7 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "f10), image files, or one video")
     r.add_argument("--ref", default=None, type=parse_ref,
                    help="reference: index (0-based, in input order; negative counts from "
-                        "the end, -1 = the last), file name (one that no other input has), "
+                        "the end, -1 = the last), file name or stem (one that no other "
+                        "input has; digits that name a file are that file: 0002 is "
+                        "0002.jpg), "
                         "path (exactly that input) or 'auto' (the sharpest frame with "
                         "the most keypoint matches); default: the middle image. The run "
                         "names the one it takes")

@@ -727,10 +727,27 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     ``paths``, the inputs' paths) by path; default: the middle image.
 
     A path (see :func:`is_path_ref`) picks exactly that file (resolved paths compared);
-    a name or stem that more than one input has is an error listing them.
+    a name or stem that more than one input has is an error listing them. A string of
+    digits is a name where an input has that name or stem (frames 0001.jpg, 0002.jpg:
+    ``--ref 0002`` is 0002.jpg, not index 2) and, written without leading zeros, an
+    index too: where the two pick different images, it is an error saying how to
+    give either.
     """
     if ref is None or ref == "":
         return len(names) // 2
+    if isinstance(ref, str) and ref.lstrip("-").isdigit():
+        named = ([i for i, n in enumerate(names) if n == ref]
+                 or [i for i, n in enumerate(names) if Path(n).stem == ref])
+        as_index = not (len(ref.lstrip("-")) > 1 and ref.lstrip("-").startswith("0"))
+        if len(named) == 1:
+            i = int(ref)
+            if as_index and -len(names) <= i < len(names) and i % len(names) != named[0]:
+                raise InputError(
+                    f"--ref {ref}: both the index of {names[i % len(names)]} and the name of "
+                    f"{names[named[0]]} (index {named[0]}): give {names[named[0]]} for that "
+                    f"file, or {i % len(names) - len(names)} (counted from the end) for "
+                    f"{names[i % len(names)]}")
+            return named[0]
     if isinstance(ref, int) or (isinstance(ref, str) and ref.lstrip("-").isdigit()):
         i = int(ref)
         if not -len(names) <= i < len(names):

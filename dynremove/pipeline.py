@@ -104,7 +104,7 @@ def api_params(params: Params | str | dict | None) -> Params:
 
 
 def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
-            names: Sequence[str]) -> int:
+            names: Sequence[str], names_given: bool = True) -> int:
     """``remove_dynamic``'s ``ref`` as an index: None = the middle image; an int,
     negative from the end as in Python; ``"auto"`` (``video.auto_reference``); a
     name of ``names``. Raises InputError when it names nothing or is out of range."""
@@ -118,7 +118,13 @@ def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
         raise InputError(f"reference {ref!r}: give an int index, a name or 'auto'")
     if isinstance(ref, (np.integer, int)):
         ref = int(ref)
-    return resolve_ref(ref, names)
+    try:
+        return resolve_ref(ref, names)
+    except InputError as e:  # the API's words: ref=, names= (not --ref)
+        msg = str(e).replace(f"--ref {ref}:", f"ref={ref!r}:", 1)
+        if names_given is False and isinstance(ref, str) and "names no input image" in msg:
+            msg += "; pass names=[...] (e.g. the file names) to refer to images by name"
+        raise InputError(msg) from None
 
 
 def _array_hint(i: int, im: object) -> str:
@@ -372,6 +378,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     -------
     Result
         ``clean`` (H, W, 3) uint8 and ``dynamic`` (H, W) bool, at the input's size;
+        ``coverage`` (H, W) uint8: how many sources the output was made from (inside
+        ``dynamic``: 0 where inpainted), what the CLI writes as coverage.png;
         ``warnings``: the run's notes as sentences (each also issued as a
         ``UserWarning``); ``timings``: seconds per stage (they add up to
         ``"total"``); ``scans``: one record per scan (``SCAN_SUMMARY_DTYPE``'s
@@ -403,6 +411,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     validate_images(images, 0)
     if kernel not in ("numba", "reference"):
         raise InputError(f"kernel must be 'numba' or 'reference', got {kernel!r}")
+    names_in = names
     if names is None:
         names = [f"image{i}" for i in range(len(images))]
     else:
@@ -410,7 +419,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         if len(names) != len(images):
             raise InputError(f"names: {len(names)} given for {len(images)} images: "
                              "give one name per image, in the same order")
-    ref = api_ref(ref, images, names)
+    ref = api_ref(ref, images, names, names_given=names_in is not None)
     images, gray_note = gray_like_reference(images, ref)
     sink = NullSink() if sink is None else sink
     H, W = images[0].shape[:2]
@@ -608,6 +617,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     selection = None
     if params.fuse:
         clock.start("fusion")
+    pre_fill = dyn  # L as the fill by selection takes it
     if params.fuse and params.fill == "select":
         selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=None if
                                 valid_masks is None else np.stack([valid_masks[s] for s in srcs]),
@@ -689,12 +699,22 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         n_rep = int((dyn & ~selection.no_source).sum())
         n_un = int(unconfirmed_fill(selection, dyn).sum())
         if n_rep >= 5e-4 * dyn.size and n_un >= UNCONFIRMED_SHARE * n_rep:
+            # and what the fill put back of what was found moving (a second trial saw
+            # the cup's sleeve kept and the note silent on it)
+            n_kept = int((pre_fill & ~selection.replaced).sum())
+            kept = (f"; {n_kept} px ({100 * n_kept / max(1, int(pre_fill.sum())):.0f} % of "
+                    "what was found moving) were kept as the reference shows them, where "
+                    "the other photos did not agree on anything else"
+                    + (" (with three photos, two that disagree cannot outvote the "
+                       "reference)" if len(srcs) == 2 else "")
+                    if n_kept >= 0.25 * pre_fill.sum() else "")
             msgs.append(f"{100 * n_un / n_rep:.0f} % of the replaced region ({n_un} px) was "
                         "filled from one photo alone, where the other photos show a mover "
                         "of their own or something else: nothing confirms the fill there, "
-                        "and parts of a mover may remain or be pasted in (look at it: "
-                        "coverage.png counts one photo there; more photos, or photos taken "
-                        "further apart in time, let the fill be cross-checked)")
+                        f"and parts of a mover may remain or be pasted in{kept} (look at "
+                        "it: the coverage map, coverage.png or Result.coverage, counts one "
+                        "photo there; more photos, or photos taken further apart in time, "
+                        "let the fill be cross-checked)")
             warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and selection.consensus_mode == "scan" and dyn.any():
         note = _knee_note(views, params.select_parallax_px)

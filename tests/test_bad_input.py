@@ -525,6 +525,12 @@ def test_api_arguments_are_checked_before_the_run(scene, monkeypatch):
     three = scene.images[:3]
     with pytest.raises(InputError, match=r"^names: 1 given for 3 images"):
         remove_dynamic(three, names=["a"])
+    # the API's words for the reference: ref=, and names= where none were given
+    with pytest.raises(InputError, match=r"^ref='tim4.jpg': names no input image \(have "
+                                         r"image0, image1, image2\); pass names=\[...\]"):
+        remove_dynamic(three, ref="tim4.jpg")
+    with pytest.raises(InputError, match=r"^ref='x': names no input image \(have a, b, c\)$"):
+        remove_dynamic(three, ref="x", names=["a", "b", "c"])
     with pytest.raises(InputError, match=r"^kernel must be 'numba' or 'reference', got 'cuda'"):
         remove_dynamic(three, kernel="cuda")
     with pytest.raises(InputError, match=r"^params: t_r must be a number, got 'abc' \(str\)"):

@@ -370,6 +370,24 @@ def test_resolve_ref_by_path_name_stem_and_index(tmp_path, monkeypatch):
     # an exact name wins over another input's stem
     assert io.resolve_ref("v.png", ["v.png", "v.png.jpg"]) == 0
 
+
+def test_a_reference_named_by_digits_is_the_file_of_that_name():
+    """Frames 0001.jpg … 0003.jpg: ``--ref 0002`` is 0002.jpg (a trial got 0003.jpg,
+    index 2, with no word); digits that are both an index and another file's name are
+    an error that says how to give either; a plain index still works."""
+    frames = ["0001.jpg", "0002.jpg", "0003.jpg"]
+    assert io.resolve_ref("0002", frames) == 1 and io.resolve_ref("0003.jpg", frames) == 2
+    assert io.resolve_ref("2", frames) == 2 and io.resolve_ref("-1", frames) == 2
+    plain = ["1.jpg", "2.jpg", "3.jpg"]
+    with pytest.raises(InputError, match=r"^--ref 2: both the index of 3.jpg and the name "
+                                         r"of 2.jpg \(index 1\): give 2.jpg for that file, "
+                                         r"or -1 \(counted from the end\) for 3.jpg$"):
+        io.resolve_ref("2", plain)
+    with pytest.raises(InputError, match=r"both the index of 2.jpg and the name of 1.jpg"):
+        io.resolve_ref("1", plain)
+    assert io.resolve_ref("0", ["0.png", "1.png"]) == 0  # both say image 0
+    assert io.resolve_ref("2.jpg", plain) == 1 and io.resolve_ref("-1", plain) == 2
+
 # --- recordings --------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):

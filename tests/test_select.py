@@ -876,6 +876,12 @@ def test_a_fill_that_rests_on_one_contradicted_photo_is_told():
         if told:
             assert note[0].startswith(f"{100 * share:.0f} % of the replaced region "
                                       f"({un.sum()} px) was filled from one photo alone")
+            # and what the fill put back of what was found moving (the cup's sleeve: a
+            # second trial saw it kept and the note silent on it)
+            kept = int((r.stages["snap"] & ~r.dynamic).sum())
+            assert kept >= 0.25 * r.stages["snap"].sum()
+            assert f"; {kept} px (" in note[0] and "kept as the reference shows them" in \
+                note[0] and "(with three photos, two that disagree cannot outvote" in note[0]
             # each such pixel is made from one source, and another source there shows a
             # mover of its own or disagrees (the per-source reasons)
             assert (r.selection.members.sum(0)[un] == 1).all()
