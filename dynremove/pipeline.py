@@ -7,6 +7,7 @@ engineered steps, each switched by ``Params``).
 from __future__ import annotations
 
 import dataclasses
+import os
 import platform
 from concurrent.futures import Future, ThreadPoolExecutor
 import time
@@ -122,7 +123,7 @@ def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
         return resolve_ref(ref, names)
     except InputError as e:  # the API's words: ref=, names= (not --ref)
         msg = str(e).replace(f"--ref {ref}:", f"ref={ref!r}:", 1)
-        if names_given is False and isinstance(ref, str) and "names no input image" in msg:
+        if not names_given and isinstance(ref, str) and "names no input image" in msg:
             msg += "; pass names=[...] (e.g. the file names) to refer to images by name"
         raise InputError(msg) from None
 
@@ -133,6 +134,10 @@ def _array_hint(i: int, im: object) -> str:
     if im is None:
         return (f"image {i} is None (cv2.imread returns None for a file it could not "
                 "read: check that path)")
+    if isinstance(im, (str, bytes, os.PathLike)):
+        return (f"image {i} is a path ({os.fsdecode(im)!r}), not an image: read the photos "
+                "with dynremove.io.load_image_set(paths, max_side=1280).images (EXIF "
+                "orientation, the command line's analysis size) or cv2.imread")
     if not isinstance(im, np.ndarray):
         kind = f"{type(im).__module__}.{type(im).__qualname__}".removeprefix("builtins.")
         if kind.startswith("PIL."):
@@ -147,6 +152,9 @@ def _array_hint(i: int, im: object) -> str:
     if im.ndim == 3 and im.shape[2] == 4:
         return (f"image {i}: expected (H, W, 3) uint8, {got}: with an alpha channel; pass "
                 "img[..., :3] (BGRA to BGR, as the command line does)")
+    if im.ndim == 3 and im.shape[0] in (1, 3, 4) and im.shape[2] > 4:
+        return (f"image {i}: expected (H, W, 3) uint8, {got}: channels first; pass "
+                "np.ascontiguousarray(np.moveaxis(img, 0, -1)) (and BGR order)")
     if im.ndim != 3 or im.shape[2] != 3:
         return f"image {i}: expected (H, W, 3) uint8, {got}"
     if im.dtype == np.uint16:

@@ -503,11 +503,17 @@ def _bad_images(scene):
         "gray": ([im[..., 1]] * 3, "cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)"),
         "BGRA": ([np.dstack([im, im[..., :1]])] * 3, "img[..., :3]"),
         "16-bit": ([im.astype(np.uint16) << 8] * 3, "(img >> 8).astype(np.uint8)"),
+        "paths": (["a.jpg", "b.jpg", "c.jpg"],
+                  "image 0 is a path ('a.jpg'), not an image: read the photos with "
+                  "dynremove.io.load_image_set(paths, max_side=1280).images"),
+        "channels first": ([np.moveaxis(im, -1, 0)] * 3,
+                           "channels first; pass np.ascontiguousarray(np.moveaxis(img, 0, -1))"),
     }
 
 
 @pytest.mark.parametrize("case", ["failed imread", "not arrays", "PIL", "float 0-1",
-                                  "float 0-255", "gray", "BGRA", "16-bit"])
+                                  "float 0-255", "gray", "BGRA", "16-bit", "paths",
+                                  "channels first"])
 def test_an_api_image_of_the_wrong_kind_is_told_how_to_convert_it(scene, case):
     images, words = _bad_images(scene)[case]
     with pytest.raises(InputError) as e:
