@@ -7,6 +7,7 @@ engineered steps, each switched by ``Params``).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import os
 import platform
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -92,10 +93,15 @@ def api_params(params: Params | str | dict | None) -> Params:
         except ValueError as e:
             raise InputError(f"params: {e}") from None
     if isinstance(params, dict):
-        unknown = sorted(set(params) - {f.name for f in dataclasses.fields(Params)})
+        fields = [f.name for f in dataclasses.fields(Params)]
+        unknown = sorted(set(params) - set(fields), key=str)
         if unknown:
-            raise InputError(f"params: unknown field(s) {', '.join(unknown)} (the fields "
-                             "of dynremove.Params)")
+            # (a trial's mistyped field got no hint)
+            near = [m for u in unknown
+                    for m in difflib.get_close_matches(str(u), fields, n=1, cutoff=0.75)]
+            raise InputError(f"params: unknown field(s) {', '.join(map(str, unknown))} ("
+                             + (f"did you mean {', '.join(near)}? " if near else "")
+                             + "the fields of dynremove.Params)")
         try:
             return DEFAULT.replace(**params)
         except (TypeError, ValueError) as e:

@@ -545,6 +545,11 @@ def test_api_arguments_are_checked_before_the_run(scene, monkeypatch):
         remove_dynamic(three, params={"patch_size": 13.5})
     with pytest.raises(InputError, match=r"^params: snap must be True or False, got 1 "):
         remove_dynamic(three, params={"snap": 1})
+    with pytest.raises(InputError, match=r"^params: unknown field\(s\) select_minorty \(did "
+                                         r"you mean select_minority\? the fields of"):
+        remove_dynamic(three, params={"select_minorty": 0})
+    with pytest.raises(InputError, match=r"^params: unknown field\(s\) zzz \(the fields of"):
+        remove_dynamic(three, params={"zzz": 0})
 
 
 def test_api_takes_a_generator_or_a_stacked_array(scene):
