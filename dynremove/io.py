@@ -721,8 +721,15 @@ def is_path_ref(ref: object) -> bool:
     return isinstance(ref, str) and any(sep and sep in ref for sep in ("/", os.sep, os.altsep))
 
 
+def _named(ref: str, names: Sequence[str]) -> list[int]:
+    """The indices of the inputs named ``ref``: by exact name, else by stem."""
+    return ([i for i, n in enumerate(names) if n == ref]
+            or [i for i, n in enumerate(names) if Path(n).stem == ref])
+
+
 def resolve_ref(ref: str | int | None, names: Sequence[str],
-                paths: Sequence[str | os.PathLike] | None = None) -> int:
+                paths: Sequence[str | os.PathLike] | None = None, *,
+                label: str | None = None) -> int:
     """Reference by index (negative counts from the end), by file name or stem, or (with
     ``paths``, the inputs' paths) by path; default: the middle image.
 
@@ -731,19 +738,20 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     digits is a name where an input has that name or stem (frames 0001.jpg, 0002.jpg:
     ``--ref 0002`` is 0002.jpg, not index 2) and, written without leading zeros, an
     index too: where the two pick different images, it is an error saying how to
-    give either.
+    give either. ``label`` names the value in the errors (default ``--ref REF``; the
+    API gives ``ref='REF'``).
     """
     if ref is None or ref == "":
         return len(names) // 2
+    what = label or f"--ref {ref}"
     if isinstance(ref, str) and ref.lstrip("-").isdigit():
-        named = ([i for i, n in enumerate(names) if n == ref]
-                 or [i for i, n in enumerate(names) if Path(n).stem == ref])
+        named = _named(ref, names)
         as_index = not (len(ref.lstrip("-")) > 1 and ref.lstrip("-").startswith("0"))
         if len(named) == 1:
             i = int(ref)
             if as_index and -len(names) <= i < len(names) and i % len(names) != named[0]:
                 raise InputError(
-                    f"--ref {ref}: both the index of {names[i % len(names)]} and the name of "
+                    f"{what}: both the index of {names[i % len(names)]} and the name of "
                     f"{names[named[0]]} (index {named[0]}): give {names[named[0]]} for that "
                     f"file, or {i % len(names) - len(names)} (counted from the end) for "
                     f"{names[i % len(names)]}")
@@ -751,13 +759,13 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     if isinstance(ref, int) or (isinstance(ref, str) and ref.lstrip("-").isdigit()):
         i = int(ref)
         if not -len(names) <= i < len(names):
-            raise InputError(f"--ref {ref}: out of range, there are {len(names)} images "
+            raise InputError(f"{what}: out of range, there are {len(names)} images "
                              f"(0..{len(names) - 1})")
         return i % len(names)
     ref = str(ref)
     if is_path_ref(ref):
         if paths is None:
-            raise InputError(f"--ref {ref}: a path cannot name the reference here; give a "
+            raise InputError(f"{what}: a path cannot name the reference here; give a "
                              "file name or an index")
         target = Path(ref).expanduser().resolve()
         matches = [i for i, q in enumerate(paths) if Path(q).resolve() == target]
@@ -767,17 +775,16 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
             hint = (f"a bare file name, {name}, matches the inputs by name" if name in names
                     else "the inputs: " + ", ".join(names[:8]) + (" …" if len(names) > 8
                                                                  else ""))
-            raise InputError(f"--ref {ref}: is not one of the input images{why} ({hint})")
+            raise InputError(f"{what}: is not one of the input images{why} ({hint})")
         return matches[0]
-    matches = ([i for i, n in enumerate(names) if n == ref]
-               or [i for i, n in enumerate(names) if Path(n).stem == ref])
+    matches = _named(ref, names)
     if not matches:
-        raise InputError(f"--ref {ref}: names no input image (have {', '.join(names[:8])}"
+        raise InputError(f"{what}: names no input image (have {', '.join(names[:8])}"
                          + (" …" if len(names) > 8 else "") + ")")
     if len(matches) > 1:
         which = ", ".join(f"{paths[i] if paths is not None else names[i]} (index {i})"
                           for i in matches)
-        raise InputError(f"--ref {ref}: {len(matches)} input images have this name: {which}; "
+        raise InputError(f"{what}: {len(matches)} input images have this name: {which}; "
                          "give the path of one, or its index")
     return matches[0]
 

@@ -134,15 +134,15 @@ class Params:
     candidate_set: bool = True  # P as a set (the paper): a repeated (s, x, y) candidate counts once
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):  # a value of another type fails below with
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            # a value of another type fails the comparisons below in Python's words
             if f.default is not dataclasses.MISSING and f.default is not None:
-                _check_type(f.name, getattr(self, f.name), type(f.default))  # Python's words
+                _check_type(f.name, v, type(f.default))
+            if isinstance(v, float) and not math.isfinite(v):  # NaN passes every comparison
+                raise ValueError(f"{f.name} must be a finite number, got {v}")
         if self.patch_size < 3 or self.patch_size % 2 == 0:
             raise ValueError(f"patch_size must be odd and >= 3, got {self.patch_size}")
-        for f in dataclasses.fields(self):  # NaN passes every comparison below
-            v = getattr(self, f.name)
-            if isinstance(v, float) and not math.isfinite(v):
-                raise ValueError(f"{f.name} must be a finite number, got {v}")
         if self.dbscan_eps <= 0:
             raise ValueError(f"dbscan_eps must be > 0, got {self.dbscan_eps}")
         if self.dbscan_min_pts < 1:

@@ -126,12 +126,12 @@ def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
     if isinstance(ref, (np.integer, int)):
         ref = int(ref)
     try:
-        return resolve_ref(ref, names)
-    except InputError as e:  # the API's words: ref=, names= (not --ref)
-        msg = str(e).replace(f"--ref {ref}:", f"ref={ref!r}:", 1)
-        if not names_given and isinstance(ref, str) and "names no input image" in msg:
-            msg += "; pass names=[...] (e.g. the file names) to refer to images by name"
-        raise InputError(msg) from None
+        return resolve_ref(ref, names, label=f"ref={ref!r}")  # the API's words, not --ref
+    except InputError as e:
+        if names_given or not isinstance(ref, str) or "names no input image" not in str(e):
+            raise
+        raise InputError(f"{e}; pass names=[...] (e.g. the file names) to refer to images "
+                         "by name") from None
 
 
 def _array_hint(i: int, im: object) -> str:
@@ -425,7 +425,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     validate_images(images, 0)
     if kernel not in ("numba", "reference"):
         raise InputError(f"kernel must be 'numba' or 'reference', got {kernel!r}")
-    names_in = names
+    names_given = names is not None
     if names is None:
         names = [f"image{i}" for i in range(len(images))]
     else:
@@ -433,7 +433,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         if len(names) != len(images):
             raise InputError(f"names: {len(names)} given for {len(images)} images: "
                              "give one name per image, in the same order")
-    ref = api_ref(ref, images, names, names_given=names_in is not None)
+    ref = api_ref(ref, images, names, names_given=names_given)
     images, gray_note = gray_like_reference(images, ref)
     sink = NullSink() if sink is None else sink
     H, W = images[0].shape[:2]

@@ -899,51 +899,47 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     H, W = L.shape
     scan_dirs = [(m["scan"], m["direction"]) for m in read_scan_maps(path, root=root)] or \
         [(int(s), 1 if s % 2 == 0 else -1) for s in np.unique(dec["scan"]).tolist()] or [(0, 1)]
-    out = []
+    found = []  # (kind, area, bbox, labels, label, centroid): cheap, for the sort
     for kind, mask in (("FP", L & ~gt), ("FN", ~L & gt)):
         n, lab, stats, cents = cv2.connectedComponentsWithStats(mask.astype(np.uint8), 8)
         for i in range(1, n):
             x0, y0, w, hh, area = (int(v) for v in stats[i])
-            comp = (lab[y0:y0 + hh, x0:x0 + w] == i).astype(np.uint8)
-            dist = cv2.distanceTransform(np.pad(comp, 1), cv2.DIST_L2, 3)[1:-1, 1:-1]
-            py, px = np.unravel_index(int(np.argmax(dist)), dist.shape)
-            inside = ((dec["x"] >= x0) & (dec["x"] < x0 + w) & (dec["y"] >= y0)
-                      & (dec["y"] < y0 + hh))
-            d_in = dec[inside]
-            d_in = d_in[lab[d_in["y"], d_in["x"]] == i]
-            worst = None
-            finite = d_in[np.isfinite(d_in["M"])]
-            if len(finite):
-                j = int(np.argmin(finite["M"]) if kind == "FP" else np.argmax(finite["M"]))
-                worst = dict(x=int(finite[j]["x"]), y=int(finite[j]["y"]),
-                             M=float(finite[j]["M"]), scan=int(finite[j]["scan"]),
-                             step=int(finite[j]["step"]))
-            qx, qy = x0 + int(px), y0 + int(py)
-            out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh), _labels=(lab, i),
-                            centroid=(float(cents[i][0]), float(cents[i][1])),
-                            pixel=(qx, qy), n_decisions=len(d_in), worst=worst,
-                            size=(H, W), photo=photo_size(info),
-                            photo_pixel=analysis_to_photo(info, qx, qy),
-                            steps=[visit_step(sc, qx, qy, H, W, direction=dr)
-                                   for sc, dr in scan_dirs]))
-    out.sort(key=lambda e: -e["area"])
-    out = out[:top]
-    for e in out:  # (only the regions returned: a run may have hundreds)
-        lab, i = e.pop("_labels")
+            found.append((kind, area, (x0, y0, w, hh), lab, i,
+                          (float(cents[i][0]), float(cents[i][1]))))
+    found.sort(key=lambda f: -f[1])
+    out = []
+    for kind, area, (x0, y0, w, hh), lab, i, centroid in found[:top]:
+        # (only the regions returned are read further: a run may have hundreds)
         region = lab == i
-        shares, per_px = failure_causes(e["kind"], region, stages, sel)
-        e["why"], e["why_share"] = shares[0] if shares else (None, 0.0)
-        e["why_more"] = [(c, f) for c, f in shares[1:] if f >= 0.05]
-        if shares and e["why_share"] < 0.995:
-            # the pixel to explain shows the cause named first (a trial's pixel was
-            # dropped by the clean-up where the line said "never flagged")
-            x0, y0, w, hh = e["bbox"]
+        inside = ((dec["x"] >= x0) & (dec["x"] < x0 + w) & (dec["y"] >= y0)
+                  & (dec["y"] < y0 + hh))
+        d_in = dec[inside]
+        d_in = d_in[lab[d_in["y"], d_in["x"]] == i]
+        worst = None
+        finite = d_in[np.isfinite(d_in["M"])]
+        if len(finite):
+            j = int(np.argmin(finite["M"]) if kind == "FP" else np.argmax(finite["M"]))
+            worst = dict(x=int(finite[j]["x"]), y=int(finite[j]["y"]),
+                         M=float(finite[j]["M"]), scan=int(finite[j]["scan"]),
+                         step=int(finite[j]["step"]))
+        shares, per_px = failure_causes(kind, region, stages, sel)
+        why, why_share = shares[0] if shares else (None, 0.0)
+        # the pixel to explain: the most interior one of the share named first (a
+        # trial's pixel was dropped by the clean-up where the line said "never flagged")
+        mine = region
+        if shares and why_share < 0.995:
             mine = np.zeros(region.shape, bool)
-            mine[region] = per_px == e["why"]
-            sub = mine[y0:y0 + hh, x0:x0 + w].astype(np.uint8)
-            dist = cv2.distanceTransform(np.pad(sub, 1), cv2.DIST_L2, 3)[1:-1, 1:-1]
-            py, px = np.unravel_index(int(np.argmax(dist)), dist.shape)
-            qx, qy = x0 + int(px), y0 + int(py)
-            e["pixel"], e["photo_pixel"] = (qx, qy), analysis_to_photo(info, qx, qy)
-            e["steps"] = [visit_step(sc, qx, qy, H, W, direction=dr) for sc, dr in scan_dirs]
+            mine[region] = per_px == why
+        sub = mine[y0:y0 + hh, x0:x0 + w].astype(np.uint8)
+        dist = cv2.distanceTransform(np.pad(sub, 1), cv2.DIST_L2, 3)[1:-1, 1:-1]
+        py, px = np.unravel_index(int(np.argmax(dist)), dist.shape)
+        qx, qy = x0 + int(px), y0 + int(py)
+        out.append(dict(kind=kind, area=area, bbox=(x0, y0, w, hh), centroid=centroid,
+                        pixel=(qx, qy), n_decisions=len(d_in), worst=worst,
+                        size=(H, W), photo=photo_size(info),
+                        photo_pixel=analysis_to_photo(info, qx, qy),
+                        steps=[visit_step(sc, qx, qy, H, W, direction=dr)
+                               for sc, dr in scan_dirs],
+                        why=why, why_share=why_share,
+                        why_more=[(c, f) for c, f in shares[1:] if f >= 0.05]))
     return out

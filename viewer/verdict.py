@@ -118,13 +118,16 @@ def candidate_counts(d: dict[str, Any]) -> str:
     for c in cands:
         by[c["cluster"]] = by.get(c["cluster"], 0) + 1
     win = d["win_cluster"]
+
+    def listed(keep) -> str:  # the candidates ``keep`` takes: source, position, B_l
+        return ", ".join(f"{m['src_name']} ({m['x']},{m['y']}) B_l {m['B']:.2f}"
+                         for m in cands if keep(m["cluster"]))
+
     parts = []
     for c in sorted((c for c in by if c >= 0), key=lambda c: (c != win, c)):
         if c == win:
-            members = ", ".join(f"{m['src_name']} ({m['x']},{m['y']}) B_l {m['B']:.2f}"
-                                for m in cands if m["cluster"] == c)
             parts.append(f"{by[c]} in the winner cluster {c} (b_m {d['win_weight']:.2f}: "
-                         f"{members})")
+                         f"{listed(lambda k, c=c: k == c)})")
         else:
             parts.append(f"{by[c]} in cluster {c}")
     if by.get(-1):
@@ -132,8 +135,7 @@ def candidate_counts(d: dict[str, Any]) -> str:
         if win < 0:
             # no cluster: where they were is all there is to read (a trial's probe of
             # an undecided pixel said only "2 candidates: all noise")
-            noise += " (" + ", ".join(f"{m['src_name']} ({m['x']},{m['y']}) B_l {m['B']:.2f}"
-                                      for m in cands if m["cluster"] < 0) + ")"
+            noise += f" ({listed(lambda k: k < 0)})"
         parts.append(noise)
     return head + ": " + ", ".join(parts)
 
