@@ -134,22 +134,26 @@ def _assemble_sift(pooled, offs, cw, out):
     """pooled (8, H, W) float32, offs (4,) int64 ascending, cw (4, 4) float32 → out (H, W,
     128) uint8 (written).
 
-    Per pixel: d = the 16 cells' 8 pooled values × the cell weight (float32),
-    n = √Σ d² + 1e-12, d ← min(d / n, 0.2) (stored float32; Σ over the float64
-    values), again ÷ (√Σ + 1e-12), ×512, +0.5, saturated at 255 and truncated.
-    The sums run over the 128 values in order, each pixel on its own; a row is
-    done B pixels at a time with the pixel as the inner loop, so the divisions
-    and the B sums vectorise across pixels while every pixel's arithmetic stays
+    Per pixel, all in float32: d = the 16 cells' 8 pooled values × the cell
+    weight, n = √Σ d² + 1e-12, d ← min(d · (1 / n), 0.2), then
+    d · (512 / (√Σ d² + 1e-12)) + 0.5, saturated at 255 and truncated. The sums
+    run over the 128 values in order, each pixel on its own; a row is done B
+    pixels at a time with the pixel as the inner loop, so the reciprocals and
+    the B sums vectorise across pixels while every pixel's arithmetic stays
     the same, bit for bit. error_model="numpy" drops the ZeroDivisionError
-    check that stops vectorisation (the divisors are ≥ 1e-12).
+    check that stops vectorisation (the divisors are ≥ 1e-12). (Float64 sums
+    and two divisions per value, as first written, took 1.6× the time at
+    854×480 and changed 22 of its 52 million bytes, each by 1.)
     """
     _, H, W = pooled.shape
     B = 32
+    one, tiny, clamp = np.float32(1.0), np.float32(1e-12), np.float32(0.2)
+    scale, half, top = np.float32(512.0), np.float32(0.5), np.float32(255.0)
     for y in numba.prange(H):
         d = np.empty((128, B), np.float32)
         q = np.empty((128, B), np.uint8)
-        n = np.empty(B)
-        n2 = np.empty(B)
+        n = np.empty(B, np.float32)
+        n2 = np.empty(B, np.float32)
         for x0 in range(0, W, B):
             nbk = min(B, W - x0)
             inner = x0 + offs[0] >= 0 and x0 + nbk - 1 + offs[3] <= W - 1  # no clamping
@@ -176,23 +180,23 @@ def _assemble_sift(pooled, offs, cw, out):
                 for p in range(nbk):
                     n[p] += di[p] * di[p]
             for p in range(nbk):
-                n[p] = math.sqrt(n[p]) + 1e-12
+                n[p] = one / (np.sqrt(n[p]) + tiny)
                 n2[p] = 0.0
             for i in range(128):
                 di = d[i]
                 for p in range(nbk):
-                    t = di[p] / n[p]
-                    v = 0.2 if 0.2 < t else t  # min(t, 0.2) without a branch
+                    t = di[p] * n[p]
+                    v = clamp if clamp < t else t  # min(t, 0.2) without a branch
                     di[p] = v
                     n2[p] += v * v
             for p in range(nbk):
-                n2[p] = math.sqrt(n2[p]) + 1e-12
+                n2[p] = scale / (np.sqrt(n2[p]) + tiny)
             for i in range(128):
                 di = d[i]
                 qi = q[i]
                 for p in range(nbk):
-                    t = di[p] / n2[p] * 512.0 + 0.5
-                    qi[p] = np.uint8(255.0 if 255.0 < t else t)
+                    t = di[p] * n2[p] + half
+                    qi[p] = np.uint8(top if top < t else t)
             for p in range(nbk):
                 op = out[y, x0 + p]
                 for i in range(128):

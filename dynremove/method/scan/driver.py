@@ -250,8 +250,15 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
         # then recomputes only what its own updates invalidate (exact). The pipeline
         # takes them too: its rows then cost what the movers cost, and the
         # precompute balances the static pixels' share perfectly (row by row;
-        # the paper preset's 4 scans at 7 × 854×480 went from 2.7 to 1.9 s)
-        use_pre = kernel == "numba" and PRECOMPUTE
+        # the paper preset's 4 scans at 7 × 854×480 went from 2.7 to 1.9 s). Not
+        # for the pipeline's first scan: it finds most of the movers, whose work
+        # is the critical path, and the static pixels' decisions fit beside it on
+        # the other core, while the precompute decides the movers' pixels twice
+        # (the default's one scan at 7 × 854×480: 0.64 -> 0.58 s; every DAVIS set
+        # as fast or faster, by up to 11 %; the paper's later scans, few movers
+        # each, still gain: 0.37 -> 0.30 s). A scan on one thread (recorded)
+        # always takes it.
+        use_pre = kernel == "numba" and PRECOMPUTE and (scan > 0 or not pipeline)
         preM = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
         preB = np.empty((H, W), np.float64) if use_pre else np.empty((1, 1), np.float64)
         preK = np.empty((H, W, 4), np.int32) if use_pre else np.empty((1, 1, 4), np.int32)
