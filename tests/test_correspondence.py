@@ -224,3 +224,42 @@ def test_the_parallax_percentiles_of_a_facade_with_columns(rng, share):
     assert tv.parallax_px <= tv.parallax_p95_px
     assert (tv.parallax_px > 8.0) == (share > 0.1)
     assert (tv.parallax_p95_px > 8.0) == (share > 0.0)
+
+
+def test_compiled_homography_map_equals_its_numpy_form(rng):
+    """``apply_homography``'s compiled pass gives ``project_homography``'s values
+    rounded to float32, bit for bit: float32 and float64 points, a homography with
+    perspective, and one whose w vanishes (the 1e-12 floor); the sampling grid it
+    usually maps is shared and read-only."""
+    xs, ys = corr.pixel_grid(H_, W_)
+    assert corr.pixel_grid(H_, W_)[0] is xs
+    with pytest.raises(ValueError):
+        xs[0, 0] = 1.0
+    flat = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1e-13]])
+    for Hm in [np.eye(3) + rng.normal(0, 1, (3, 3)) * [[0.05, 0.05, 20], [0.05, 0.05, 20],
+                                                        [1e-3, 1e-3, 0.01]] for _ in range(5)
+               ] + [flat]:
+        for px, py in [(xs, ys), (xs + rng.normal(0, 3, xs.shape).astype(np.float32), ys),
+                       (xs.astype(np.float64) + 0.3, ys.astype(np.float64) - 7.1)]:
+            mx, my, _ = geometry.project_homography(Hm, px, py)
+            gx, gy = geometry.apply_homography(Hm, px, py)
+            assert gx.dtype == gy.dtype == np.float32 and gx.shape == px.shape
+            assert np.array_equal(gx.view(np.int32), mx.astype(np.float32).view(np.int32))
+            assert np.array_equal(gy.view(np.int32), my.astype(np.float32).view(np.int32))
+
+
+def test_compiled_sampson_distance_equals_its_numpy_form(rng):
+    """``sampson_sq`` (compiled) equals Hartley & Zisserman's Eq. (11.9) written in
+    NumPy in the same order of operations, bit for bit."""
+    F = rng.normal(0, 1, (3, 3))
+    xr = rng.uniform(0, 800, (500, 2))
+    xs = xr + rng.normal(0, 5, (500, 2))
+    x, y, u, v = xr[:, 0], xr[:, 1], xs[:, 0], xs[:, 1]
+    a = F[0, 0] * x + F[0, 1] * y + F[0, 2]
+    b = F[1, 0] * x + F[1, 1] * y + F[1, 2]
+    c = F[2, 0] * x + F[2, 1] * y + F[2, 2]
+    ta = F[0, 0] * u + F[1, 0] * v + F[2, 0]
+    tb = F[0, 1] * u + F[1, 1] * v + F[2, 1]
+    e = u * a + v * b + c
+    want = e * e / np.maximum(a * a + b * b + ta * ta + tb * tb, 1e-300)
+    assert np.array_equal(geometry.sampson_sq(F, xr, xs), want)

@@ -26,9 +26,22 @@ def to_gray(bgr: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
 
 
-def to_lab(bgr: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
-    """(H, W, 3) uint8 BGR → (H, W, 3) float32 CIE Lab (L in [0, 100])."""
-    return cv2.cvtColor(bgr.astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
+def to_lab(bgr: npt.NDArray[np.uint8], *, out: npt.NDArray[np.float32] | None = None
+           ) -> npt.NDArray[np.float32]:
+    """(H, W, 3) uint8 BGR → (H, W, 3) float32 CIE Lab (L in [0, 100]); written into
+    ``out`` (C-contiguous (H, W, 3) float32: one photo's slot of a stack) if given."""
+    x = bgr.astype(np.float32)
+    np.divide(x, np.float32(255.0), out=x)
+    return _into(cv2.cvtColor(x, cv2.COLOR_BGR2Lab, dst=out), out)
+
+
+def _into(result: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+    """``out`` holding ``result`` (OpenCV writes into a ``dst`` of the right size and
+    type; this guards the rest), or ``result`` when there is no ``out``."""
+    if out is None or result is out:
+        return result
+    out[...] = result
+    return out
 
 
 def lab_mean(bgr: npt.NDArray[np.uint8], *, patch_size: int) -> npt.NDArray[np.float32]:
@@ -54,9 +67,12 @@ def lab_mean(bgr: npt.NDArray[np.uint8], *, patch_size: int) -> npt.NDArray[np.f
     return patch_mean(to_lab(bgr), patch_size=patch_size)
 
 
-def patch_mean(img: npt.NDArray[np.float32], *, patch_size: int) -> npt.NDArray[np.float32]:
-    """Mean over the p×p patch at every pixel (mirror-reflected borders)."""
-    return cv2.blur(img, (patch_size, patch_size), borderType=cv2.BORDER_REFLECT_101)
+def patch_mean(img: npt.NDArray[np.float32], *, patch_size: int,
+               out: npt.NDArray[np.float32] | None = None) -> npt.NDArray[np.float32]:
+    """Mean over the p×p patch at every pixel (mirror-reflected borders); written into
+    ``out`` (C-contiguous, img's shape and type) if given."""
+    return _into(cv2.blur(img, (patch_size, patch_size), dst=out,
+                          borderType=cv2.BORDER_REFLECT_101), out)
 
 
 def sift_bin_px(patch_size: int) -> int:
