@@ -315,3 +315,27 @@ def test_the_support_weights_equal_their_first_writing():
             want[:, i] = np.where(np.isfinite(d), np.exp(-d / support_de), 0.0)
         want = want / np.maximum(want.sum(1, keepdims=True), 1e-12)
         np.testing.assert_array_equal(px._support_weights(ref, qy, qx, box, support_de), want)
+
+
+def test_the_compiled_step_costs_equal_their_numpy_form(rng):
+    """``_step_costs`` writes what ``epipolar_search`` first computed in NumPy:
+    min(ΔE, cap) at the cells' window positions where the step's point is in the
+    source, the cap elsewhere (points off every side, and on the last pixel)."""
+    from dynremove.refine.colour import delta_e
+    from dynremove.refine.parallax import _CAP, _step_costs
+
+    k, n, Hs, Ws = 7, 50, 40, 60
+    fx = rng.uniform(-5, Ws + 4, (k, n)).astype(np.float32)
+    fy = rng.uniform(-5, Hs + 4, (k, n)).astype(np.float32)
+    fx[0, :3], fy[0, :3] = Ws - 1, Hs - 1  # on the border: inside
+    smp = rng.uniform(-20, 100, (k * n, 3)).astype(np.float32)
+    ref_c = rng.uniform(-20, 100, (n, 3)).astype(np.float32)
+    cells = rng.choice(12 * 15, n, replace=False)
+    py, px = cells // 15, cells % 15
+    buf = np.full((12, 15, 32), -1.0, np.float32)
+    _step_costs(smp, ref_c, fx, fy, Ws, Hs, _CAP, buf, py, px)
+    inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
+    d = np.minimum(delta_e(smp.reshape(k, n, 3), ref_c), _CAP)
+    want = np.where(inside, d, _CAP).T
+    assert inside.any() and not inside.all() and (d == _CAP).any() and (d < _CAP).any()
+    assert np.array_equal(buf[py, px, :k].view(np.int32), want.astype(np.float32).view(np.int32))

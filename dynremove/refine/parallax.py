@@ -446,11 +446,8 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
         gs = steps[i0:i0 + chunk]
         k = len(gs)
         fx, fy = _project_steps(view.H, e, gs, CX, CY)  # (k, n)
-        smp = remap_points(lab_s, fx.ravel(), fy.ravel(),
-                           borderMode=cv2.BORDER_REPLICATE).reshape(k, n, 3)
-        inside = (fx >= 0) & (fx <= Ws - 1) & (fy >= 0) & (fy <= Hs - 1)
-        d = np.minimum(delta_e(smp, ref_c), _CAP)
-        buf[py_b, px_b, :k] = np.where(inside, d, _CAP).T
+        smp = remap_points(lab_s, fx.ravel(), fy.ravel(), borderMode=cv2.BORDER_REPLICATE)
+        _step_costs(smp, ref_c, fx, fy, Ws, Hs, _CAP, buf, py_b, px_b)
         if weights is None:
             bf = cv2.boxFilter(buf[..., :k], -1, (box, box)).reshape(bh, bw, k)[qy_b, qx_b]
         else:
@@ -469,6 +466,29 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     cost[region] = cu[region]
     best_mu[region] = mu_u[region]
     return cost, best_mu
+
+
+@numba.njit(cache=True, nogil=True)
+def _step_costs(smp, ref_c, fx, fy, Ws, Hs, cap, buf, py, px):
+    """One chunk of ``epipolar_search``'s steps into its window buffer: ``buf[py[j],
+    px[j], i]`` = min(ΔE(smp[i·n + j], ref_c[j]), cap) where step i's point (fx,
+    fy)[i, j] lies in the source (Ws × Hs), else cap. smp (k·n, 3), ref_c (n, 3),
+    fx, fy (k, n) float32; buf (h, w, ≥ k) float32. The NumPy form's values, bit for
+    bit (``colour.delta_e``'s order; ``test_parallax``), in one pass."""
+    k, n = fx.shape
+    c32 = np.float32(cap)
+    for i in range(k):
+        for j in range(n):
+            x = fx[i, j]
+            y = fy[i, j]
+            if x >= 0 and x <= Ws - 1 and y >= 0 and y <= Hs - 1:
+                a = smp[i * n + j, 0] - ref_c[j, 0]
+                b = smp[i * n + j, 1] - ref_c[j, 1]
+                c = smp[i * n + j, 2] - ref_c[j, 2]
+                d = np.sqrt((a * a + b * b) + c * c)
+                buf[py[j], px[j], i] = c32 if d > c32 else d
+            else:
+                buf[py[j], px[j], i] = c32
 
 
 def _support_weights(ref: np.ndarray, qy: np.ndarray, qx: np.ndarray, box: int,
