@@ -430,7 +430,7 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     c_best = np.full(len(qy), np.inf, np.float32)
     m_best = np.full(len(qy), np.nan, np.float32)
     steps = np.linspace(lo, hi, n_steps)
-    n, chunk = len(py), 32  # steps per pass: the window sums run on one image of
+    chunk = 32  # steps per pass: the window sums run on one image of
     # `chunk` channels, over the box of the sampled cells (box // 2 wider, so that
     # the sums at the region's cells read what the whole image's would)
     r = box // 2
