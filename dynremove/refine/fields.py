@@ -16,6 +16,8 @@ and every source sampled through the interpolated field; the mask refinement
 
 from __future__ import annotations
 
+import threading
+
 import cv2
 import numba
 import numpy as np
@@ -74,6 +76,30 @@ def harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *
                   ) -> npt.NDArray[np.float32]:
     """Fill ``field`` (H, W, C) where ``hole`` with the membrane (Laplace) solution.
 
+    Each channel is solved on its own arithmetic, so from the main thread the
+    channels are split in two halves solved on two threads (``for_each_source``;
+    OpenCV and the compiled sweeps release the GIL): the same values, bit for bit
+    (the background fields' 12 channels at 854×480: 0.08 -> 0.05 s a call).
+    See ``_harmonic_fill`` for the method and the parameters.
+    """
+    C = field.shape[2]
+    if C >= _SPLIT_CHANNELS and threading.current_thread() is threading.main_thread():
+        cuts = [slice(0, C // 2), slice(C // 2, C)]
+        parts = for_each_source(lambda k: _harmonic_fill(field[..., cuts[k]], hole,
+                                                         iters=iters, need=need), 2)
+        return np.concatenate(parts, axis=-1)
+    return _harmonic_fill(field, hole, iters=iters, need=need)
+
+
+# from this many channels up, ``harmonic_fill`` solves two halves on two threads
+_SPLIT_CHANNELS = 4
+
+
+def _harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *,
+                   iters: int = 40, need: npt.NDArray[np.bool_] | None = None
+                   ) -> npt.NDArray[np.float32]:
+    """Fill ``field`` (H, W, C) where ``hole`` with the membrane (Laplace) solution.
+
     Coarse to fine: the field is area-averaged over its valid pixels to half
     size (a coarse pixel is a hole if any of its fine pixels is), solved there,
     upsampled as the starting point, and relaxed by ``iters`` Jacobi sweeps.
@@ -127,8 +153,8 @@ def harmonic_fill(field: npt.NDArray[np.float32], hole: npt.NDArray[np.bool_], *
     for (by0, by1, bx0, bx1), _ in boxes:
         cneed[max(by0 // 2 - 2, 0):(by1 + 1) // 2 + 2,
               max(bx0 // 2 - 2, 0):(bx1 + 1) // 2 + 2] = True
-    coarse = harmonic_fill(np.where(chole[..., None], 0, cfield).astype(np.float32), chole,
-                          iters=iters, need=cneed)
+    coarse = _harmonic_fill(np.where(chole[..., None], 0, cfield).astype(np.float32), chole,
+                           iters=iters, need=cneed)
     out = cv2.resize(coarse, (W, H), interpolation=cv2.INTER_LINEAR).reshape(H, W, -1)
     # the valid pixels as given (cv2.copyTo with a mask: the copy that
     # ``out[~hole] = field[~hole]`` makes, ~50× faster at 854×480)
