@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 
 import cv2
+import maxflow
 import numpy as np
 import numpy.typing as npt
 
@@ -16,7 +17,7 @@ from dynremove.refine.fields import blurred_lab
 from dynremove.refine.montage import (BAND_AGREE, BAND_PX, BAND_SIGMA_PX, DECAY_PX,
                                       LIGHT_DECAY_PX, LIGHT_SCALE_PX, LIGHT_SIGMA_PX, PLATEAU_PX,
                                       band_light, component_offsets, consistent_departures,
-                                      gaussian_mean_at)
+                                      gaussian_mean_at, pairwise_distance)
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.select import mixture_detail
 from dynremove.refine.upsample import grow_replaced
@@ -246,3 +247,70 @@ def full_resolution(reference, sources, clean_working, dynamic, selection, tau=1
     moved[roi] = rep_roi
     dyn_full |= moved & (np.linalg.norm(lab_o - lab_r, axis=-1) >= tau)
     return clean, dyn_full
+
+
+# the photomontage's alpha-expansion as it was written before it kept to the movable pixels
+def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32], *,
+                     beta: float, cycles: int = 2,
+                     init: npt.NDArray[np.intp] | None = None,
+                     distance: npt.NDArray[np.float32] | None = None,
+                     forbidden: float | None = None) -> npt.NDArray[np.intp]:
+    """``montage.expansion_labels`` on the whole grid: every pixel a node of every move's
+    graph, every edge looked at (as written before the moves kept to the pixels that
+    can move)."""
+    nl, H, W = D.shape
+    lab = (np.argmin(D, 0) if init is None else init.astype(np.intp).copy()).ravel()
+    # V(a, b) at each pixel; an edge sums it over both its pixels
+    pair = beta * (pairwise_distance(colours) if distance is None else distance)
+    pair = pair.reshape(nl * nl, H * W)
+    Df = D.reshape(nl, H * W)
+    idx = np.arange(H * W).reshape(H, W)
+    ep = np.concatenate([idx[:-1].ravel(), idx[:, :-1].ravel()])  # p of each edge
+    eq = np.concatenate([idx[1:].ravel(), idx[:, 1:].ravel()])  # its neighbour q
+
+    def V(u, v, p, q):  # seam cost of labels u at p and v at q, per edge (p, q)
+        k = u * nl + v
+        return pair[k, p] + pair[k, q]
+
+    for _ in range(cycles):
+        changed = False
+        for a in range(nl):
+            # p may move to a (x_p = 1) unless a is forbidden there or p has it already
+            free = lab != a
+            if forbidden is not None:
+                free &= Df[a] < forbidden
+            if not free.any():
+                continue
+            node = np.full(H * W, -1, np.intp)
+            node[free] = np.arange(int(free.sum()))
+            cost1 = Df[a].astype(np.float64)  # x_p = 1: p takes label a
+            cost0 = Df[lab, np.arange(H * W)].astype(np.float64)
+            # only edges touching a pixel that may move carry a term
+            e = free[ep] | free[eq]
+            p, q = ep[e], eq[e]
+            lp, lq = lab[p], lab[q]
+            A, B, C = V(lp, lq, p, q), V(lp, a, p, q), V(a, lq, p, q)
+            # E(x_p, x_q) = A + (C - A) x_p - C x_q + (B + C - A)(1 - x_p) x_q;
+            # a fixed pixel has x = 0
+            fp, fq = free[p], free[q]
+            both = fp & fq
+            only_q = fq & ~fp
+            n = H * W
+            cost1 += np.bincount(p[fp], (C - A)[fp], n)
+            cost1 -= np.bincount(q[both], C[both], n)
+            cost1 += np.bincount(q[only_q], (B - A)[only_q], n)
+            g = maxflow.Graph[float]()
+            g.add_nodes(int(free.sum()))
+            g.add_edges(node[p[both]], node[q[both]],
+                        np.maximum(B + C - A, 0.0)[both], np.zeros(int(both.sum())))
+            c1, c0 = cost1[free], cost0[free]
+            m = np.minimum(c0, c1)
+            g.add_grid_tedges(np.arange(len(c1)), c1 - m, c0 - m)
+            g.maxflow()
+            take = g.get_grid_segments(np.arange(len(c1)))
+            if take.any():
+                changed = True
+                lab[np.flatnonzero(free)[take]] = a
+        if not changed:
+            break
+    return lab.reshape(H, W)

@@ -107,3 +107,36 @@ def test_interpolate_field_equals_its_gaussian_blur_form(shape):
     hole[0, 0] = False
     np.testing.assert_array_equal(interpolate_field(field, hole),
                                   naive.interpolate_field(field, hole))
+
+
+@pytest.mark.parametrize("start", ["cheapest", "given"])
+def test_alpha_expansion_on_the_movable_pixels_equals_the_whole_grid(rng, start):
+    """The expansion's moves keep to the pixels with two allowed labels or more (and
+    the edges touching them): the same labelling, bit for bit, as the graph over the
+    whole grid, with labels forbidden on most of it (as on the fill's box), a
+    started labelling that puts pixels on a forbidden label, and 5 labels."""
+    from dynremove.refine.montage import expansion_labels
+
+    nl, H, W = 5, 40, 56
+    D = rng.uniform(0, 30, (nl, H, W))
+    allowed = np.zeros((nl, H, W), bool)
+    allowed[0] = True
+    allowed[1:, 10:30, 12:40] = rng.uniform(size=(nl - 1, 20, 28)) < 0.8
+    forbidden = 1e6
+    D[~allowed] = forbidden
+    D[0, 15:25, 20:30] += 40  # the reference costly inside: the sources take it
+    # alike photos (seams cheap where they agree), one source off in a patch
+    colours = (rng.uniform(0, 100, (1, H, W, 3)) + rng.normal(0, 2, (nl, H, W, 3))
+               ).astype(np.float32)
+    colours[2, 10:20, 12:25] += 30
+    init = None
+    if start == "given":
+        init = np.argmin(D, 0)
+        init[12, 14] = 4 if not allowed[4, 12, 14] else init[12, 14]
+        init[2, 2] = 3  # outside every source: on a forbidden label
+    fast = expansion_labels(D, colours, beta=0.7, cycles=2, init=init, forbidden=forbidden)
+    want = naive.expansion_labels(D, colours, beta=0.7, cycles=2, init=init,
+                                  forbidden=forbidden)
+    assert np.array_equal(fast, want)
+    assert (fast != 0).sum() > 50  # the sources took part of it: not a trivial labelling
+    assert allowed[fast, np.arange(H)[:, None], np.arange(W)[None]].all()

@@ -101,58 +101,79 @@ def expansion_labels(D: npt.NDArray[np.float64], colours: npt.NDArray[np.float32
     labels : (H, W) intp ndarray
     """
     nl, H, W = D.shape
+    n = H * W
     lab = (np.argmin(D, 0) if init is None else init.astype(np.intp).copy()).ravel()
     # V(a, b) at each pixel; an edge sums it over both its pixels
-    pair = beta * (pairwise_distance(colours) if distance is None else distance)
-    pair = pair.reshape(nl * nl, H * W)
-    Df = D.reshape(nl, H * W)
-    idx = np.arange(H * W).reshape(H, W)
+    dist = (pairwise_distance(colours) if distance is None else distance).reshape(nl * nl, n)
+    Df = D.reshape(nl, n)
+    idx = np.arange(n).reshape(H, W)
     ep = np.concatenate([idx[:-1].ravel(), idx[:, :-1].ravel()])  # p of each edge
     eq = np.concatenate([idx[1:].ravel(), idx[:, 1:].ravel()])  # its neighbour q
+    # Only a pixel with two allowed labels or more can ever move, and only an edge
+    # touching one can carry a term: every move works on those pixels (``act``,
+    # in pixel order) and edges (in their order), numbered compactly. The graphs,
+    # their nodes' and edges' order and every sum are those of the whole grid:
+    # the same labelling (on the fill's box, most pixels allow the reference only)
+    act = (np.flatnonzero((Df < forbidden).sum(0) >= 2) if forbidden is not None
+           else np.arange(n))
+    if init is not None and forbidden is not None:
+        # a pixel started on a forbidden label may move to its one allowed label
+        act = np.union1d(act, np.flatnonzero(Df[lab, np.arange(n)] >= forbidden))
+    compact = np.full(n, -1, np.intp)
+    compact[act] = np.arange(len(act))
+    e = (compact[ep] >= 0) | (compact[eq] >= 0)
+    ep, eq = ep[e], eq[e]
+    cp, cq = compact[ep], compact[eq]
+    na = len(act)
 
     def V(u, v, p, q):  # seam cost of labels u at p and v at q, per edge (p, q)
         k = u * nl + v
-        return pair[k, p] + pair[k, q]
+        # (β times the distance at each pixel, as one product over all of them gave)
+        return beta * dist[k, p] + beta * dist[k, q]
 
     for _ in range(cycles):
         changed = False
         for a in range(nl):
             # p may move to a (x_p = 1) unless a is forbidden there or p has it already
-            free = lab != a
+            free_a = lab[act] != a
             if forbidden is not None:
-                free &= Df[a] < forbidden
-            if not free.any():
+                free_a &= Df[a, act] < forbidden
+            if not free_a.any():
                 continue
-            node = np.full(H * W, -1, np.intp)
-            node[free] = np.arange(int(free.sum()))
-            cost1 = Df[a].astype(np.float64)  # x_p = 1: p takes label a
-            cost0 = Df[lab, np.arange(H * W)].astype(np.float64)
+            nf = int(free_a.sum())
+            node = np.full(na, -1, np.intp)
+            node[free_a] = np.arange(nf)
+            cost1 = Df[a, act].astype(np.float64)  # x_p = 1: p takes label a
+            cost0 = Df[lab[act], act].astype(np.float64)
             # only edges touching a pixel that may move carry a term
-            e = free[ep] | free[eq]
+            fp, fq = (cp >= 0), (cq >= 0)
+            fp[fp] = free_a[cp[fp]]
+            fq[fq] = free_a[cq[fq]]
+            e = fp | fq
             p, q = ep[e], eq[e]
+            fp, fq = fp[e], fq[e]
             lp, lq = lab[p], lab[q]
             A, B, C = V(lp, lq, p, q), V(lp, a, p, q), V(a, lq, p, q)
             # E(x_p, x_q) = A + (C - A) x_p - C x_q + (B + C - A)(1 - x_p) x_q;
             # a fixed pixel has x = 0
-            fp, fq = free[p], free[q]
             both = fp & fq
             only_q = fq & ~fp
-            n = H * W
-            cost1 += np.bincount(p[fp], (C - A)[fp], n)
-            cost1 -= np.bincount(q[both], C[both], n)
-            cost1 += np.bincount(q[only_q], (B - A)[only_q], n)
+            pc, qc = cp[e], cq[e]
+            cost1 += np.bincount(pc[fp], (C - A)[fp], na)
+            cost1 -= np.bincount(qc[both], C[both], na)
+            cost1 += np.bincount(qc[only_q], (B - A)[only_q], na)
             g = maxflow.Graph[float]()
-            g.add_nodes(int(free.sum()))
-            g.add_edges(node[p[both]], node[q[both]],
+            g.add_nodes(nf)
+            g.add_edges(node[pc[both]], node[qc[both]],
                         np.maximum(B + C - A, 0.0)[both], np.zeros(int(both.sum())))
-            c1, c0 = cost1[free], cost0[free]
+            c1, c0 = cost1[free_a], cost0[free_a]
             m = np.minimum(c0, c1)
             g.add_grid_tedges(np.arange(len(c1)), c1 - m, c0 - m)
             g.maxflow()
             take = g.get_grid_segments(np.arange(len(c1)))
             if take.any():
                 changed = True
-                lab[np.flatnonzero(free)[take]] = a
+                lab[act[free_a][take]] = a
         if not changed:
             break
     return lab.reshape(H, W)
