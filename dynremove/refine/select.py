@@ -730,8 +730,10 @@ def _minority_witnesses(lab_r: np.ndarray, lab_w: np.ndarray, geo_ok: np.ndarray
     if found is not None and cand.any():
         # a source in which the reference's content lies somewhere on its epipolar
         # line still shows it (the match was only misplaced): no witness there
-        for k in range(S):  # (searched only where this source would witness)
-            dis[k] &= ~found(k, (cand > 0) & dis[k])
+        # (searched only where this source would witness; the sources on threads)
+        shown = for_each_source(lambda k: found(k, (cand > 0) & dis[k]), S)
+        for k in range(S):
+            dis[k] &= ~shown[k]
         cand, ys, xs, v_best = witnessed()
     if not cand.any():
         return none
@@ -1471,7 +1473,12 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         inside.append(ins)
     cand_img = np.stack(cand)
     usable = np.stack(inside)
-    labs = np.stack([blurred_lab(c, 1.0) for c in cand_img])
+    labs = np.empty(cand_img.shape, np.float32)
+
+    def to_lab(k):
+        labs[k] = blurred_lab(cand_img[k], 1.0)
+
+    for_each_source(to_lab, len(cand_img))
 
     # 3. weighted consensus
     p_mover = _mover_probability(colours, labs)
