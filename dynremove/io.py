@@ -32,6 +32,7 @@ from dynremove.video import read_video
 IMAGE_EXTS = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp", ".jp2", ".ppm",
               ".pgm", ".pnm"}
 AUTO_MAX_SIDE = 1280  # larger inputs are downscaled unless --max-side says otherwise
+SMALL_MAX_SIDE = 480  # an analysis size given below this gets a note (coarse masks)
 MIN_MAX_SIDE = 16  # smallest --max-side accepted (dense flow needs a side of >= 12 px)
 HEIF_BRANDS = {b"heic", b"heix", b"heim", b"heis", b"hevc", b"hevx", b"mif1", b"msf1"}
 AVIF_BRANDS = {b"avif", b"avis"}
@@ -690,8 +691,16 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
     target = max_side
     if max_side is None and side > AUTO_MAX_SIDE:
         target = AUTO_MAX_SIDE
-        notes.append(f"images are {W0}x{H0}: downscaled to at most {AUTO_MAX_SIDE} px "
-                     "(use --max-side to choose, 0 to keep the full size)")
+        # (not "0 to keep the full size": a trial took the hint on 12 MP photos and
+        # waited 5 minutes, 13 GB, for a worse result; the method's patches and
+        # thresholds are in analysis pixels, chosen at 854-1280 px)
+        notes.append(f"images are {W0}x{H0}: analysed at most {AUTO_MAX_SIDE} px on the "
+                     "long side, the scale the method is tuned at (--max-side sets it; "
+                     "larger is slower and needs more memory)")
+    elif max_side and max_side < SMALL_MAX_SIDE and side > max_side:
+        notes.append(f"--max-side {max_side}: analysed at {max_side} px on the long side, "
+                     f"well below the 854-{AUTO_MAX_SIDE} px the method is tuned at (its patches "
+                     "are sized in analysis pixels): expect a coarse mask")
     scale = 1.0
     if target and side > target:
         scale = target / side
@@ -845,6 +854,11 @@ def prepare_out_dir(out: str | os.PathLike, inputs: Sequence[str | os.PathLike] 
     p = Path(out)
     if p.exists() and not p.is_dir():
         raise InputError(f"--out {p}: exists and is not a folder")
+    if not p.exists() and p.suffix.lower() in IMAGE_EXTS | VIDEO_SUFFIXES:
+        # (a trial's --out out/clean.jpg made a folder of that name, silently)
+        raise InputError(f"--out {p}: names a folder, where the run writes "
+                         f"{', '.join(RUN_OUTPUTS)} and report.json (the clean photo is "
+                         f"clean.png, lossless); give a folder, e.g. --out {p.with_suffix('')}")
     target = p.resolve()
     written = {target / n for n in (*RUN_OUTPUTS, "report.json")}
     for a in inputs:

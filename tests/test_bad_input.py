@@ -184,6 +184,25 @@ def test_non_image_files_are_skipped_with_a_note(tmp_path, capsys, scene):
     assert "notes.txt" in note and "Thumbs.db" in note and "skipped 2" in note
 
 
+def test_out_named_like_a_photo_is_refused(tmp_path, capsys, scene):
+    """``--out out/clean.jpg`` made a folder of that name, silently (a trial): --out is
+    the folder of the outputs; a new name with a photo's or video's suffix is refused,
+    with the folder to give instead, and nothing is created."""
+    d = tmp_path / "set"
+    write_set(d, scene.images[:3])
+    for name in ("clean.jpg", "result.PNG", "out.mp4"):
+        out = tmp_path / "res" / name
+        rc, _, err = run_cli(capsys, d, "--out", out, *FAST)
+        assert_input_error(rc, err, f"--out {out}", "names a folder",
+                           f"--out {out.with_suffix('')}")
+        assert not (tmp_path / "res").exists()
+    # an existing folder of that name is used as it is
+    out = tmp_path / "old.png"
+    out.mkdir()
+    rc, _, err = run_cli(capsys, d, "--out", out, *FAST)
+    assert_ok_run(rc, err, out)
+
+
 def test_out_in_the_input_folder_or_over_an_input_is_refused(tmp_path, capsys, scene):
     """The outputs would become photos of the next run there, or replace an input."""
     d = tmp_path / "set"

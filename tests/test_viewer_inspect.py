@@ -864,3 +864,12 @@ def test_the_paper_preset_says_when_its_scans_stop_at_the_cap(paper_rrd):
     assert len(res.scans) == 2 and last > 0, "the scene must still flag pixels in scan 2"
     note = next(w for w in res.warnings if w.startswith("the scans stopped"))
     assert f"--max-scans 2 while the last still called {last} px dynamic" in note, note
+
+
+def test_offsets_at_the_recording_s_clip_are_not_read_as_measurements():
+    """The recording holds the blend's offsets as 128 + levels clipped to 0..255: a
+    trial read "-128/-128/-128" as a measured value; at the clip the words say ≤ / ≥."""
+    from viewer.verdict import levels_words
+
+    assert levels_words([-128, 5, 127]) == "≤ -128/+5/≥ +127"
+    assert levels_words([-3, 0, 12]) == "-3/+0/+12"

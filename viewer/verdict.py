@@ -20,6 +20,14 @@ _LIGHT_OR_REST = ("the photos' light differing there, exposure, glare or shade, 
                   "this; so does part of a mover left in the reference around the region")
 
 
+
+def levels_words(off) -> str:
+    """B/G/R levels as the recording holds them (``sink``: 128 + levels, clipped to
+    0..255): "+12/-3/-128" reads "≤ -128" and "≥ +127" at the clip, where the true
+    value may be anything beyond (a trial read "-128/-128/-128" as a measurement)."""
+    return "/".join("≤ -128" if c <= -128 else "≥ +127" if c >= 127 else f"{c:+d}"
+                    for c in off)
+
 def _label(v: bool | None) -> str:
     return "?" if v is None else ("dynamic" if v else "static")
 
@@ -351,7 +359,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                 # what the ring around the region asked for: exposure and light, or, when
                 # large, a shadow or another object the ring saw (a trial read -115
                 # levels as light)
-                why += ("; the blend added B/G/R " + "/".join(f"{c:+d}" for c in off)
+                why += ("; the blend added B/G/R " + levels_words(off)
                         + " levels to it, to meet the reference around the region"
                         + (" (a large correction: the ring there differs from this source "
                            "by more than light does, e.g. a shadow, a wrong source, or part "
@@ -383,7 +391,7 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                             "(--select-complete): it keeps it too"))
         elif sel.get("completed") == 3:
             off = sel.get("offset")
-            would = (" (it would have added B/G/R " + "/".join(f"{c:+d}" for c in off)
+            would = (" (it would have added B/G/R " + levels_words(off)
                      + " levels here)" if off and max(abs(c) for c in off) >= 1 else "")
             lines.append("fill: reference kept — the photomontage took a source here, but "
                          "the blend would have had to shift that region's fill by more than "
