@@ -312,8 +312,14 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     bar = _bar(args, params)  # the steps after the pipeline's, on the same bar
     if args.output_size == "full" and iset.scale < 1.0 and not iset.video:
         bar("full-size output", 0.0)
+        h, w = res.clean.shape[:2]
         res = at_output_size(res, iset, args.output_size)
         bar("full-size output", 1.0)
+        if any(re.search(r"\d px\b", str(n)) for n in res.warnings):
+            # (a trial read "2 px ... inpainted" against report.json's 18: two sizes)
+            H1, W1 = res.clean.shape[:2]
+            _note(args, f"the notes count pixels of the {w}x{h} analysed copy; clean.png, "
+                  f"dynamic_mask.png and report.json's *_px are at {W1}x{H1}")
     if gt_full is not None:
         gt = _resized_mask(gt_full, res.dynamic.shape)  # the output's size
     check_stop()  # a Ctrl-C lost in the last stage: nothing is written
