@@ -638,9 +638,23 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         clock.start("fusion")
     pre_fill = dyn  # L as the fill by selection takes it
     if params.fuse and params.fill == "select":
+        # a black-and-white source beside a colour reference and colour sources: its
+        # evidence counts, its pixels never fill (its levels mapped to the
+        # reference's channels would paste a tinted grey; a fresh-user trial's
+        # sanitizer2.jpg saved as grey read "cooler in colour")
+        no_fill = np.zeros(len(srcs), bool)
+        if not is_gray(images[ref]):
+            no_fill = np.array([is_gray(images[s]) for s in srcs], bool)
+            if no_fill.all():
+                no_fill[:] = False
+            elif no_fill.any():
+                msgs.append("black-and-white photos among colour ones: "
+                            + ", ".join(names[srcs[k]] for k in np.flatnonzero(no_fill))
+                            + " count as evidence but do not fill the colour reference")
+                warnings.warn(msgs[-1], stacklevel=2)
         selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=None if
                                 valid_masks is None else np.stack([valid_masks[s] for s in srcs]),
-                                flows=st.Nf_flow)
+                                flows=st.Nf_flow, no_fill=no_fill)
         clean = selection.clean
         dyn = stages["select"] = selection.replaced
     elif params.fuse:

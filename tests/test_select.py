@@ -1746,3 +1746,35 @@ def test_a_copy_the_flow_followed_counts_against_the_line():
         warnings.simplefilter("ignore")
         r = remove_dynamic(ls.images, ref=ls.ref)
     assert (r.dynamic & ls.gt).sum() / (r.dynamic | ls.gt).sum() > 0.7  # 0.81; 0.59 neutral
+
+
+def test_a_black_and_white_source_never_fills_a_colour_reference():
+    """A grey photo among colour ones (a fresh-user trial: sanitizer2.jpg saved in
+    grey) is evidence, not fill: its levels mapped to the reference's channels would
+    paste a tinted grey. The same scene with that source in colour fills from it, so
+    the test can fail; with it grey, no replaced pixel takes or combines it, a note says
+    so, and the mover is still removed."""
+    from dynremove.evaluation.metrics import jaccard
+
+    sc = synth.make_scene(seed=0, n_views=5, size=(240, 432))
+    ref = sc.ref_index
+    srcs = [i for i in range(len(sc.images)) if i != ref]
+    colour = remove_dynamic(sc.images, ref=ref)
+    # the source that fills most in colour is the one made grey
+    counts = np.bincount(colour.selection.label[colour.selection.replaced].ravel(),
+                         minlength=len(srcs) + 1)[1:]
+    k = int(np.argmax(counts))
+    assert counts[k] > 100
+    ims = [im.copy() for im in sc.images]
+    g = cv2.cvtColor(ims[srcs[k]], cv2.COLOR_BGR2GRAY)
+    ims[srcs[k]] = cv2.cvtColor(g, cv2.COLOR_GRAY2BGR)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = remove_dynamic(ims, ref=ref, names=[f"v{i}.png" for i in range(len(ims))])
+    sel = r.selection
+    assert not (sel.label[sel.replaced] == k + 1).any()
+    assert not sel.members[k].any()
+    notes = [str(w.message) for w in caught if "black-and-white" in str(w.message)]
+    assert len(notes) == 1 and f"v{srcs[k]}.png" in notes[0], notes
+    gt = sc.masks[ref]
+    assert jaccard(r.dynamic, gt) > jaccard(colour.dynamic, gt) - 0.1

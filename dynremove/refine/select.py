@@ -1174,7 +1174,8 @@ def median_parallax_px(views: list[TwoView], field: str = "parallax_px") -> floa
 def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
                 views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params, *,
                 valid: npt.NDArray[np.bool_] | None = None,
-                flows: npt.NDArray[np.float32] | None = None) -> Selection:
+                flows: npt.NDArray[np.float32] | None = None,
+                no_fill: npt.NDArray[np.bool_] | None = None) -> Selection:
     """Fill ``mask`` by selecting, per region, one source that is free there.
 
     Parameters
@@ -1196,6 +1197,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         method="homography+flow")`` of the gray images), if the caller has them
         (the pipeline keeps them from its correspondence stage); computed here
         otherwise.
+    no_fill : (S,) bool ndarray, optional
+        Sources whose evidence counts but whose pixels never fill (a black-and-white
+        photo beside colour ones).
 
     Returns
     -------
@@ -1537,6 +1541,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # across a face in tim6; 12 composites: damage 0.502 -> 0.499 %, leftover 17.07
     # -> 17.21 %; DAVIS J 0.569 -> 0.570)
     D[1:, explained[roi]] = _FORBIDDEN
+    if no_fill is not None:
+        D[1:][np.asarray(no_fill, bool)] = _FORBIDDEN
     # a source showing its own mover never fills where another source may; where
     # none may, the pixel is still replaced, and inpainted (``no_src`` below)
     D[1:][own & ((D[1:] < _FORBIDDEN) & ~own).any(0)[None]] = _FORBIDDEN
@@ -1581,6 +1587,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
           | copies | own)
     movers[:, y0:y1, x0:x1] = mv & reg[None]
     free = usable[1:] & ~mv
+    if no_fill is not None:
+        free[np.asarray(no_fill, bool)] = False
     if P.select_halo_px > 0:
         lab = grow_into_rim(lab, reg & ~explained[roi], free, labs, p_mover[0], tau,
                             P.select_halo_px)
