@@ -694,8 +694,8 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
         # (not "0 to keep the full size": a trial took the hint on 12 MP photos and
         # waited 5 minutes, 13 GB, for a worse result; the method's patches and
         # thresholds are in analysis pixels, chosen at 854-1280 px)
-        notes.append(f"images are {W0}x{H0}: analysed at most {AUTO_MAX_SIDE} px on the "
-                     "long side, the scale the method is tuned at (--max-side sets it; "
+        notes.append(f"images are {W0}x{H0}: downscaled to at most {AUTO_MAX_SIDE} px for "
+                     "the analysis, the scale the method is tuned at (--max-side sets it; "
                      "larger is slower and needs more memory)")
     elif max_side and max_side < SMALL_MAX_SIDE and side > max_side:
         notes.append(f"--max-side {max_side}: analysed at {max_side} px on the long side, "
