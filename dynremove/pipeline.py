@@ -440,6 +440,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                              "give one name per image, in the same order")
     ref = api_ref(ref, images, names, names_given=names_given)
     images, gray_note = gray_like_reference(images, ref)
+    gray_apart, gray_apart_note = gray_beside_colour(images, ref, names)
     sink = NullSink() if sink is None else sink
     H, W = images[0].shape[:2]
     for (x, y) in probes:
@@ -450,7 +451,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
     clock = _Clock(timings, progress)
-    msgs: list[str] = [gray_note] if gray_note else []
+    msgs: list[str] = [n for n in (gray_note, gray_apart_note) if n]
     srcs = [i for i in range(len(images)) if i != ref]
     keep: list[np.ndarray] = []
 
@@ -638,23 +639,9 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         clock.start("fusion")
     pre_fill = dyn  # L as the fill by selection takes it
     if params.fuse and params.fill == "select":
-        # a black-and-white source beside a colour reference and colour sources: its
-        # evidence counts, its pixels never fill (its levels mapped to the
-        # reference's channels would paste a tinted grey; a fresh-user trial's
-        # sanitizer2.jpg saved as grey read "cooler in colour")
-        no_fill = np.zeros(len(srcs), bool)
-        if not is_gray(images[ref]):
-            no_fill = np.array([is_gray(images[s]) for s in srcs], bool)
-            if no_fill.all():
-                no_fill[:] = False
-            elif no_fill.any():
-                msgs.append("black-and-white photos among colour ones: "
-                            + ", ".join(names[srcs[k]] for k in np.flatnonzero(no_fill))
-                            + " count as evidence but do not fill the colour reference")
-                warnings.warn(msgs[-1], stacklevel=2)
         selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=None if
                                 valid_masks is None else np.stack([valid_masks[s] for s in srcs]),
-                                flows=st.Nf_flow, no_fill=no_fill)
+                                flows=st.Nf_flow, no_fill=gray_apart[srcs])
         clean = selection.clean
         dyn = stages["select"] = selection.replaced
     elif params.fuse:
@@ -848,6 +835,25 @@ def gray_like_reference(images: Sequence[np.ndarray], ref: int
                     f"{'was' if len(colour) == 1 else 'were'} used in gray, so that the "
                     "fill matches it; without colour to go by, a mover in the scene's gray "
                     "levels may be found only in part: look at the clean photo")
+
+
+def gray_beside_colour(images: Sequence[np.ndarray], ref: int, names: Sequence[str]
+                       ) -> tuple[npt.NDArray[np.bool_], str | None]:
+    """The other half of ``gray_like_reference``: black-and-white photos beside a
+    colour reference and colour sources, (N,) bool per image, and a note; none (and
+    None) otherwise. Their evidence counts but they never fill (``select_fill``'s
+    ``no_fill``): their levels mapped to the reference's channels would paste a tinted
+    grey (a fresh-user trial's sanitizer2.jpg saved as grey read "cooler in colour").
+    Where every source is grey, they fill: nothing else could."""
+    apart = np.zeros(len(images), bool)
+    if is_gray(images[ref]):
+        return apart, None
+    apart[[i for i, im in enumerate(images) if i != ref and is_gray(im)]] = True
+    if not apart.any() or apart.sum() == len(images) - 1:
+        return np.zeros(len(images), bool), None
+    return apart, ("black-and-white photos among colour ones: "
+                   + ", ".join(names[i] for i in np.flatnonzero(apart))
+                   + " count as evidence but do not fill the colour reference")
 
 
 def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
