@@ -114,11 +114,14 @@ def _distance(known):
 def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
                  ring_px=3, max_de=15.0, plateau_px=PLATEAU_PX, decay_px=DECAY_PX,
                  light_sigma_px=LIGHT_SIGMA_PX, light_scale_px=LIGHT_SCALE_PX,
-                 light_decay_px=LIGHT_DECAY_PX, band_px=BAND_PX, band_sigma_px=BAND_SIGMA_PX):
+                 light_decay_px=LIGHT_DECAY_PX, band_px=BAND_PX, band_sigma_px=BAND_SIGMA_PX,
+                 suspect=None):
     """``montage.offset_blend`` on whole images."""
     out = reference.astype(np.float32)
     ring = dilate_disc(replaced, ring_px) & ~replaced
     band = dilate_disc(replaced, band_px[1]) & ~dilate_disc(replaced, band_px[0])
+    if suspect is not None:
+        band &= ~suspect
     by, bx = np.nonzero(band)
     ry, rx = np.nonzero(ring)
     for lbl in np.unique(labels[replaced]):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import warnings
 
 import cv2
+import naive
 import numpy as np
 import pytest
 
@@ -251,6 +252,37 @@ def test_a_glare_over_part_of_the_ring_is_light_not_content():
     err = np.abs(out.astype(int) - bg).max(2)
     assert np.median(err[low]) <= 2 and np.percentile(err[low], 90) <= 6
     assert np.median(err[rep]) <= 2
+
+
+def test_a_mover_s_kept_parts_are_not_light_for_the_blend():
+    """A dark mover against a pale wall: the graph cut replaced its body and kept its
+    head and legs (dark on the dark scene behind them: tim6 with tim3.jpg). The ring
+    on those kept parts differs from the ring's median by far more than
+    ``ring_agrees``' 15, and so does the band beyond it, which lies on them too:
+    without ``suspect`` that reads as light (``band_light``), and the body comes out
+    a dark smear. The pixels of L are no evidence of light: the fill is the wall."""
+    from dynremove.refine.fields import blurred_lab
+
+    rng = np.random.default_rng(0)
+    H, W = 160, 160
+    wall = cv2.GaussianBlur(rng.integers(185, 215, (H, W, 3)).astype(np.uint8), (0, 0), 1.5)
+    ref = wall.copy()
+    body = np.zeros((H, W), bool)
+    body[60:100, 50:110] = True
+    kept = np.zeros((H, W), bool)
+    kept[15:60, 62:98] = True  # the head
+    kept[100:155, 55:105] = True  # the legs
+    ref[body | kept] = (40, 35, 30)
+    labs = np.stack([blurred_lab(ref, 1.0), blurred_lab(wall, 1.0)])
+    args = (ref, np.stack([ref, wall]), body.astype(np.intp), body, np.ones((2, H, W), bool),
+            labs)
+    err = np.abs(offset_blend(*args, suspect=body | kept).astype(int) - wall).max(2)
+    assert np.median(err[body]) <= 3 and np.percentile(err[body], 90) <= 12
+    smear = np.abs(offset_blend(*args).astype(int) - wall).max(2)
+    assert np.median(smear[body]) >= 20  # (the failure this guards against)
+    # the whole-image form excludes the same band pixels
+    np.testing.assert_array_equal(offset_blend(*args, suspect=body | kept),
+                                  naive.offset_blend(*args, suspect=body | kept))
 
 
 def test_ring_agrees_keeps_the_common_offset_and_drops_content():

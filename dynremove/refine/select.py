@@ -1635,7 +1635,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         else:
             ly, lx = np.nonzero(rep_b)
             members[lab_b[ly, lx] - 1, ly + y0, lx + x0] = True
-        clean[roi] = offset_blend(reference[roi], cand_img, lab_b, rep_b, usable, labs)
+        # (L's pixels are no evidence of light: a mover's kept parts are content)
+        clean[roi] = offset_blend(reference[roi], cand_img, lab_b, rep_b, usable, labs,
+                                  suspect=in_mask)
         members[:, y0:y1, x0:x1] &= ~no_src[None]  # inpainted: no source's value
         fy, fx = np.nonzero(rep_b & ~no_src)
         offset[fy + y0, fx + x0] = (clean[fy + y0, fx + x0].astype(np.float32)
