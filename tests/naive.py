@@ -236,7 +236,10 @@ def full_resolution(reference, sources, clean_working, dynamic, selection, tau=1
                        light_sigma_px=LIGHT_SIGMA_PX * scale,
                        light_scale_px=LIGHT_SCALE_PX * scale,
                        light_decay_px=LIGHT_DECAY_PX * scale, band_px=band_px,
-                       band_sigma_px=BAND_SIGMA_PX * scale)
+                       band_sigma_px=BAND_SIGMA_PX * scale,
+                       suspect=None if selection.mask is None else cv2.resize(
+                           selection.mask.astype(np.uint8), size,
+                           interpolation=cv2.INTER_NEAREST)[roi] > 0)
     no_src = cv2.resize(selection.no_source.astype(np.uint8), size,
                         interpolation=cv2.INTER_NEAREST)[roi] > 0
     if no_src.any():

@@ -182,6 +182,50 @@ def test_full_resolution_equals_the_dense_computation():
         assert (clean != ref).any()
 
 
+def test_a_mover_s_kept_parts_do_not_darken_the_full_size_fill():
+    """As ``test_a_mover_s_kept_parts_are_not_light_for_the_blend`` at working size:
+    a dark mover on a pale wall, its body replaced (a source showing the wall), its
+    head and legs kept. At full size (×2) the blend's band lies on the kept parts too;
+    the pixels of L (``Selection.mask``) are no evidence of light there, so the body
+    comes out as the wall; without them, a dark smear. Both equal the dense form."""
+    import dataclasses
+
+    import naive
+
+    from dynremove.refine.select import Selection
+    from dynremove.refine.upsample import full_resolution
+
+    rng = np.random.default_rng(0)
+    h = w = 160  # the working-size test's scene, written at twice its size
+    wall = cv2.GaussianBlur(rng.integers(185, 215, (2 * h, 2 * w, 3)).astype(np.uint8),
+                            (0, 0), 1.5)
+    body = np.zeros((h, w), bool)
+    body[60:100, 50:110] = True
+    kept = np.zeros((h, w), bool)
+    kept[15:60, 62:98] = True  # the head
+    kept[100:155, 55:105] = True  # the legs
+    up = lambda m: cv2.resize(m.astype(np.uint8), (2 * w, 2 * h),  # noqa: E731
+                              interpolation=cv2.INTER_NEAREST) > 0
+    ref = wall.copy()
+    ref[up(body | kept)] = (40, 35, 30)
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    label = np.where(body, 1, np.where(cv2.dilate(body.view(np.uint8), np.ones((9, 9))) > 0,
+                                       0, -1)).astype(np.int16)
+    none = np.zeros((h, w), bool)
+    sel = Selection(clean=cv2.resize(ref, (w, h)), replaced=body, label=label,
+                    explained=kept, movers=none[None], no_source=none, seams=none,
+                    parallax_px=0.0, consensus_mode="scan", fields=[np.stack([gx, gy], -1)],
+                    members=body[None], mask=body | kept)
+    small = cv2.resize(ref, (w, h), interpolation=cv2.INTER_AREA)
+    for s, ok in ((sel, True), (dataclasses.replace(sel, mask=None), False)):
+        clean, dyn = full_resolution(ref, [wall], small, body, s)
+        clean_d, dyn_d = naive.full_resolution(ref, [wall], small, body, s)
+        np.testing.assert_array_equal(clean, clean_d)
+        np.testing.assert_array_equal(dyn, dyn_d)
+        err = np.abs(clean.astype(int) - wall).max(2)[up(body)]
+        assert (np.median(err) <= 3) if ok else (np.median(err) >= 20), np.median(err)
+
+
 def test_the_full_size_fill_takes_one_working_pixel_more():
     """grow_replaced: the replaced labels grow ``px`` pixels into the kept reference
     (label 0), never into pixels outside the fill region (−1), taking a neighbour's

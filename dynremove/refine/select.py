@@ -181,6 +181,10 @@ class Selection:
     # region); NaN where no source filled the pixel (kept, or inpainted), but where
     # ``misfit_regions`` kept the reference (``completed`` 3): what it would have added
     offset: npt.NDArray[np.float32] | None = None
+    # (H, W) bool: L as the fill by selection last saw it (the scans' map grown by its
+    # own steps); the blend's pixels that may show a mover (``offset_blend``'s
+    # ``suspect``), at full size too (``upsample.full_resolution``)
+    mask: npt.NDArray[np.bool_] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen",
@@ -1714,7 +1718,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
                      followed=np.stack([np.zeros((H, W), bool) if f is None else f
                                         for f in followed]),
-                     offset=offset)
+                     offset=offset, mask=mask)
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "OUTSIDE", "OWN_MOVER",

@@ -124,6 +124,8 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     shape = rep.shape
     ring = dilate_disc(rep, ring_px) & ~rep
     band = band_around(rep, band_px)
+    if selection.mask is not None:  # L is no evidence of light (``offset_blend``)
+        band &= ~(_resize_nearest(selection.mask.view(np.uint8), size)[y0:y1, x0:x1] > 0)
     # the pixels sampled: the replaced ones and those the blurred ring and band read
     reach = m - 1 + math.ceil(4 * blur) + 1
     near = cv2.dilate(rep.view(np.uint8), np.ones((2 * reach + 1, 2 * reach + 1), np.uint8))
