@@ -36,13 +36,13 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Generator, Iterable, Sequence
 
 import cv2
 import numpy as np
 
 from dynremove import io
-from dynremove.errors import InputError
+from dynremove.errors import InputError, interruption
 from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
 from dynremove.refine.concurrency import one_thread_per_worker
@@ -410,6 +410,12 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
                                gt=gt, reference=ref_info, extra=extra)
         row.update(_row_from_report(report), status="ok")
     except Exception as e:  # noqa: BLE001 - recorded in the summary, the batch goes on
+        stop = interruption(e)
+        if stop is not None:
+            # a Ctrl-C that landed inside a compiled call (a SystemError around it):
+            # the batch stops, this set is not run (a fresh-user trial saw it
+            # recorded as failed, and the batch go on)
+            raise stop from None
         msg = " ".join(str(e).split()) or type(e).__name__
         if (out / "report.json").is_file():  # left as they were: nothing is lost
             msg += (f" ({out} still holds an earlier run's outputs, not of these inputs)")
@@ -583,7 +589,7 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
             n = min(effective_n_jobs(jobs), len(sets))
             if on_note is not None:
                 on_note(f"{len(sets)} sets, {n} at a time: a line as each one finishes")
-            _collect(Parallel(n_jobs=jobs, return_as="generator_unordered")(
+            _collect_all(Parallel(n_jobs=jobs, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)
         return [results[bs.name] for bs in sets], effective_n_jobs(jobs)
@@ -610,7 +616,7 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
             on_note(f"{len(sets)} sets on the cluster's {sum(client.nthreads().values())} "
                     "worker threads: a line as each one finishes")
         with parallel_config(backend="dask"):  # joblib's backend: the default client
-            _collect(Parallel(n_jobs=-1, return_as="generator_unordered")(
+            _collect_all(Parallel(n_jobs=-1, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)
     finally:
@@ -635,6 +641,22 @@ def _collect(gen: Iterable[dict], sets: Sequence[BatchSet],
         if on_done:
             on_done(k, len(sets), row)
     return list(results.values())
+
+
+def _collect_all(gen: Generator[dict, None, None], sets: Sequence[BatchSet],
+                 on_done: Callable[[int, int, dict], None] | None, results: dict) -> None:
+    """``_collect`` over joblib's generator of rows, which is closed however the
+    loop ends: an interruption that reaches the main thread between two rows (in
+    ``on_done``) leaves joblib's generator suspended, its workers running their sets
+    on; closing it aborts them here and now (joblib kills its loky workers). A
+    fresh-user trial saw two workers outlive a batch cut short by SIGINT and write a
+    set 16 s after the command had exited 130."""
+    try:
+        _collect(gen, sets, on_done, results)
+    finally:
+        with warnings.catch_warnings():  # ("exited early": it was told to)
+            warnings.simplefilter("ignore")
+            gen.close()
 
 
 def _is_photo_note(note: str) -> bool:

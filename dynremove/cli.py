@@ -23,11 +23,11 @@ from typing import Any, Callable, Sequence
 
 import cv2
 
-from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, SAMPLE_STATIC, Terminated, clear_stop,
+from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, SAMPLE_STATIC, clear_stop,
                                 request_stop, cmd_batch, cmd_bench,
                                 cmd_composite, cmd_demo, cmd_eval, cmd_export, cmd_inspect,
-                                cmd_run, cmd_view, interruption)
-from dynremove.errors import InputError
+                                cmd_run, cmd_view)
+from dynremove.errors import InputError, Terminated, interruption
 from dynremove.evaluation.composite import MAX_SIDE as COMPOSITE_MAX_SIDE
 from dynremove.evaluation.evaluate import ABLATIONS, METHODS
 from dynremove.params import DEFAULT, FIELD_CHOICES, PAPER, PRESETS, Params, field_docs

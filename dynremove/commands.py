@@ -31,7 +31,7 @@ from dynremove import io
 from dynremove.method.scan import _kernels
 from dynremove.method.scan.driver import compiled_kernels
 from dynremove.batch import at_output_size, load_for_reference, write_outputs
-from dynremove.errors import InputError
+from dynremove.errors import InputError, interruption
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.bench import run_bench
 from dynremove.evaluation.evaluate import (METHODS, format_ablation, format_table, image_files,
@@ -42,10 +42,6 @@ from dynremove.pipeline import remove_dynamic
 from dynremove.progress import ProgressBar, SetProgress, stage_labels
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
-
-
-class Terminated(BaseException):
-    """SIGTERM, raised in the main thread between chunks of work."""
 
 
 # The stop (KeyboardInterrupt or Terminated) a signal asked for, until it is seen
@@ -70,23 +66,6 @@ def check_stop() -> None:
 def clear_stop() -> None:
     """The stop reached the command's handler (or a new command starts)."""
     _PENDING_STOP.clear()
-
-
-def interruption(e: BaseException | None) -> BaseException | None:
-    """The KeyboardInterrupt or Terminated behind ``e``: ``e`` itself, or one in its
-    ``__cause__`` / ``__context__`` chain; None if there is none.
-
-    A Ctrl-C that lands inside a compiled (numba) call can surface as a
-    ``SystemError`` ("returned a result with an exception set") whose context is
-    the KeyboardInterrupt: that is still an interruption, not an internal error.
-    """
-    seen: set[int] = set()
-    while e is not None and id(e) not in seen:
-        if isinstance(e, (KeyboardInterrupt, Terminated)):
-            return e
-        seen.add(id(e))
-        e = e.__cause__ or e.__context__
-    return None
 
 
 # --- parameters as flags -------------------------------------------------------------

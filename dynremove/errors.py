@@ -12,4 +12,25 @@ class InputError(ValueError):
     """The inputs cannot be processed (the CLI exits with code 2)."""
 
 
-__all__ = ["InputError"]
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread between chunks of work."""
+
+
+def interruption(e: BaseException | None) -> BaseException | None:
+    """The KeyboardInterrupt or Terminated behind ``e``: ``e`` itself, or one in its
+    ``__cause__`` / ``__context__`` chain; None if there is none.
+
+    A Ctrl-C that lands inside a compiled (numba) call can surface as a
+    ``SystemError`` ("returned a result with an exception set") whose context is
+    the KeyboardInterrupt: that is still an interruption, not an internal error.
+    """
+    seen: set[int] = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, (KeyboardInterrupt, Terminated)):
+            return e
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return None
+
+
+__all__ = ["InputError", "Terminated", "interruption"]

@@ -380,6 +380,83 @@ def test_a_cut_batch_lists_what_finished_and_says_how_to_resume(tmp_path, root, 
     assert rows["a"]["skipped"] in ("True", "1", "true") and rows["davis/b"]["status"] == "ok"
 
 
+def test_a_ctrl_c_inside_a_compiled_call_stops_the_batch(tmp_path, root, capsys, monkeypatch):
+    """A Ctrl-C that lands inside a numba call surfaces as a SystemError ("returned a
+    result with an exception set") around the KeyboardInterrupt. A fresh-user trial
+    saw it recorded as the set's failure, exit 1, and the batch go on to the next
+    sets; it is an interruption: exit 130, the set not listed as failed, no other set
+    started."""
+    from dynremove.cli import main
+
+    started = []
+
+    def interrupted_in_a_kernel(images, *a, **k):
+        started.append(len(images))
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("CPUDispatcher(<function _assemble_sift>) returned a result "
+                              "with an exception set") from None
+
+    monkeypatch.setattr(batch, "remove_dynamic", interrupted_in_a_kernel)
+    out = tmp_path / "out"
+    rc = main(["batch", str(root), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 130, err
+    assert len(started) == 1 and "SystemError" not in err and "failed" not in err, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] is True and s["n_failed"] == 0 and s["n_not_run"] == 3
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads /proc (Linux)")
+def test_a_cut_parallel_batch_leaves_no_worker_running(tmp_path):
+    """--jobs 2, interrupted in the main process between two finished sets (as a
+    SIGINT to the main PID alone lands): the workers still running their sets are
+    stopped with it. A fresh-user trial saw two workers outlive the command and write
+    a set 16 s after it had exited 130."""
+    import os
+    import time
+
+    from dynremove.params import preset
+
+    root = tmp_path / "root"
+    for i in range(4):
+        sc = synth.make_scene(seed=i, n_views=5, size=(240, 320), n_objects=1)
+        write_set(root / f"s{i}", sc.images)
+
+    def workers() -> list[str]:  # this process's children, but joblib's trackers
+        out = []
+        for p in Path("/proc").iterdir():
+            try:
+                if p.name.isdigit() and int((p / "stat").read_text().split()[3]) == os.getpid():
+                    cmd = (p / "cmdline").read_bytes().replace(b"\0", b" ").decode()
+                    if "resource_tracker" not in cmd:
+                        out.append(cmd)
+            except (OSError, ValueError, IndexError):
+                pass
+        return out
+
+    def cut(k, n, row):
+        raise KeyboardInterrupt
+
+    out = tmp_path / "out"
+    held = None
+    try:
+        batch.run_batch(root, out, params=preset("default"), preset_name="default", jobs=2,
+                        on_done=cut)
+    except KeyboardInterrupt as e:
+        # its frames kept, as they are while the CLI reports the cut and exits (so
+        # joblib's generator is not garbage-collected, which would abort it too)
+        held = e.__traceback__
+    assert held is not None
+    finished = {p.name for p in out.iterdir() if p.is_dir()}
+    assert 1 <= len(finished) < 4
+    time.sleep(3)  # (a set takes about 2 s here)
+    assert workers() == []
+    assert {p.name for p in out.iterdir() if p.is_dir()} == finished  # none written since
+    del held
+
+
 def test_a_cut_rerun_keeps_the_rows_of_the_sets_it_did_not_reach(tmp_path, root, capsys,
                                                                   monkeypatch):
     """A finished batch, then the same command cut short at its first set: the

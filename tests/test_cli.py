@@ -588,7 +588,7 @@ def test_a_stop_raised_inside_a_destructor_prints_no_traceback():
     stop is kept and raised again by the run); any other such error still goes to
     the previous hook, which prints it."""
     from dynremove.cli import _quiet_stops
-    from dynremove.commands import Terminated
+    from dynremove.errors import Terminated
 
     class Freed:
         def __init__(self, exc):

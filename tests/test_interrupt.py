@@ -292,10 +292,10 @@ def test_interrupted_before_the_sink_exists(tmp_path, monkeypatch, capsys, where
                                             sig, code):
     """In process: a Ctrl-C / SIGTERM while loading or choosing the reference writes a
     recording that says so (with the names and size once the images are read)."""
-    from dynremove import batch, commands
+    from dynremove import batch, commands, errors
     from dynremove.cli import main
 
-    exc = commands.Terminated if sig == "Terminated" else sig
+    exc = errors.Terminated if sig == "Terminated" else sig
     images = _write_set(tmp_path / "set", (48, 64))
     target = commands.io if where == "load_image_set" else batch
 
@@ -356,7 +356,7 @@ def test_ctrl_c_inside_a_compiled_call_is_an_interruption(tmp_path, monkeypatch,
 
 
 def test_interruption_walks_the_cause_chain():
-    from dynremove.commands import Terminated, interruption
+    from dynremove.errors import Terminated, interruption
 
     k = KeyboardInterrupt()
     assert interruption(k) is k

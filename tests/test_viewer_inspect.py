@@ -21,7 +21,7 @@ rr = pytest.importorskip("rerun")
 
 from test_viewer_fixtures import fabricate_run, make_info  # noqa: E402
 
-from dynremove import commands  # noqa: E402
+from dynremove import commands, errors  # noqa: E402
 from dynremove.cli import main  # noqa: E402
 from dynremove.evaluation import synth  # noqa: E402
 from viewer import RerunSink, make_compare_blueprint  # noqa: E402
@@ -206,7 +206,7 @@ def _run_cut_at(step, sig, tmp_path, capsys, monkeypatch, code):
     return rrd
 
 
-@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (commands.Terminated, 143)])
+@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (errors.Terminated, 143)])
 def test_cut_between_start_and_the_first_scan_is_nothing_to_inspect(
         tmp_path, capsys, monkeypatch, sig, code):
     """Ctrl-C and SIGTERM after the sink's start (its step-0 snapshot is logged) but
@@ -511,7 +511,7 @@ def test_failures_at_the_photos_size_add_no_note(tmp_path, capsys):
 
 
 # -- trial 18, item 3: interrupted after the scans is not "at scan S, step N" -------------
-@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (commands.Terminated, 143)])
+@pytest.mark.parametrize("sig, code", [(KeyboardInterrupt, 130), (errors.Terminated, 143)])
 def test_cut_during_the_refinement_is_after_the_scans(tmp_path, capsys, monkeypatch, sig,
                                                       code):
     """A real run (one scan) interrupted in the refinement, after the scan's summary
