@@ -418,7 +418,7 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
             raise stop from None
         msg = " ".join(str(e).split()) or type(e).__name__
         if (out / "report.json").is_file():  # left as they were: nothing is lost
-            msg += (f" ({out} still holds an earlier run's outputs, not of these inputs)")
+            msg += f" ({out} still holds an earlier run's outputs, not this run's)"
         row.update(status="error", error=msg if isinstance(e, InputError)
                    else f"{type(e).__name__}: {msg}")
     row["seconds"] = round(time.perf_counter() - t0, 3)

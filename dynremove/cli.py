@@ -28,6 +28,7 @@ from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, SAMPLE_STATIC, clear_
                                 cmd_composite, cmd_demo, cmd_eval, cmd_export, cmd_inspect,
                                 cmd_run, cmd_view)
 from dynremove.errors import InputError, Terminated, interruption
+from dynremove.io import MIN_MAX_SIDE
 from dynremove.evaluation.composite import MAX_SIDE as COMPOSITE_MAX_SIDE
 from dynremove.evaluation.evaluate import ABLATIONS, METHODS
 from dynremove.params import DEFAULT, FIELD_CHOICES, PAPER, PRESETS, Params, field_docs
@@ -147,9 +148,10 @@ def parse_max_side(s: str) -> int | None:
         # (argparse names the flag: "argument --max-side: ...")
         raise argparse.ArgumentTypeError(f"{s!r}: expected pixels, 0, 'none' or "
                                          "'auto'") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"{v}: must be 0 (keep the full size) "
-                                         "or a size in pixels")
+    if v < 0 or 0 < v < MIN_MAX_SIDE:
+        # (here, so that batch and eval refuse it once, not once per set)
+        raise argparse.ArgumentTypeError(f"{v}: must be 0 (keep the full size) or at "
+                                         f"least {MIN_MAX_SIDE} px")
     return v
 
 

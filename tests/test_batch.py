@@ -309,7 +309,7 @@ def test_what_the_search_does_not_run_is_said(tmp_path, capsys):
 def test_a_set_that_fails_after_an_earlier_run_says_its_outputs_are_old(tmp_path, capsys):
     """A trial broke a set that had run before: its error row sat next to the old
     clean.png without a word. The old outputs stay (nothing is lost); the error says
-    they are not of these inputs."""
+    they are an earlier run's."""
     s = synth.make_scene(seed=1, n_views=3, size=(64, 80), n_objects=1)
     r = tmp_path / "root"
     paths = write_set(r / "trip", s.images)
@@ -322,6 +322,18 @@ def test_a_set_that_fails_after_an_earlier_run_says_its_outputs_are_old(tmp_path
     err = summary_rows(out)["trip"]["error"]
     assert "same size" in err and "still holds an earlier run's outputs" in err, err
     assert (out / "trip" / "clean.png").read_bytes() == old
+
+
+def test_a_bad_max_side_is_refused_once_before_any_set(tmp_path, root, capsys):
+    """A fresh-user trial: --max-side 5 was checked inside each set, one identical
+    error per set (and exit 1). It is refused once, before anything runs: exit 2."""
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as e:  # (argparse's exit, as the program gives it)
+        main(["batch", str(root), "--out", str(out), "--max-side", "5"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--max-side: 5: must be 0" in err and "16 px" in err, err
+    assert not out.exists()
 
 
 def test_batch_scores_at_the_size_written(tmp_path, root, capsys):
