@@ -295,6 +295,11 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
     not images."""
     notes = [] if notes is None else notes
     root = Path(root)
+    if root.is_file():  # one video (as the help says), or nothing batch can run
+        if io.is_video_file(root):
+            return [BatchSet(root.stem, (root,))]
+        raise InputError(f"{root}: is a file, and not a video that can be read: give a "
+                         "folder of sets or one video")
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")
     skip = {p.resolve() for p in exclude}
@@ -340,6 +345,10 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
             elif q.is_file() and io.is_video_file(q):
                 rel = q.relative_to(root)
                 found.append(BatchSet(rel.with_suffix("").as_posix(), (q,)))
+            elif q.is_file() and q.suffix.lower() in io.VIDEO_SUFFIXES:
+                # (a fresh-user trial's text file named fake.mp4 vanished without a word)
+                notes.append(f"{q.relative_to(root).as_posix()}: named as a video, but its "
+                             "content is not one that can be read: not a set")
 
     walk(root)
     return sorted(found, key=lambda s: s.name)
@@ -502,16 +511,17 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     if Path(out).resolve() == Path(root).resolve():
         raise InputError(f"--out {out}: is ROOT itself (the search would meet the outputs "
                          "and skip them); choose a folder beside it, or one below it")
-    out = io.prepare_out_dir(out)
-    prev = _previous_rows(out)
     notes: list[str] = []
-    sets = find_sets(root, exclude=[out], notes=notes)
+    # (the sets first: a ROOT with none leaves no empty --out folder behind)
+    sets = find_sets(root, exclude=[Path(out)], notes=notes)
     for n in notes:
         if on_note is not None:
             on_note(n)
     if not sets:
         raise InputError(f"{root}: no sets found (a set is a folder of at least 2 images, "
                          "a folder with frames/, or a video)")
+    out = io.prepare_out_dir(out)
+    prev = _previous_rows(out)
     options = {"params": params.to_dict(), "preset": preset_name, "max_side": max_side,
                "ref": ref, "frames": frames, "span": span, "pick": pick}
     t0 = time.perf_counter()

@@ -304,6 +304,12 @@ def test_what_the_search_does_not_run_is_said(tmp_path, capsys):
     assert [len(x.inputs) for x in batch.find_sets(r2, notes=notes)] == [3]
     assert notes == ["lonely: one photo only (view0.png): not a set",
                      "trip: skipped 2 non-image file(s): Thumbs.db, notes.txt"]
+    # a file named as a video that is not one (a trial's text file named fake.mp4)
+    (r2 / "fake.mp4").write_text("not a video")
+    notes = []
+    assert [x.name for x in batch.find_sets(r2, notes=notes)] == ["trip"]
+    assert "fake.mp4: named as a video, but its content is not one that can be read: " \
+           "not a set" in notes, notes
 
 
 def test_a_set_that_fails_after_an_earlier_run_says_its_outputs_are_old(tmp_path, capsys):
@@ -334,6 +340,30 @@ def test_a_bad_max_side_is_refused_once_before_any_set(tmp_path, root, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--max-side: 5: must be 0" in err and "16 px" in err, err
     assert not out.exists()
+
+
+def test_root_may_be_one_video_and_a_file_that_is_not_is_refused(tmp_path, capsys):
+    """The help says ROOT may be one video; a trial found `batch clip.mp4` refused as
+    "no such folder" (a file that is there), as was a text file. The video is one set;
+    another file is one line, exit 2, and no --out folder is left behind."""
+    s = synth.make_scene(seed=1, n_views=4, size=(64, 80), n_objects=1)
+    clip = tmp_path / "clip.avi"
+    vw = cv2.VideoWriter(str(clip), cv2.VideoWriter_fourcc(*"MJPG"), 5, (80, 64))
+    for im in s.images:
+        vw.write(im)
+    vw.release()
+    out = tmp_path / "out"
+    assert main(["batch", str(clip), "--out", str(out), *FAST]) == 0
+    assert list(summary_rows(out)) == ["clip"] and (out / "clip" / "clean.png").is_file()
+    capsys.readouterr()
+    fake = tmp_path / "fake.mp4"
+    fake.write_text("not a video")
+    assert main(["batch", str(fake), "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a file, and not a video" in err, err
+    assert not (tmp_path / "o2").exists()
+    assert main(["batch", str(tmp_path / "nothing"), "--out", str(tmp_path / "o3")]) == 2
+    assert "no such folder" in capsys.readouterr().err and not (tmp_path / "o3").exists()
 
 
 def test_batch_scores_at_the_size_written(tmp_path, root, capsys):
