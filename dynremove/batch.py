@@ -396,9 +396,12 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
                        seconds=_earlier_seconds(done))
             return row
         params = Params(**options["params"])
+        # --frames and --span are for the video sets (a folder of photos has its own)
+        video = len(bs.inputs) == 1 and io.is_video_file(Path(bs.inputs[0]))
         iset, ref, ref_info, notes = load_for_reference(
             bs.inputs, options.get("ref"), max_side=options.get("max_side"),
-            frames=options.get("frames"), span=options.get("span"),
+            frames=options.get("frames") if video else None,
+            span=options.get("span") if video else None,
             pick=options.get("pick") or "sharpest")
         iset.notes.extend(notes)
         with warnings.catch_warnings():  # the run's warnings are in res.warnings

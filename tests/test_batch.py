@@ -366,6 +366,25 @@ def test_root_may_be_one_video_and_a_file_that_is_not_is_refused(tmp_path, capsy
     assert "no such folder" in capsys.readouterr().err and not (tmp_path / "o3").exists()
 
 
+def test_frames_applies_to_the_video_sets_of_a_mixed_root(tmp_path, capsys):
+    """A trial's ROOT held videos and photo folders: `--frames 4` failed every photo
+    set ("--frames and --span take frames from a video"). They are the video sets'."""
+    s = synth.make_scene(seed=1, n_views=6, size=(64, 80), n_objects=1)
+    r = tmp_path / "root"
+    write_set(r / "photos", s.images[:4])
+    vw = cv2.VideoWriter(str(r / "clip.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 5, (80, 64))
+    for im in s.images:
+        vw.write(im)
+    vw.release()
+    out = tmp_path / "out"
+    assert main(["batch", str(r), "--out", str(out), "--frames", "4", *FAST]) == 0
+    rows = summary_rows(out)
+    assert set(rows) == {"clip", "photos"}
+    assert all(row["status"] == "ok" for row in rows.values()), rows
+    assert rows["clip"]["inputs"] == "1"
+    assert len(json.loads((out / "clip" / "report.json").read_text())["inputs"]) == 4
+
+
 def test_batch_scores_at_the_size_written(tmp_path, root, capsys):
     """Fresh-user trial: with --max-side below the photos' size, batch read the true
     mask at the analysis size and enlarged it again, so the same mask scored J 0.570
