@@ -735,6 +735,13 @@ def _recording(path: str) -> Path:
         raise InputError(f"{p}: is a folder, not a recording")
     if not p.is_file():
         raise InputError(f"{p}: no such recording")
+    try:
+        with open(p, "rb") as f:
+            head = f.read(4)
+    except OSError as e:
+        raise InputError(f"{p}: cannot read it ({e.strerror or e})") from None
+    if head != b"RRF2":  # (before any work: export drew frames of a text file first)
+        raise InputError(f"{p}: not a Rerun recording (.rrd)")
     return p
 
 
@@ -849,6 +856,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     if Path(args.out).suffix.lower() not in (".gif", ".mp4"):
         raise InputError(f"export: {args.out} must end in .gif or .mp4")
     rec = _recording(args.recording)
+    # before the drawing (a trial's --out /proc/x.gif failed after it, as an internal
+    # error naming the temporary file)
+    io.check_out_file(args.out, "--out")
     _note(args, f"drawing a frame per snapshot of {rec} (a minute for a long run)")
     t0 = time.perf_counter()
     out = export_gif(rec, args.out, fps=args.fps, max_side=args.max_side, root=args.root)

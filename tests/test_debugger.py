@@ -428,6 +428,29 @@ def test_export_refuses_bad_rates_and_sizes_and_keeps_the_old_file(fabricated, t
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.gif"]
 
 
+def test_export_checks_its_output_and_input_before_drawing(fabricated, tmp_path, capsys,
+                                                          monkeypatch):
+    """A fresh-user trial: --out /proc/x.gif drew every frame, then failed as an
+    internal error naming the temporary file; a text file as the recording was
+    "drawn" before it was found not to be one. Both are one-line input errors
+    (exit 2) before any drawing."""
+    from viewer import export
+
+    def drawn(*a, **k):
+        raise AssertionError("drew frames")
+
+    monkeypatch.setattr(export, "render_frames", drawn)
+    assert main(["export", str(fabricated["path"]), "--gif", "/proc/x.gif"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "/proc/x.gif" in err[0] and "cannot create" in err[0], err
+    text = tmp_path / "notes.rrd"
+    text.write_text("not a recording")
+    assert main(["export", str(text), "--gif", str(tmp_path / "x.gif")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a Rerun recording" in err[0] and "drawing" not in err[0]
+    assert not (tmp_path / "x.gif").exists()
+
+
 def test_failures_print_steps_to_jump_to(fabricated):
     items = vi.failures(fabricated["path"], top=3)
     assert items and all(len(e["steps"]) == 3 for e in items)
