@@ -601,7 +601,8 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
         else:
             n = min(effective_n_jobs(jobs), len(sets))
             if on_note is not None:
-                on_note(f"{len(sets)} sets, {n} at a time: a line as each one finishes")
+                on_note(f"{len(sets)} set{'s' if len(sets) != 1 else ''}, {n} at a time: "
+                        "a line as each one finishes")
             _collect_all(Parallel(n_jobs=jobs, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)

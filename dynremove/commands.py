@@ -687,7 +687,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
     from dynremove.batch import run_batch, stderr_progress
 
     params = params_from_args(args)
-    finished = [0, 0]  # sets finished, sets in all
+    finished = [0, 0, 0]  # sets finished, sets in all, of the finished those that failed
     running: list[SetProgress] = []  # the set running now (one at a time: --jobs 1)
 
     def on_start(k: int, n: int, bs) -> SetProgress | None:
@@ -697,7 +697,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
         return running[0]
 
     def on_done(k: int, n: int, row: dict) -> None:
-        finished[:] = [k, n]
+        finished[:] = [k, n, finished[2] + (row.get("status") == "error")]
         for bar in running:
             bar.clear()
         if not args.quiet:
@@ -713,8 +713,10 @@ def cmd_batch(args: argparse.Namespace) -> int:
         for bar in running:
             bar.clear()
         if interruption(e) is not None and (Path(args.out) / "summary.csv").is_file():
-            k, n = finished
-            done = (f"{k} of {n} sets finished ({args.out}/summary.csv lists "
+            k, n, failed = finished
+            how = f", {failed} of them failed" if failed > 1 else (
+                f", {'that one' if k == 1 else 'one of them'} failed" if failed else "")
+            done = (f"{k} of {n} sets finished{how} ({args.out}/summary.csv lists "
                     f"{'it' if k == 1 else 'them'})" if k else "no set had finished")
             print(f"dynremove: batch cut short: {done}; run the same command again to "
                   "resume (finished sets are skipped)", file=sys.stderr)
