@@ -374,8 +374,18 @@ def _check_memory(args: argparse.Namespace, iset: io.ImageSet) -> None:
     have = _physical_memory()
     what = (f"analysing {n} images of {W}x{H} ({W * H / 1e6:.1f} MP) needs about "
             f"{need / 1e9:.0f} GB of memory")
-    hint = ("--max-side 1280 (the default) analyses a smaller copy and still writes the "
-            "clean photo at full size")
+    # what would lower it: a smaller analysis copy where the images are larger than
+    # the default's, fewer images where there are many (a trial's 30-frame clip of
+    # 960 px photos was told to use --max-side 1280, which changes nothing there)
+    hints = []
+    if max(H, W) > io.AUTO_MAX_SIDE:
+        hints.append(f"--max-side {io.AUTO_MAX_SIDE} (the default) analyses a smaller copy "
+                     "and still writes the clean photo at full size")
+    if iset.video is not None:
+        hints.append("fewer frames (--frames 7, the default, takes 7)")
+    elif n > 10:
+        hints.append("fewer photos (3 to 10 are what the method is made for)")
+    hint = " or ".join(hints) or "fewer or smaller photos"
     if have is not None and need > have:
         raise InputError(f"{what}, more than this machine's {have / 1e9:.0f} GB: use {hint}")
     _note(args, f"{what}" + (f" (this machine has {have / 1e9:.0f} GB)" if have else "")
