@@ -520,8 +520,10 @@ def build_parser() -> argparse.ArgumentParser:
     x = sub.add_parser("export", help="render the progressive removal to a GIF or MP4",
                        description="Render a recording's snapshots, without a viewer, to "
                                    "an animated GIF (Pillow, one palette) or an MP4 "
-                                   "(OpenCV): left the input with L in red, right the "
-                                   "rewritten reference, a caption with scan, step and |L|.")
+                                   "(OpenCV's MPEG-4 Part 2, 'mp4v': VLC and ffmpeg play "
+                                   "it, some browsers do not; the GIF plays everywhere): "
+                                   "left the input with L in red, right the rewritten "
+                                   "reference, a caption with scan, step and |L|.")
     x.add_argument("recording", help="a .rrd file")
     x.add_argument("--gif", "--out", dest="out", required=True, metavar="OUT",
                    help="output .gif or .mp4")
