@@ -638,10 +638,21 @@ def cmd_eval(args: argparse.Namespace) -> int:
           + (f" -> {args.json}" if args.json else ""))
     if args.json:
         io.write_json(args.json, report)
-    failed = sorted({i["set"] for i in report.get("set_info", []) if "error" in i})
-    if failed:  # the others are in the table; the exit code says not all ran
-        print(f"dynremove: error: {len(failed)} set{'' if len(failed) == 1 else 's'} could "
-              f"not be run: {', '.join(failed)} (see the lines above)", file=sys.stderr)
+    info = report.get("set_info", [])
+    errors = {i["set"]: i["error"] for i in info if "error" in i}
+    unscored = [i["set"] for i in info if "error" not in i
+                and not (i.get("has_mask", True) or i.get("has_background", True))]
+    if info and not errors and len(unscored) == len(info):
+        # (a trial's frames without masks/ gave a table of dashes and exit 0)
+        print(f"dynremove: error: nothing was scored: no set has masks/<reference>.png or "
+              f"background.png ({', '.join(sorted(unscored))})", file=sys.stderr)
+        return 1
+    if errors:  # the others are in the table; the exit code says not all ran
+        # (each named with its error here: under --quiet no line above says it)
+        for name in sorted(errors):
+            print(f"dynremove: error: {name}: {errors[name]}", file=sys.stderr)
+        print(f"dynremove: error: {len(errors)} set{'' if len(errors) == 1 else 's'} could "
+              f"not be run: {', '.join(sorted(errors))}", file=sys.stderr)
         return 1
     return EXIT_OK
 

@@ -56,3 +56,43 @@ def test_eval_runs_on_frames_found_by_content(odd_set, tmp_path, capsys):
     assert rc == 0
     (row,) = json.loads(out.read_text())["sets"]
     assert row["set"] == "odd" and row["jaccard"] is not None and row["jaccard"] > 0.3
+
+
+@pytest.mark.parametrize("truth", ["mask", "background", "free"])
+def test_truth_of_another_size_is_refused_not_resized(tmp_path, capsys, truth):
+    """A fresh-user trial gave eval camel's masks at 300x500 (the frames 854x480): they
+    were stretched into place and scored (J 0.316, exit 0), where `run --gt` refuses
+    the same file. A mask, background or free map that is not the frames' own size is
+    now the set's error (exit 1, the file and both sizes named); the right size scores."""
+    import numpy as np
+
+    scene = synth.make_scene(seed=1, n_views=3, size=(72, 96), n_objects=1)
+    synth.write_scene(scene, tmp_path / "data" / "s")
+    d = tmp_path / "data" / "s"
+    assert (d / "background.png").is_file()  # (written by write_scene)
+    assert cv2.imwrite(str(d / "free.png"), np.full((72, 96), 255, np.uint8))
+    assert main(["eval", str(tmp_path / "data"), "--methods", "median", "--quiet"]) == 0
+    capsys.readouterr()
+    f = {"mask": sorted((d / "masks").iterdir())[1], "background": d / "background.png",
+         "free": d / "free.png"}[truth]
+    im = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+    assert cv2.imwrite(str(f), cv2.resize(im, (50, 90), interpolation=cv2.INTER_NEAREST))
+    assert main(["eval", str(tmp_path / "data"), "--methods", "median", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert f"{f}: is 50x90 but the frames are 96x72; it must have their size" in err, err
+
+
+def test_eval_that_scores_nothing_exits_1(tmp_path, capsys):
+    """A trial's frames without masks/ or background.png: a table of dashes, a JSON of
+    nulls, and exit 0 for a script to read as success. Nothing scored is exit 1."""
+    import shutil
+
+    scene = synth.make_scene(seed=1, n_views=3, size=(72, 96), n_objects=1)
+    synth.write_scene(scene, tmp_path / "data" / "s")
+    d = tmp_path / "data" / "s"
+    for extra in ("masks", "background.png", "free.png"):
+        p = d / extra
+        shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
+    assert main(["eval", str(tmp_path / "data"), "--methods", "median", "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "nothing was scored" in err and err.count("\n") == 1, err

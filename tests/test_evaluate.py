@@ -116,13 +116,14 @@ def test_a_set_that_cannot_be_read_does_not_lose_the_others(data, tmp_path, caps
 
 def test_a_set_with_nothing_to_score_is_not_run(data, tmp_path, capsys):
     """No true mask and no background: the methods are not run (a trial's eval of the
-    bursts spent 17 s on a set it then left blank), and the line says so."""
+    bursts spent 17 s on a set it then left blank), and the line says so; the JSON is
+    written, and with no set scored at all the exit code is 1 (session 56's trial)."""
     import shutil
 
     shutil.copytree(data / "syn1" / "frames", tmp_path / "d" / "syn1" / "frames")
     out = tmp_path / "e.json"
     assert main(["eval", str(tmp_path / "d"), "--methods", "dynremove,median", "--json",
-                 str(out)]) == 0
+                 str(out)]) == 1
     assert "nothing to score, not run" in capsys.readouterr().err
     rows = json.loads(out.read_text())["sets"]
     assert len(rows) == 2 and all(r["seconds"] is None and r["jaccard"] is None for r in rows)
