@@ -97,6 +97,14 @@ def parse_positive(s: str) -> int:
     return v
 
 
+def parse_nonnegative(s: str) -> int:
+    """An integer of at least 0 (seeds)."""
+    v = _integer(s)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {v}")
+    return v
+
+
 def _number(s: str) -> float:
     try:
         return float(s)
@@ -394,7 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--views", type=int, default=7, help="number of images (default 7)")
     b.add_argument("--json", default="out/bench.json", metavar="FILE",
                    help="where to write the JSON (default out/bench.json)")
-    b.add_argument("--repeat", type=int, default=1, metavar="N",
+    b.add_argument("--repeat", type=parse_positive, default=1, metavar="N",
                    help="timed runs after the warm-up; the fastest is reported (default 1)")
     b.add_argument("--max-side", type=int, default=None, metavar="PX",
                    help="also time large photos as users run them: analysis at PX, the "
@@ -461,7 +469,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="DAVIS-style sets with masks (e.g. shared/data/davis)")
     c.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (required; with --n-sets, one sub-folder per set)")
-    c.add_argument("--seed", type=int, default=0,
+    c.add_argument("--seed", type=parse_nonnegative, default=0,
                    help="seed of the random choices: the objects, their size and path (same "
                         "seed, same sets; default 0)")
     c.add_argument("--n-views", type=int, default=6, metavar="N",

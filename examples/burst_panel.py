@@ -29,7 +29,10 @@ from dynremove.evaluation.baselines import median_baseline
 def _label(img: np.ndarray, text: str) -> np.ndarray:
     out = img.copy()
     cv2.rectangle(out, (0, 0), (out.shape[1], 26), (0, 0, 0), -1)
-    cv2.putText(out, text, (6, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 255), 1,
+    # the font shrinks to fit the tile (a long name ran under the next tile)
+    (tw, _), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.6, 1)
+    scale = min(0.6, 0.6 * (out.shape[1] - 12) / max(tw, 1))
+    cv2.putText(out, text, (6, 19), cv2.FONT_HERSHEY_SIMPLEX, scale, (255, 255, 255), 1,
                 cv2.LINE_AA)
     return out
 
@@ -47,6 +50,10 @@ def main(argv: list[str] | None = None) -> int:
         keep = None if args.views is None else [int(v) for v in args.views.split(",")]
     except ValueError:
         print(f"--views {args.views!r}: give frame numbers, e.g. 1,3,4", file=sys.stderr)
+        return 2
+    if not cv2.haveImageWriter(args.out):  # (before 20 s of runs, not after them)
+        print(f"--out {args.out}: not an image format OpenCV writes (use .png or .jpg)",
+              file=sys.stderr)
         return 2
     root = Path(args.data) / "bursts"
     sets = sorted(p.parent for p in root.glob("*/frames"))

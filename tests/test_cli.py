@@ -272,6 +272,15 @@ def test_flag_values_out_of_range_are_usage_errors(tmp_path, capsys, folder):
     with pytest.raises(SystemExit) as e:
         main(["inspect", str(tmp_path / "x.rrd"), "--failures", "--top", "-3"])
     assert e.value.code == 2 and "must be at least 1" in capsys.readouterr().err
+    # session 56's trial: composite --seed -5 was an internal error, bench --repeat 0
+    # ran once without a word
+    for argv, words in [(["composite", str(tmp_path), str(tmp_path), "--out", str(out),
+                          "--seed", "-5"], "--seed: must be 0 or more, got -5"),
+                        (["bench", "--repeat", "0"], "--repeat: must be at least 1, got 0")]:
+        with pytest.raises(SystemExit) as e:
+            main(argv)
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and words in err and err.count("\n") == 1, err
     # the smallest --max-side these 64x48 photos allow is named
     rc, _, err = run_cli(capsys, folder, "--out", out, "--max-side", "16")
     assert rc == 2 and "give at least --max-side 22" in err, err
