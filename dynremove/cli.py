@@ -457,7 +457,9 @@ def build_parser() -> argparse.ArgumentParser:
     c = sub.add_parser(
         "composite", help="paste real moving objects into a static multi-view set",
         description="Cut objects out of a DAVIS-style folder (<set>/frames, <set>/masks) "
-                    "and paste them, moving, into consecutive views of a static set. "
+                    "and paste them, moving, into consecutive views of a static set "
+                    "(successive annotated frames, wrapping around a short clip; "
+                    "composite.json lists the frames and the size each object got). "
                     "Writes DIR/frames/, DIR/masks/ (0/255), DIR/background.png, "
                     "DIR/free.png (0/255: reference pixels some other view shows free of "
                     "the objects) and DIR/composite.json: the layout 'dynremove eval' reads. "
