@@ -13,14 +13,15 @@ placement that leaves it covered in more than half of them is redrawn).
 
 Objects take successive annotated frames of their sequence (so they move their
 limbs), frames whose mask touches the image border being avoided: the views run
-through that pool in order from a random start, *wrapping around* at its end, so a
-pool shorter than the views repeats frames (and jumps from the clip's end to its
-start), and a pool of one frame (one annotated frame clear of the border, or
-none: then the largest; DAVIS kite-surf) pastes the same frame in every view. ``composite.json`` lists each
-object's frames. They are scaled so their area in the reference is 8–15 % of the
-image, capped so the object fits (0.7 × the height, 0.45 × the width): a tall or
-wide object can come out smaller (``ref_mask_fraction`` in ``composite.json``; a
-kite-surf set under 1 %). An object may leave the frame in the outer views.
+through that pool in order from a random start, *wrapping around* at its end, so
+a pool shorter than the views repeats frames (and jumps from the clip's end to
+its start), and a pool of one frame (one annotated frame clear of the border, or
+none: then the largest; DAVIS kite-surf) pastes the same frame in every view.
+``composite.json`` lists each object's frames. They are scaled so their area in
+the reference is 8–15 % of the image, capped so the object fits (0.7 × the
+height, 0.45 × the width): a tall or wide object can come out smaller
+(``ref_mask_fraction`` in ``composite.json``; a kite-surf set under 1 %). An
+object may leave the frame in the outer views.
 Edges are feathered: the object's binary mask is blurred with a
 Gaussian (sigma = ``feather_px / 2``, i.e. a ~2 px ramp) to give the alpha, and
 the true mask written is ``alpha >= 0.5`` (union over objects, later objects on
