@@ -609,9 +609,12 @@ def cmd_bench(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     params = params_from_args(args)
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    # each once, in the order given (a trial's dynremove,dynremove counted one set twice)
+    methods = list(dict.fromkeys(m.strip() for m in args.methods.split(",") if m.strip()))
     if not methods:
         raise InputError("--methods: empty list")
+    if args.variants and not args.ablation:
+        _note(args, "--variants is used with --ablation only: ignored")
     if args.json:
         out = Path(args.json)
         if out.is_dir():

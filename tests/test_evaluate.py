@@ -62,6 +62,7 @@ def test_eval_cli_writes_json(data, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "median" in text
     assert "mean J (1 set) " in text and "mean PSNR dB (1 set) " in text  # not "1 sets"
+    assert "telea is given the true mask: it has no Jaccard" in text  # its '-' explained
     assert "analysis size" not in text  # scored at the photos' own size
     # with --max-side the table says where it scores (run and batch: at the size written)
     assert main(["eval", str(data), "--sets", "syn1", "--methods", "median", "--max-side",
@@ -73,6 +74,14 @@ def test_eval_cli_writes_json(data, tmp_path, capsys):
     assert main(["eval", str(data), "--sets", "syn1", "--methods", "median"]) == 0
     ref = json.loads(out.read_text())["set_info"][0]["ref"]
     assert f", reference {ref}" in capsys.readouterr().err
+    # a method given twice is run once (a trial: two columns, "mean J (2 sets)"), and
+    # --variants without --ablation is said to be ignored
+    assert main(["eval", str(data), "--sets", "syn1", "--methods", "median,median",
+                 "--variants", "no-hog", "--json", str(out)]) == 0
+    assert [r["method"] for r in json.loads(out.read_text())["sets"]] == ["median"]
+    captured = capsys.readouterr()
+    assert "mean J (1 set) " in captured.out
+    assert "--variants is used with --ablation only: ignored" in captured.err
 
 
 def _whole_report(n_sets: int) -> dict:

@@ -678,6 +678,9 @@ def format_table(report: dict) -> str:
     if any(summ[m]["own_mover"] is not None for m in methods):
         head += ("\n  own-mover fill %: of the pixels the fill replaced, those taken mostly "
                  "from the other photos' own true movers (ghosts)")
+    if "telea" in methods:  # (a trial read its column of '-' as a failure)
+        head += ("\n  telea is given the true mask: it has no Jaccard ('-'); it scores "
+                 "only the fill, where a background is known")
     out = [head] + _render(table, len(set_names))
     if any_bg:
         out += [""] + _format_whole(report, methods, by, info, set_names)
