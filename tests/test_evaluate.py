@@ -84,6 +84,22 @@ def test_eval_cli_writes_json(data, tmp_path, capsys):
     assert "--variants is used with --ablation only: ignored" in captured.err
 
 
+def test_each_note_once_under_the_method_that_gave_it(data, tmp_path, capsys):
+    """A trial found one note three times in the JSON, and the paper preset's "the
+    scans stopped at --max-scans 4" beside the default's notes under "pipeline:",
+    as if the default had said it. Each note is there once, named by its method."""
+    out = tmp_path / "e.json"
+    assert main(["eval", str(data), "--methods", "dynremove,paper", "--json", str(out),
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    notes = [n for i in json.loads(out.read_text())["set_info"] for n in i["notes"]]
+    per_set = [i["notes"] for i in json.loads(out.read_text())["set_info"]]
+    assert all(len(ns) == len(set(ns)) for ns in per_set), per_set
+    assert not any(n.startswith("pipeline:") for n in notes), notes
+    stopped = [n for n in notes if "stopped at --max-scans 4" in n]
+    assert stopped and all(n.startswith("paper: ") for n in stopped), notes
+
+
 def _whole_report(n_sets: int) -> dict:
     """A report of ``n_sets`` sets with a background and free.png, two methods."""
     from dynremove.evaluation.evaluate import SCORE_KEYS

@@ -299,12 +299,13 @@ def own_mover_fill(ls: LoadedSet, result: Result) -> float | None:
 
 
 def run_method(method: str, ls: LoadedSet, params: Any | None = None, *,
-               detail: dict | None = None
+               detail: dict | None = None, label: str | None = None
                ) -> tuple[np.ndarray | None, np.ndarray | None, list[str]]:
     """Run one method on a loaded set: (clean, dynamic, notes); None = not applicable.
 
     With ``detail`` (a dict), the pipeline's :class:`Result` is stored under
-    ``"result"``."""
+    ``"result"``. Each note starts with ``label`` (default ``method``): the method's
+    name in the table (a preset or variant run as ``"pipeline"``)."""
     notes: list[str] = []
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -326,7 +327,7 @@ def run_method(method: str, ls: LoadedSet, params: Any | None = None, *,
                 detail["result"] = res
     seen = set()
     for w in caught:
-        msg = f"{method}: {w.message}"
+        msg = f"{label or method}: {w.message}"
         if msg not in seen:
             seen.add(msg)
             notes.append(msg)
@@ -426,9 +427,12 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
                 params = _make_params(pd) if pd is not None else None
                 detail: dict = {}
                 clean, dyn, n = run_method(method if pd is None else "pipeline", ls, params,
-                                           detail=detail)
+                                           detail=detail, label=method)
                 secs = time.perf_counter() - t
-                notes.extend(n)
+                # each note once, under the method that gave it (a trial found the same
+                # note three times, and the paper preset's "stopped at --max-scans 4"
+                # unattributed beside the default's)
+                notes.extend(x for x in n if x not in notes)
                 res = detail.get("result")
                 done[key] = (clean, dyn, secs, res)
             row.update(score(ls, clean, dyn, res))
