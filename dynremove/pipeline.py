@@ -586,7 +586,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         cov0 = _coverage(st, params)
         sink.start(RunInfo(
             names=names, ref_index=ref, source_indices=srcs, images=list(images),
-            params=params.to_dict(), preset=preset_name, versions=_versions(),
+            params=params.to_dict(), preset=preset_name, versions=versions(),
             size=(H, W), N0=st.N.copy(), C0=st.C.copy(), coverage=cov0,
             probes=[(int(x), int(y)) for x, y in probes]))
     if progress:  # (a ProgressBar times scan 0 from the end of the similarity)
@@ -1081,7 +1081,8 @@ def _dist_version(name: str) -> str:
         return "unknown"
 
 
-def _versions() -> dict[str, str]:
+def versions() -> dict[str, str]:
+    """The versions of dynremove, its libraries and Python (report.json's, the bench's)."""
     return {"dynremove": _dist_version("dynremove"), "numpy": np.__version__,
             "opencv": cv2.__version__, "numba": numba.__version__,
             "scikit-learn": _dist_version("scikit-learn"),

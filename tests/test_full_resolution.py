@@ -111,7 +111,7 @@ def test_bench_times_the_large_photo_path_not_a_full_size_analysis():
     assert out["analysis_size"] == [160, 120] and out["full_output_size"] == [320, 240]
     # the JSON says how it was made (a trial: it had no params, size limit or version)
     assert out["params"] == DEFAULT.to_dict() and out["max_side"] == 160
-    assert out["repeat"] == 1 and out["version"]
+    assert out["repeat"] == 1 and set(out["versions"]) >= {"dynremove", "numpy", "opencv"}
     assert out["full_output_end_to_end_s"] == out["end_to_end_s"]
     # the scan's rate is over the analysed pixels
     s = out["scans"][0]

@@ -25,7 +25,7 @@ from dynremove.method.scan.driver import run_scans
 from dynremove.progress import stage_labels
 from dynremove.params import DEFAULT, Params, preset
 from dynremove.evaluation.baselines import median_baseline
-from dynremove.pipeline import full_resolution_output, prepare, remove_dynamic
+from dynremove.pipeline import full_resolution_output, prepare, remove_dynamic, versions
 
 RecordingSink = Callable[[Path, object], EventSink]
 
@@ -144,12 +144,11 @@ def run_bench(*, params: Params = DEFAULT, preset_name: str = "default",
     wall_mem = time.perf_counter() - t
     rec = (_recording_cost(scene, params, recording_sink, work)
            if recording_sink else {})
-    from dynremove import __version__
     out = {
         "size": [W, H], "views": views, "preset": preset_name, "fill": params.fill,
         # how the figures were made, as eval's and run's JSON say it (a trial: a bench
         # JSON alone could not tell)
-        "version": __version__, "max_side": max_side, "repeat": repeat,
+        "versions": versions(), "max_side": max_side, "repeat": repeat,
         "params": params.to_dict(),
         "warmup_s": warm, "end_to_end_s": wall, "end_to_end_all_s": [r[0] for r in runs],
         "stages_s": {k: float(v) for k, v in res.timings.items()},
