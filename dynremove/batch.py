@@ -36,7 +36,7 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Generator, Iterable, Sequence
+from typing import Any, Callable, Generator, Sequence
 
 import cv2
 import numpy as np
@@ -603,7 +603,7 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
             if on_note is not None:
                 on_note(f"{len(sets)} set{'s' if len(sets) != 1 else ''}, {n} at a time: "
                         "a line as each one finishes")
-            _collect_all(Parallel(n_jobs=jobs, return_as="generator_unordered")(
+            _collect(Parallel(n_jobs=jobs, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)
         return [results[bs.name] for bs in sets], effective_n_jobs(jobs)
@@ -630,7 +630,7 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
             on_note(f"{len(sets)} sets on the cluster's {sum(client.nthreads().values())} "
                     "worker threads: a line as each one finishes")
         with parallel_config(backend="dask"):  # joblib's backend: the default client
-            _collect_all(Parallel(n_jobs=-1, return_as="generator_unordered")(
+            _collect(Parallel(n_jobs=-1, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)
     finally:
@@ -648,29 +648,25 @@ def _with_earlier(on_done: Callable[[int, int, dict], None] | None, prev: dict[s
     return cb
 
 
-def _collect(gen: Iterable[dict], sets: Sequence[BatchSet],
+def _collect(gen: Generator[dict, None, None], sets: Sequence[BatchSet],
              on_done: Callable[[int, int, dict], None] | None, results: dict) -> list[dict]:
-    for k, row in enumerate(gen, 1):
-        results[row["set"]] = row
-        if on_done:
-            on_done(k, len(sets), row)
-    return list(results.values())
+    """The rows of ``gen`` into ``results`` (and ``on_done``), as they come.
 
-
-def _collect_all(gen: Generator[dict, None, None], sets: Sequence[BatchSet],
-                 on_done: Callable[[int, int, dict], None] | None, results: dict) -> None:
-    """``_collect`` over joblib's generator of rows, which is closed however the
-    loop ends: an interruption that reaches the main thread between two rows (in
-    ``on_done``) leaves joblib's generator suspended, its workers running their sets
-    on; closing it aborts them here and now (joblib kills its loky workers). A
-    fresh-user trial saw two workers outlive a batch cut short by SIGINT and write a
-    set 16 s after the command had exited 130."""
+    ``gen`` is closed however the loop ends: an interruption that reaches the main
+    thread between two rows (in ``on_done``) leaves joblib's generator suspended, its
+    workers running their sets on; closing it aborts them here and now (joblib kills
+    its loky workers). A fresh-user trial saw two workers outlive a batch cut short
+    by SIGINT and write a set 16 s after the command had exited 130."""
     try:
-        _collect(gen, sets, on_done, results)
+        for k, row in enumerate(gen, 1):
+            results[row["set"]] = row
+            if on_done:
+                on_done(k, len(sets), row)
     finally:
         with warnings.catch_warnings():  # ("exited early": it was told to)
             warnings.simplefilter("ignore")
             gen.close()
+    return list(results.values())
 
 
 def _is_photo_note(note: str) -> bool:

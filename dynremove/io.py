@@ -798,13 +798,21 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     return matches[0]
 
 
+def require_size(path: str | os.PathLike, size: tuple[int, int],
+                 native: tuple[int, int]) -> None:
+    """InputError unless a truth file's own ``size`` (W, H) is the frames' ``native``
+    (W, H) as read: one of another size or shape belongs to other photos, and is not
+    resized into place (``eval``; ``run --gt`` refuses it too)."""
+    if tuple(size) != tuple(native):
+        raise InputError(f"{path}: is {size[0]}x{size[1]} but the frames are "
+                         f"{native[0]}x{native[1]}; it must have their size")
+
+
 def read_mask(path: str | os.PathLike, size: tuple[int, int] | None = None, *,
-              native: tuple[int, int] | None = None, of: str = "the frames") -> np.ndarray:
+              native: tuple[int, int] | None = None) -> np.ndarray:
     """Read a 0/255 mask as (H, W) bool, resized (nearest) to ``size`` = (W, H).
 
-    ``native`` = (W, H): the size the file itself must have (the photos' as read,
-    before any analysis scaling), else InputError naming ``of`` (a mask of another
-    size or shape is not resized into place: it belongs to other photos)."""
+    ``native`` = (W, H): the size the file itself must have (``require_size``)."""
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: no such file")
@@ -813,9 +821,8 @@ def read_mask(path: str | os.PathLike, size: tuple[int, int] | None = None, *,
     m = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
     if m is None:
         raise InputError(f"{p}: not a readable mask image")
-    if native is not None and (m.shape[1], m.shape[0]) != tuple(native):
-        raise InputError(f"{p}: is {m.shape[1]}x{m.shape[0]} but {of} are "
-                         f"{native[0]}x{native[1]}; it must have their size")
+    if native is not None:
+        require_size(p, (m.shape[1], m.shape[0]), native)
     if size is not None and (m.shape[1], m.shape[0]) != tuple(size):
         m = cv2.resize(m, tuple(size), interpolation=cv2.INTER_NEAREST)
     return m > 127

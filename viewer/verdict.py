@@ -20,13 +20,13 @@ _LIGHT_OR_REST = ("the photos' light differing there, exposure, glare or shade, 
                   "this; so does part of a mover left in the reference around the region")
 
 
-
 def levels_words(off) -> str:
     """B/G/R levels as the recording holds them (``sink``: 128 + levels, clipped to
     0..255): "+12/-3/-128" reads "≤ -128" and "≥ +127" at the clip, where the true
     value may be anything beyond (a trial read "-128/-128/-128" as a measurement)."""
     return "/".join("≤ -128" if c <= -128 else "≥ +127" if c >= 127 else f"{c:+d}"
                     for c in off)
+
 
 def _label(v: bool | None) -> str:
     return "?" if v is None else ("dynamic" if v else "static")

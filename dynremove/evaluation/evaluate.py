@@ -233,9 +233,7 @@ def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None 
     bg = None
     if es.background is not None:
         bg, _ = io.read_image(es.background)
-        if (bg.shape[1], bg.shape[0]) != native:
-            raise InputError(f"{es.background}: is {bg.shape[1]}x{bg.shape[0]} but the "
-                             f"frames are {native[0]}x{native[1]}; it must have their size")
+        io.require_size(es.background, (bg.shape[1], bg.shape[0]), native)
         if bg.shape[:2] != (H, W):
             interp = cv2.INTER_AREA if bg.shape[1] > W else cv2.INTER_LINEAR
             bg = cv2.resize(bg, (W, H), interpolation=interp)
