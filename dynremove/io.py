@@ -759,11 +759,21 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
         if len(named) == 1:
             i = int(ref)
             if as_index and -len(names) <= i < len(names) and i % len(names) != named[0]:
-                raise InputError(
-                    f"{what}: both the index of {names[i % len(names)]} and the name of "
-                    f"{names[named[0]]} (index {named[0]}): give {names[named[0]]} for that "
-                    f"file, or {i % len(names) - len(names)} (counted from the end) for "
-                    f"{names[i % len(names)]}")
+                j, k = named[0], i % len(names)
+                if label and label.startswith("ref="):
+                    # the API: an int is always an index (a trial was told to "give 1"
+                    # for a file named "1", which is what it had given)
+                    how = (f"give the int {j} for {names[j]!r}, or the int {k} for "
+                           f"{names[k]!r}")
+                elif names[j] != ref:
+                    how = (f"give {names[j]} for that file, or {k - len(names)} (counted "
+                           f"from the end) for {names[k]}")
+                else:
+                    how = (f"give a path to {names[j]} (with a '/', e.g. ./{names[j]}) for "
+                           f"that file, or {k - len(names)} (counted from the end) for "
+                           f"{names[k]}")
+                raise InputError(f"{what}: both the index of {names[k]} and the name of "
+                                 f"{names[j]} (index {j}): {how}")
             return named[0]
     if isinstance(ref, int) or (isinstance(ref, str) and ref.lstrip("-").isdigit()):
         i = int(ref)
@@ -965,6 +975,15 @@ def photo_to_analysis(x: int, y: int, photo: tuple[int, int],
     (W0, H0), (W, H) = photo, analysis
     return (min(W - 1, max(0, int(round((x + 0.5) * W / W0 - 0.5)))),
             min(H - 1, max(0, int(round((y + 0.5) * H / H0 - 0.5)))))
+
+
+def require_folder(path: str | os.PathLike) -> None:
+    """InputError unless ``path`` is a folder: "no such folder", or "is a file, not a
+    folder" (a trial's ``eval results.json`` was told "no such folder")."""
+    p = Path(path)
+    if p.is_dir():
+        return
+    raise InputError(f"{p}: is a file, not a folder" if p.exists() else f"{p}: no such folder")
 
 
 def check_out_file(path: str | os.PathLike, flag: str) -> Path:

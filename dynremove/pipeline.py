@@ -88,8 +88,8 @@ def api_params(params: Params | str | dict | None) -> Params:
     if isinstance(params, Params):
         return params
     if isinstance(params, str):
-        try:
-            return preset(params)
+        try:  # (as ref="auto", any case: a trial's "Default" was refused)
+            return preset(params.strip().lower())
         except ValueError as e:
             raise InputError(f"params: {e}") from None
     if isinstance(params, dict):
@@ -111,15 +111,19 @@ def api_params(params: Params | str | dict | None) -> Params:
 
 
 def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
-            names: Sequence[str], names_given: bool = True) -> int:
+            names: Sequence[str], names_given: bool = True,
+            notes: list[str] | None = None) -> int:
     """``remove_dynamic``'s ``ref`` as an index: None = the middle image; an int,
-    negative from the end as in Python; ``"auto"`` (``video.auto_reference``); a
-    name of ``names``. Raises InputError when it names nothing or is out of range."""
+    negative from the end as in Python; ``"auto"`` (``video.auto_reference``: its
+    note, which names the choice, is warned and appended to ``notes``); a name of
+    ``names``. Raises InputError when it names nothing or is out of range."""
     if isinstance(ref, str) and ref.strip().lower() == "auto":
         from dynremove.video import auto_reference
 
         r, note, _ = auto_reference(images, names)
         warnings.warn(note, stacklevel=3)
+        if notes is not None:
+            notes.append(note)
         return r
     if isinstance(ref, (bool, float)):
         raise InputError(f"reference {ref!r}: give an int index, a name or 'auto'")
@@ -132,6 +136,49 @@ def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
             raise
         raise InputError(f"{e}; pass names=[...] (e.g. the file names) to refer to images "
                          "by name") from None
+
+
+def _api_probes(probes: object, W: int, H: int) -> list[tuple[int, int]]:
+    """``remove_dynamic``'s ``probes`` as (x, y) int pairs inside the W×H image;
+    InputError otherwise (a trial's float, triple or bare int leaked IndexError,
+    ValueError and TypeError)."""
+    try:
+        items = list(probes)  # type: ignore[call-overload]
+    except TypeError:
+        raise InputError(f"probes={probes!r}: give a sequence of (x, y) pixels, e.g. "
+                         "[(120, 40)]") from None
+    out = []
+    for p in items:
+        ok = (isinstance(p, (tuple, list, np.ndarray)) and len(p) == 2 and all(
+            isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in p))
+        if not ok:
+            raise InputError(f"probe {p!r}: give an (x, y) pair of int pixel coordinates")
+        x, y = int(p[0]), int(p[1])
+        if not (0 <= x < W and 0 <= y < H):
+            raise InputError(f"probe pixel ({x}, {y}) is outside the {W}x{H} image")
+        out.append((x, y))
+    return out
+
+
+def _api_valid_masks(valid_masks: object, n: int, W: int, H: int) -> list[np.ndarray]:
+    """``remove_dynamic``'s ``valid_masks``: one (H, W) mask per image, as bool;
+    InputError otherwise (a wrong count or size leaked IndexError and ValueError)."""
+    try:
+        masks = list(valid_masks)  # type: ignore[call-overload]
+    except TypeError:
+        raise InputError(f"valid_masks: give one ({H}, {W}) bool mask per image, got "
+                         f"{type(valid_masks).__name__}") from None
+    if len(masks) != n:
+        raise InputError(f"valid_masks: {len(masks)} given for {n} images: give one "
+                         f"({H}, {W}) bool mask per image, in the same order")
+    out = []
+    for i, m in enumerate(masks):
+        a = np.asarray(m)
+        if a.shape != (H, W):
+            raise InputError(f"valid_masks[{i}]: shape {a.shape}, the images are "
+                             f"{W}x{H}: give ({H}, {W}) bool masks")
+        out.append(a.astype(bool))
+    return out
 
 
 def _array_hint(i: int, im: object) -> str:
@@ -364,30 +411,36 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     ref : int or str, optional
         The reference: an index (negative counts from the end, as in Python), a
         name of ``names``, or ``"auto"`` (the sharpest image with the most keypoint
-        matches, as ``run --ref auto``; a warning names it). Default: the middle image.
+        matches, as ``run --ref auto``; a note in ``Result.warnings`` names it).
+        Default: the middle image.
     params : Params, str, dict or None
         The method's parameters: a Params, a preset name (``"default"``,
         ``"paper"``), a dict of Params fields applied over the default preset, or
         None (the default preset).
     sink : EventSink, optional
         Observer of the scans (default NullSink: nothing recorded).
-    probes : sequence of (x, y)
+    probes : sequence of (x, y) ints
         Pixels whose every decision is recorded, static or not.
-    sample_static : float
+    sample_static : float in [0, 1]
         Fraction of static decisions recorded (deterministic sample).
     names : sequence of str, optional
         One per image, in order: how notes, warnings and a recording name them, and
         what a str ``ref`` may name (default ``image0``, ``image1``, ...).
     preset_name : str
-        The preset's name as the recording and ``Result.params`` report it.
+        The preset's name as a recording reports it (default: the name given as
+        ``params``, else "custom").
     kernel : {"numba", "reference"}
         The compiled scan or the slow readable one (tests).
-    chunk_rows : int, optional
+    chunk_rows : int >= 1, optional
         Rows the compiled scan visits between two returns to Python (progress,
         Ctrl-C); the default suits the image size. The result does not depend on it.
     progress : callable (stage: str, fraction: float) -> None, optional
-        Told each stage's start (0.0), progress and end (1.0): "features",
-        "geometry", ..., "scan 0", ..., "fill by selection".
+        Told each stage's start (0.0), progress and end (1.0), in order:
+        "features", "geometry", "correspondence", "similarity", "scan 0" (and
+        "scan 1", ... where more scans run), "coverage", then, where they run,
+        "refine" and "fusion" (the fill, which the command line's bar calls "fill
+        by selection"). ``Result.timings`` has the same keys, but one "scans" for
+        all the scans.
     valid_masks : sequence of (H, W) bool ndarrays, optional
         Per image, where it has content (False: transparent or empty border of a
         pre-aligned frame). Never flagged in the reference (the input is kept
@@ -398,7 +451,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     Result
         ``clean`` (H, W, 3) uint8 and ``dynamic`` (H, W) bool, at the input's size;
         ``coverage`` (H, W) uint8: how many sources the output was made from (inside
-        ``dynamic``: 0 where inpainted), what the CLI writes as coverage.png;
+        ``dynamic``: 0 where inpainted), the counts that the CLI's coverage.png
+        scales to 0–255 (its report.json gives the factor, ``value_per_source``);
         ``warnings``: the run's notes as sentences (each also issued as a
         ``UserWarning``); ``timings``: seconds per stage (they add up to
         ``"total"``); ``scans``: one record per scan (``SCAN_SUMMARY_DTYPE``'s
@@ -415,10 +469,14 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         16-bit, float, None from a failed ``cv2.imread``, a PIL image); images of
         different sizes; ``names`` not one per image; a ``ref`` that names nothing
         or is out of range; an unknown preset, Params field, a value of the wrong
-        type or range; a probe outside the image; an unknown ``kernel``.
+        type or range; a probe that is not an (x, y) pair of ints or lies outside the
+        image; ``sample_static`` outside [0, 1]; ``chunk_rows`` under 1;
+        ``valid_masks`` not one (H, W) mask per image; an unknown ``kernel``.
     TypeError
         ``params`` of another type.
     """
+    if isinstance(params, str) and preset_name == "custom":
+        preset_name = params.strip().lower()
     params = api_params(params)
     if isinstance(images, np.ndarray) or not isinstance(images, Sequence):
         # a stacked (N, H, W, 3) array, a generator, a map: read once, as a list
@@ -438,20 +496,27 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         if len(names) != len(images):
             raise InputError(f"names: {len(names)} given for {len(images)} images: "
                              "give one name per image, in the same order")
-    ref = api_ref(ref, images, names, names_given=names_given)
+    auto_note: list[str] = []
+    ref = api_ref(ref, images, names, names_given=names_given, notes=auto_note)
     images, gray_note = gray_like_reference(images, ref)
     gray_apart, gray_apart_note = gray_beside_colour(images, ref, names)
     sink = NullSink() if sink is None else sink
     H, W = images[0].shape[:2]
-    for (x, y) in probes:
-        if not (0 <= x < W and 0 <= y < H):
-            raise InputError(f"probe pixel ({x}, {y}) is outside the {W}x{H} image")
+    probes = _api_probes(probes, W, H)
+    if not (isinstance(sample_static, (int, float, np.number))
+            and not isinstance(sample_static, bool) and 0.0 <= sample_static <= 1.0):
+        raise InputError(f"sample_static={sample_static!r}: give a fraction in [0, 1]")
+    if chunk_rows is not None and (isinstance(chunk_rows, bool) or not isinstance(
+            chunk_rows, (int, np.integer)) or chunk_rows < 1):
+        raise InputError(f"chunk_rows={chunk_rows!r}: give an int of 1 or more (or None)")
+    if valid_masks is not None:
+        valid_masks = _api_valid_masks(valid_masks, len(images), W, H)
     if sink.enabled and hasattr(type(sink), "begin"):  # optional hook (RerunSink): open
         sink.begin(names, (H, W), images=images, ref=ref)  # the recording before features
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
     clock = _Clock(timings, progress)
-    msgs: list[str] = [n for n in (gray_note, gray_apart_note) if n]
+    msgs: list[str] = auto_note + [n for n in (gray_note, gray_apart_note) if n]
     srcs = [i for i in range(len(images)) if i != ref]
     keep: list[np.ndarray] = []
 
@@ -474,6 +539,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             msgs.append(_strays_note([(names[srcs[k]], views[k].n_matches,
                                        views[k].n_inliers_F) for k in strays], min(good)))
             drop(strays)
+        all_copies = False
         if params.near_copy_agree > 0 and len(srcs) >= 1:
             agree = agreement_with_reference(
                 np.asarray(images[ref]), np.stack([images[s] for s in srcs]),
@@ -486,12 +552,15 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                                 for k in np.flatnonzero(copy)))
                 drop(np.flatnonzero(copy))
             elif copy.all():  # (kept: there is nothing else to compare with)
+                all_copies = True
                 msgs.append("every other photo is a near-copy of the reference ("
                             + ", ".join(f"{names[srcs[k]]} {100 * agree[k]:.1f} % alike"
                                         for k in range(len(srcs)))
                             + "): none shows the scene otherwise, so nothing can be found "
                             "moving; photos taken further apart in time are needed")
-        if params.near_copy_agree > 0 and len(srcs) > 2:
+        # (where every source is a near-copy of the reference, that note says it all:
+        # a trial read "near-copies among the sources" and "only 2 of 4" after it)
+        if params.near_copy_agree > 0 and len(srcs) > 2 and not all_copies:
             dups = duplicate_sources(np.stack([images[s] for s in srcs]),
                                      [v.H for v in views], params.near_copy_agree)
             if dups:
@@ -534,8 +603,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "compared with it, so a mover may stay, whole or in part, and a "
                         "static part may be refilled; photos that overlap more, or more "
                         "photos, cover it")
-        if len(srcs) == 1:
-            msgs.append("only 2 photos: where they disagree, either may show the mover; the "
+        if len(srcs) == 1 and not all_copies:
+            msgs.append(("only 2 photos" if len(images) == 2 else
+                         f"only 2 of the {len(images)} photos are used (the notes above say "
+                         "why the others are not)")
+                        + ": where they disagree, either may show the mover; the "
                         "reference is kept there unless the colours of the detected region "
                         "single it out (3 or more photos decide by consensus)")
         if all(v.F is None for v in views) and params.use_epipolar:

@@ -26,6 +26,9 @@ from dynremove import io, remove_dynamic
 from dynremove.evaluation.baselines import median_baseline
 
 
+REPO = Path(__file__).resolve().parents[1]
+
+
 def _label(img: np.ndarray, text: str) -> np.ndarray:
     out = img.copy()
     cv2.rectangle(out, (0, 0), (out.shape[1], 26), (0, 0, 0), -1)
@@ -40,8 +43,13 @@ def _label(img: np.ndarray, text: str) -> np.ndarray:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data", nargs="?",
-                    default=os.environ.get("DYNREMOVE_DATA", "../shared/data"))
-    ap.add_argument("--out", default="examples/bursts_panel.png")
+                    default=os.environ.get("DYNREMOVE_DATA", str(REPO.parent / "shared" / "data")),
+                    help="the data folder, which holds bursts/<set>/frames/*.jpg (default "
+                         "$DYNREMOVE_DATA, else ../shared/data beside the project: "
+                         "%(default)s)")
+    ap.add_argument("--out", default=str(REPO / "examples" / "bursts_panel.png"),
+                    help="the panel image, .png or .jpg (default: the README's, "
+                         "examples/bursts_panel.png in the project)")
     ap.add_argument("--height", type=int, default=360, help="row height (px)")
     ap.add_argument("--views", default=None,
                     help="only these frames of each burst, 0-based, e.g. 1,3,4 (default: all)")

@@ -1,4 +1,4 @@
-"""Choose the global Lab threshold of the median-stack baseline (DESIGN.md sec. 6).
+"""Choose the global Lab threshold of the median-stack baseline.
 
 For each alignment mode ("homography", "homography+flow") and each DAVIS set
 (reference = middle image of the sorted frames), the median background is

@@ -26,7 +26,7 @@ from joblib import Parallel, delayed
 
 from dynremove.evaluation.evaluate import find_sets, load_set
 from dynremove.evaluation.metrics import jaccard
-from dynremove.params import Params, preset
+from dynremove.params import PRESETS, Params, preset
 from dynremove.pipeline import remove_dynamic
 
 
@@ -61,12 +61,20 @@ def _one(es, base: str, grid: list[dict], max_side: int | None) -> list[float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("data", nargs="?", default=os.environ.get(
-        "DYNREMOVE_DATA", str(Path(__file__).resolve().parents[2] / "shared/data/davis")))
-    ap.add_argument("--grid", default="t_r=0.25,0.3,0.35", help='e.g. "t_r=0.3,0.4 patch_size=9,13"')
-    ap.add_argument("--preset", default="default")
+    data = Path(os.environ.get("DYNREMOVE_DATA",
+                               str(Path(__file__).resolve().parents[2] / "shared" / "data")))
+    ap.add_argument("data", nargs="?", default=str(data / "davis"),
+                    help="the sets to score: folders with frames/ and masks/ (default "
+                         "$DYNREMOVE_DATA/davis, else ../shared/data/davis beside the "
+                         "project: %(default)s)")
+    ap.add_argument("--grid", default="t_r=0.25,0.3,0.35",
+                    help='Params fields and their values, e.g. "t_r=0.3,0.4 patch_size=9,13" '
+                         "(default %(default)s)")
+    ap.add_argument("--preset", default="default", choices=sorted(PRESETS),
+                    help="the preset the grid changes (default %(default)s)")
     ap.add_argument("--max-side", type=int, default=None, help="downscale sets (px)")
-    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--jobs", type=int, default=2,
+                    help="sets run in parallel (default %(default)s)")
     ap.add_argument("--json", default=None, help="write every figure here")
     args = ap.parse_args()
     sets = find_sets(args.data)

@@ -81,6 +81,11 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, json.JSONDecodeError) as e:
         print(f"speed_table: {e}", file=sys.stderr)
         return 2
+    for f, b in zip(args.files, benches):  # (a trial's eval JSON gave a KeyError)
+        if not (isinstance(b, dict) and {"views", "size", "stages_s"} <= set(b)):
+            print(f"speed_table: {f}: not a bench JSON (dynremove bench --json FILE writes "
+                  "one)", file=sys.stderr)
+            return 2
     print(table(benches, labels))
     return 0
 

@@ -33,6 +33,9 @@ def main() -> None:
                     help="paper (default) or default")
     ap.add_argument("--seed", type=int, default=1, help="the synthetic scene's seed")
     args = ap.parse_args()
+    if Path(args.out).suffix.lower() != ".rrd":  # (as run --record: a trial's x.txt)
+        ap.error(f"--out {args.out}: a recording is an .rrd file (the viewer and "
+                 "`dynremove inspect` open .rrd files): give a name ending in .rrd")
     try:  # (a folder, or a place that cannot be written: one line, before the run)
         check_out_file(args.out, "--out")
     except InputError as e:

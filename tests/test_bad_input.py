@@ -571,6 +571,64 @@ def test_api_arguments_are_checked_before_the_run(scene, monkeypatch):
         remove_dynamic(three, params={"zzz": 0})
 
 
+@pytest.mark.parametrize("kw, words", [
+    ({"probes": [(10.5, 20.2)]}, r"^probe \(10.5, 20.2\): give an \(x, y\) pair of int"),
+    ({"probes": [(1, 2, 3)]}, r"^probe \(1, 2, 3\): give an \(x, y\) pair"),
+    ({"probes": 5}, r"^probes=5: give a sequence of \(x, y\) pixels"),
+    ({"probes": [(W, 0)]}, rf"^probe pixel \({W}, 0\) is outside the {W}x{H} image"),
+    ({"sample_static": 2.0}, r"^sample_static=2.0: give a fraction in \[0, 1\]"),
+    ({"sample_static": -1}, r"^sample_static=-1: give a fraction"),
+    ({"chunk_rows": 0}, r"^chunk_rows=0: give an int of 1 or more"),
+    ({"chunk_rows": 2.5}, r"^chunk_rows=2.5: give an int of 1 or more"),
+    ({"valid_masks": [np.ones((10, 10), bool)] * 3},
+     rf"^valid_masks\[0\]: shape \(10, 10\), the images are {W}x{H}"),
+    ({"valid_masks": [np.ones((H, W), bool)] * 2}, r"^valid_masks: 2 given for 3 images"),
+    ({"valid_masks": 5}, r"^valid_masks: give one .* got int"),
+    ({"ref": "2", "names": ["2", "1", "0"]},
+     r"^ref='2': both the index of 0 and the name of 2 \(index 0\): give the int 0 for "
+     r"'2', or the int 2 for '0'$"),
+], ids=["float probe", "triple", "bare int", "outside", "sample 2", "sample -1", "chunk 0",
+        "chunk float", "mask size", "mask count", "masks int", "ref both"])
+def test_api_probes_fractions_and_masks_are_checked_before_the_run(scene, monkeypatch, kw,
+                                                                   words):
+    """Each a one-line InputError before any work (a trial's probes, valid_masks and
+    fractions leaked IndexError, ValueError and TypeError, or ran unchecked; a name
+    that is also an index was told to give that name again)."""
+    from dynremove import pipeline
+
+    monkeypatch.setattr(pipeline, "_prepare", lambda *a, **k: pytest.fail("the run started"))
+    with pytest.raises(InputError, match=words):
+        remove_dynamic(scene.images[:3], **kw)
+
+
+def test_the_api_s_notes_name_the_auto_reference_and_the_preset(scene, monkeypatch):
+    """``ref="auto"``'s choice is in ``Result.warnings`` (it was only warned), and a
+    preset named in ``params`` (in any case) is the one a recording reports."""
+    import warnings as w
+
+    from dynremove import pipeline
+
+    seen = {}
+    real = pipeline._prepare
+
+    def spy(images, ref, params, *a, **k):
+        seen["ref"] = ref
+        return real(images, ref, params, *a, **k)
+
+    monkeypatch.setattr(pipeline, "_prepare", spy)
+    started = []
+    sink = type("Sink", (), {"enabled": True, "start": lambda self, info: started.append(info),
+                             "chunk": lambda self, *a: None,
+                             "scan_started": lambda self, *a: None,
+                             "scan_finished": lambda self, *a: None,
+                             "finish": lambda self, *a, **k: None})()
+    with w.catch_warnings():
+        w.simplefilter("ignore")
+        res = remove_dynamic(scene.images, ref="auto", params="Default", sink=sink)
+    assert res.warnings[0].startswith(f"--ref auto: image{seen['ref']} (sharpness")
+    assert started[0].preset == "default"
+
+
 def test_api_takes_a_generator_or_a_stacked_array(scene):
     """Any iterable of images runs, and as the list of them does."""
     three = list(scene.images[:3])

@@ -244,7 +244,7 @@ def test_median_baseline_homography_recovers_background(scene):
 
 
 def test_median_baseline_flow_runs(scene):
-    # Dense flow partly follows the moving square (DESIGN.md sec. 6), so only
+    # Dense flow partly follows the moving square, so only
     # the detection is checked loosely here.
     views, _, gt = scene
     clean, dynamic = baselines.median_baseline(views, REF, align="homography+flow")

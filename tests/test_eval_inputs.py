@@ -96,3 +96,27 @@ def test_eval_that_scores_nothing_exits_1(tmp_path, capsys):
     assert main(["eval", str(tmp_path / "data"), "--methods", "median", "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "nothing was scored" in err and err.count("\n") == 1, err
+
+
+def test_an_index_out_of_range_in_every_set_is_one_error(tmp_path, capsys):
+    """A trial's ``eval DATA --ref 99``: an error row, a progress line and an error line
+    per set, for one typo. It is one usage error now, before any run; an index that
+    some set has, or a name, stays each set's own matter."""
+    for k in range(2):
+        synth.write_scene(synth.make_scene(seed=k, n_views=3, size=(72, 96), n_objects=1),
+                          tmp_path / "data" / f"s{k}")
+    assert main(["eval", str(tmp_path / "data"), "--methods", "median", "--quiet",
+                 "--ref", "99"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--ref 99: out of range in every set (the largest " \
+        "has 3 frames: 0..2)" in err, err
+
+
+def test_a_file_given_as_the_data_folder_says_so(tmp_path, capsys):
+    """``eval results.json`` was "no such folder" for a file that is there."""
+    f = tmp_path / "results.json"
+    f.write_text("{}")
+    assert main(["eval", str(f), "--quiet"]) == 2
+    assert f"{f}: is a file, not a folder" in capsys.readouterr().err
+    assert main(["eval", str(tmp_path / "nothing"), "--quiet"]) == 2
+    assert "nothing: no such folder" in capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""The layers of DESIGN.md section 1, one way down, checked on every import statement.
+"""The layers, one way down (README: "Imports go one way down"), checked on every import.
 
     bottom (params, events, errors, io, video, validity, progress)
       <- method/ (the paper's Sec. 3)  <- refine/ (the default's engineered steps)

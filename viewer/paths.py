@@ -1,4 +1,4 @@
-"""Entity paths of a dynremove recording (DESIGN.md §4), in one place.
+"""Entity paths of a dynremove recording, in one place (users: recordings/README.md).
 
 Every path is relative to an optional *root*, so that two runs can be logged
 side by side in one recording (``--compare``: roots ``runs/a`` and ``runs/b``)::

@@ -1,4 +1,4 @@
-"""Baselines the method is compared against (DESIGN.md section 6).
+"""Baselines the method is compared against (README, Results).
 
 Built the way a careful user would build them with OpenCV:
 

@@ -484,8 +484,7 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
         raise InputError(f"--n-sets must be >= 1 (or left out: one set from STATIC_DIR "
                          f"itself), got {n_sets}")
     root = Path(static_root)
-    if not root.is_dir():
-        raise InputError(f"{root}: no such folder")
+    io.require_folder(root)
     statics = static_sets(root, n_views)
     if not statics:
         raise InputError(f"{root}: no folder with at least {n_views} images")

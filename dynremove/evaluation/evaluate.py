@@ -1,6 +1,6 @@
 """Evaluation on sets with ground truth (``dynremove eval``).
 
-Layout of an evaluation set (DESIGN.md sec. 6)::
+Layout of an evaluation set (as `dynremove eval --help` gives it)::
 
     <set>/frames/*            the views, sorted by name (any image format)
     <set>/masks/<stem>.png    optional: true dynamic mask of a frame (0 / 255)
@@ -174,8 +174,7 @@ def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) 
     frames are ignored.
     """
     root = Path(data_dir)
-    if not root.is_dir():
-        raise InputError(f"{root}: no such folder")
+    io.require_folder(root)
     pats: list[str] = []
     if pattern:
         for p in ([pattern] if isinstance(pattern, str) else pattern):
@@ -502,6 +501,23 @@ def summarize(rows: Sequence[dict], methods: Sequence[str]) -> dict[str, dict]:
     return out
 
 
+def _check_ref_fits_some(ref: str | int | None, found: Sequence[EvalSet]) -> None:
+    """InputError, once, for an index ``ref`` that is out of range in every set (a
+    trial's ``--ref 99`` was an error row, a progress line and an error line per
+    set). A name that some set lacks stays that set's error."""
+    if ref is None:
+        return
+    r = str(ref)
+    if not r.lstrip("-").isdigit() or (len(r.lstrip("-")) > 1 and r.lstrip("-").startswith("0")):
+        return  # a name (frames 0001.jpg ...: --ref 0001) or not an index
+    i = int(r)
+    n = max(len(es.frames) for es in found)
+    if not -n <= i < n and not any(Path(f).stem == r or Path(f).name == r
+                                   for es in found for f in es.frames):
+        raise InputError(f"--ref {ref}: out of range in every set (the largest has {n} "
+                         f"frames: 0..{n - 1})")
+
+
 def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | None = None,
              preset_name: str = "default", methods: Sequence[str] = METHODS,
              jobs: int = 1, max_side: int | None = None, ref: str | int | None = None,
@@ -515,6 +531,7 @@ def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | Non
     if not found:
         raise InputError(f"{data_dir}: no set with a frames/ folder"
                          + (f" matching {sets!r}" if sets else ""))
+    _check_ref_fits_some(ref, found)
     variants = []
     for m in methods:
         p = method_params(m, chosen)

@@ -1,7 +1,7 @@
 """Evaluation metrics: mask overlap and image quality inside a mask.
 
 Pure functions on plain arrays (no I/O, no other dynremove imports), used by the
-evaluation protocol of DESIGN.md section 6: detection Jaccard (IoU) against a
+evaluation protocol (README, Results): detection Jaccard (IoU) against a
 ground-truth dynamic mask and removal PSNR / SSIM restricted to the true
 dynamic region. The whole-photo measures (PSNR / SSIM of the whole image,
 ``damage_percent``, ``leftover_percent``) are in
