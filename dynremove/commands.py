@@ -222,10 +222,12 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             valid_mask=args.valid_mask, frames=args.frames, span=args.span, pick=args.pick)
         t_load = time.perf_counter() - t0
         where.bar("load", 1.0)
-        for n in [*iset.notes, reference_note(args.ref, ref, ref_info, iset.names),
-                  *ref_notes]:
+        # (report.json's notes are the lines printed, in order: a trial with -q found
+        # the reference's line and the probes' in neither)
+        iset.notes[:] = [*iset.notes, reference_note(args.ref, ref, ref_info, iset.names),
+                         *ref_notes]
+        for n in iset.notes:
             _note(args, n, where.bar)
-        iset.notes.extend(ref_notes)
         gt_full = gt = None
         if args.gt:
             where.stage = "while reading the ground truth"
@@ -297,8 +299,10 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         if any(re.search(r"\d px\b", str(n)) for n in res.warnings):
             # (a trial read "2 px ... inpainted" against report.json's 18: two sizes)
             H1, W1 = res.clean.shape[:2]
-            _note(args, f"the notes count pixels of the {w}x{h} analysed copy; clean.png, "
-                  f"dynamic_mask.png and report.json's *_px are at {W1}x{H1}")
+            msg = (f"the notes count pixels of the {w}x{h} analysed copy; clean.png, "
+                   f"dynamic_mask.png and report.json's *_px are at {W1}x{H1}")
+            _note(args, msg)
+            res.warnings.append(msg)  # (and in report.json)
     if gt_full is not None:
         gt = _resized_mask(gt_full, res.dynamic.shape)  # the output's size
     check_stop()  # a Ctrl-C lost in the last stage: nothing is written
@@ -344,14 +348,17 @@ def _probes_at_analysis_size(args: argparse.Namespace, iset: io.ImageSet
     out = []
     for x, y in args.probe or ():
         if not (0 <= x < W0 and 0 <= y < H0):
-            raise InputError(f"--probe {x},{y}: outside the {W0}x{H0} photo")
+            raise InputError(f"--probe {x},{y}: outside the {W0}x{H0} photo (x in "
+                             f"0..{W0 - 1}, y in 0..{H0 - 1})")
         if iset.scale == 1.0:
             out.append((x, y))
             continue
         H, W = iset.images[0].shape[:2]
         xa, ya = io.photo_to_analysis(x, y, (W0, H0), (W, H))
-        _note(args, f"--probe {x},{y}: pixel ({xa}, {ya}) of the {W}x{H} analysis image "
-              "(the recording's and `inspect --pixel`'s coordinates)")
+        msg = (f"--probe {x},{y}: pixel ({xa}, {ya}) of the {W}x{H} analysis image (the "
+               "recording's and `inspect --pixel`'s coordinates)")
+        _note(args, msg)
+        iset.notes.append(msg)  # (and in report.json)
         out.append((xa, ya))
     return out
 
@@ -791,6 +798,9 @@ def cmd_view(args: argparse.Namespace) -> int:
             if _port_in_use(port):
                 raise InputError(f"port {port} on 127.0.0.1 is in use (another viewer "
                                  f"still running?): choose another with {flag}")
+    damage = args.viewer("inspect").damage_note(rec)
+    if damage:  # (as inspect and export say: a trial's cut recording was served silently)
+        print(f"dynremove: note: {rec}: {damage}", file=sys.stderr)
     proc = args.viewer("serve").view(rec, web=args.web, port=args.port,
                                      web_port=args.web_port)
     if proc.returncode is not None and proc.returncode > 0:
@@ -817,7 +827,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
             px, py = photo
             if size is not None and not (0 <= px < size[0] and 0 <= py < size[1]):
                 raise InputError(f"--photo-pixel {px},{py}: outside the {size[0]}x{size[1]} "
-                                 "photos")
+                                 f"photos (x in 0..{size[0] - 1}, y in 0..{size[1] - 1})")
             x, y = ins.photo_to_analysis(info, px, py) or (px, py)
         else:
             x, y = args.pixel
@@ -831,8 +841,17 @@ def cmd_inspect(args: argparse.Namespace) -> int:
                       "analysis image")
             else:
                 qx, qy = ins.analysis_to_photo(info, x, y)
-                print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis "
-                      f"image = photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos")
+                # (and the photo pixels it covers: a trial's --photo-pixel 1000,2160 gave
+                # analysis pixel (400, 864), whose centre is photo pixel (1001, 2161))
+                aw, ah = int(info["width"]), int(info["height"])
+                span = max(size[0] // aw, size[1] // ah) + 2
+                xs = [p for p in range(max(0, qx - span), min(size[0], qx + span + 1))
+                      if io.photo_to_analysis(p, 0, size, (aw, ah))[0] == x]
+                ys = [p for p in range(max(0, qy - span), min(size[1], qy + span + 1))
+                      if io.photo_to_analysis(0, p, size, (aw, ah))[1] == y]
+                print(f"pixel ({x}, {y}) of the {aw}x{ah} analysis image = photo pixel ({qx}, "
+                      f"{qy}) of the {size[0]}x{size[1]} photos (its centre; it covers x "
+                      f"{xs[0]}–{xs[-1]}, y {ys[0]}–{ys[-1]})")
         hist = ins.pixel_history(path, x, y, root=args.root)
         if size is not None and hist.get("final_dynamic") is False:
             # (before the verdict, whose "not in the final mask" is the analysis

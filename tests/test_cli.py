@@ -243,6 +243,11 @@ def test_probe_is_a_photo_pixel_scaled_to_the_analysis_image(tmp_path, capsys, f
                          "1", "--probe", "40,30", "--record", rec)
     assert rc == 0, err
     assert "--probe 40,30: pixel (20, 15) of the 32x24 analysis image" in err
+    # report.json holds the lines printed (with -q, its notes are all a user gets: a
+    # trial found neither the reference's line nor the probe's there)
+    notes = json.loads((out / "report.json").read_text())["notes"]
+    assert any(n.startswith("reference: ") for n in notes) and any(
+        n.startswith("--probe 40,30: pixel (20, 15) of the 32x24") for n in notes), notes
     rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "64,10", "--record", rec,
                          *FAST)
     assert rc == 2 and "--probe 64,10: outside the 64x48 photo" in err

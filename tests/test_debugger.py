@@ -387,6 +387,21 @@ def test_view_without_display_says_so(fabricated, monkeypatch, capsys):
     assert "--web" in err and len(err.strip().splitlines()) == 1
 
 
+def test_view_of_a_cut_recording_says_so(fabricated, monkeypatch, capsys, tmp_path):
+    """``view`` said nothing of a recording cut short (``inspect`` and ``export`` do):
+    the same note, from the file's framing, before the viewer opens."""
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    monkeypatch.setattr("sys.platform", "linux")
+    data = Path(fabricated["path"]).read_bytes()
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(data[:len(data) * 2 // 3])
+    assert main(["view", str(cut)]) == 2  # (no display here)
+    err = capsys.readouterr().err
+    assert f"note: {cut}: damaged or cut short after " in err and f" of {len(data) * 2 // 3} " \
+        "bytes" in err, err
+
+
 def test_view_web_on_a_busy_port_names_it(fabricated, capsys):
     """A second `view --web` while another viewer holds the port: one line that names
     the port and the flag, exit 2, and no viewer started."""

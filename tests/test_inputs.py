@@ -426,6 +426,26 @@ def test_truncated_recording_is_read_up_to_the_damage(tmp_path, capsys, recordin
     assert note.startswith("dynremove: note:") and "damaged or cut short" in note
 
 
+def test_a_cut_recording_does_not_call_a_scan_patch_the_fill(tmp_path, capsys, recording):
+    """Cut before the fill by selection, a replaced pixel's last scan patch is the
+    scans' patch, not "fill:" (a trial's cut recording named the scan's source as the
+    fill, where the fill after the cut had taken another)."""
+    L = cv2.imread(str(recording.parent / "o" / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE)
+    ys, xs = np.nonzero(L)
+    px = f"{xs[len(xs) // 2]},{ys[len(ys) // 2]}"
+    data = recording.read_bytes()
+    rc, out, _ = run_cli(capsys, "inspect", recording, "--pixel", px)
+    assert rc == 0 and "\n  fill: " in out and "the scans' patch here" not in out, out
+    for frac in np.arange(0.95, 0.2, -0.05):  # (the last cut before the fill's data)
+        cut = tmp_path / "cut.rrd"
+        cut.write_bytes(data[: int(len(data) * frac)])
+        rc, out, _ = run_cli(capsys, "inspect", cut, "--pixel", px)
+        if "the scans' patch here" in out:
+            break
+    assert rc == 0 and "the scans' patch here: " in out and "\n  fill: " not in out, out
+    assert "the recording ends before the fill after the scans" in out
+
+
 @pytest.mark.parametrize("orientation", [3, 6, 8])
 def test_rgba_png_with_an_exif_orientation_is_read_upright(tmp_path, orientation):
     """OpenCV's IMREAD_UNCHANGED (needed for the alpha) ignores the EXIF orientation:
@@ -472,3 +492,40 @@ def test_the_analysis_size_notes_point_to_the_tuned_scale(tmp_path):
     (small,) = [n for n in notes if "--max-side 200" in n]
     assert "coarse" in small
     assert not any("coarse" in n for n in io.load_image_set([d], max_side=800).notes)
+
+
+def test_a_sliver_without_content_is_counted_not_rounded_to_zero(tmp_path):
+    """A PNG whose transparent corner is 0.04 % of it: a trial read "0.0 % without
+    content" for 1,600 px. Under 0.1 % the note counts the pixels."""
+    bgra = np.full((200, 200, 4), 200, np.uint8)
+    bgra[:4, :4, 3] = 0  # 16 px of 40,000
+    cv2.imwrite(str(tmp_path / "a.png"), bgra)
+    _, valid, notes = io.read_image_valid(tmp_path / "a.png")
+    assert valid is not None and int((~valid).sum()) == 16
+    assert any(n.startswith("a.png: 16 px (under 0.1 %) without content") for n in notes), notes
+    bgra[:40, :40, 3] = 0  # 4 %: a share
+    cv2.imwrite(str(tmp_path / "b.png"), bgra)
+    assert any(n.startswith("b.png: 4.0 % without content") for n in
+               io.read_image_valid(tmp_path / "b.png")[2])
+
+
+def test_a_gray_reference_gives_a_gray_clean_photo(tmp_path, capsys, scene):
+    """Gray photos in, a gray clean.png out (a trial's gray reference came back as RGB
+    with R = G = B, under its gray ICC profile), equal to the reference away from
+    the mover; a colour reference stays colour."""
+    from PIL import Image
+
+    grays = [cv2.cvtColor(im, cv2.COLOR_BGR2GRAY) for im in scene.images[:4]]
+    paths = write_set(tmp_path / "g", grays)
+    rc, _, err = run_cli(capsys, "run", *paths, "--out", tmp_path / "o", "--ref", paths[1].name,
+                         "-q")
+    assert rc == 0, err
+    clean = cv2.imread(str(tmp_path / "o" / "clean.png"), cv2.IMREAD_UNCHANGED)
+    assert clean.ndim == 2 and clean.shape == grays[1].shape
+    assert Image.open(tmp_path / "o" / "clean.png").mode == "L"
+    far = ~cv2.dilate((cv2.imread(str(tmp_path / "o" / "dynamic_mask.png"), 0) > 0
+                       ).astype(np.uint8), np.ones((61, 61), np.uint8)).astype(bool)
+    assert far.any() and np.array_equal(clean[far], grays[1][far])
+    paths = write_set(tmp_path / "c", scene.images[:4])
+    assert run_cli(capsys, "run", *paths, "--out", tmp_path / "oc", "-q")[0] == 0
+    assert cv2.imread(str(tmp_path / "oc" / "clean.png"), cv2.IMREAD_UNCHANGED).ndim == 3

@@ -337,10 +337,11 @@ def test_photo_pixel_explains_the_analysis_pixel_it_falls_in(downscaled, capsys)
                                    "(50, 37) of the 64x48 analysis image")
     first = out2.splitlines()[0]
     assert first == ("pixel (50, 37) of the 64x48 analysis image = photo pixel (202, 150) "
-                     "of the 256x192 photos"), first
+                     "of the 256x192 photos (its centre; it covers x 200–203, y 148–151)"), first
     rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "256,10")
     assert (rc, out) == (2, "") and err == [
-        "dynremove: error: --photo-pixel 256,10: outside the 256x192 photos"], err
+        "dynremove: error: --photo-pixel 256,10: outside the 256x192 photos (x in 0..255, "
+        "y in 0..191)"], err
     rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "1,1", "--pixel", "1,1")
     assert rc == 2 and "not both" in err[0], err
 

@@ -40,6 +40,37 @@ def _store_cached(path: str, mtime_ns: int, size: int):
     return read_rrd_tolerant(path)
 
 
+def complete_messages(data: bytes) -> tuple[int, int]:
+    """(bytes, count) of the complete messages at the start of an .rrd file's ``data``
+    (its framing only, nothing decoded): a recording cut short or damaged has bytes
+    after them."""
+    import struct
+
+    pos = 12  # FourCC, version, options; then (kind u64, length u64, payload)*
+    n = 0
+    while pos + 16 <= len(data):
+        length = struct.unpack_from("<Q", data, pos + 8)[0]
+        if pos + 16 + length > len(data):
+            break
+        pos, n = pos + 16 + length, n + 1
+    return min(pos, len(data)), n
+
+
+def damage_note(path: str | Path) -> str | None:
+    """What ``read_rrd_tolerant`` would say of a recording cut short or damaged (the
+    bytes after its last complete message), from its framing alone; None when the
+    file ends with a complete message."""
+    data = Path(path).read_bytes()
+    pos, _ = complete_messages(data)
+    end = len(data)
+    if data[-12:-4] == b"RRF2FOOT":  # the 32-byte footer of a recording closed properly
+        end -= 32
+    if pos >= end:
+        return None
+    return (f"damaged or cut short after {pos} of {len(data)} bytes: the viewer shows "
+            "what was recorded before the damage")
+
+
 def read_rrd_tolerant(path: str):
     """Read a recording, or as much of a damaged one as can be read, with one note.
 
@@ -49,7 +80,6 @@ def read_rrd_tolerant(path: str):
     Rerun's own warnings are not shown.
     """
     import os
-    import struct
     import sys
     import tempfile
     import warnings
@@ -83,13 +113,7 @@ def read_rrd_tolerant(path: str):
                 note("no footer (the run was interrupted or the file cut): read what "
                      "was recorded")
             return store
-        pos = n = 0
-        pos = 12  # FourCC, version, options; then (kind u64, length u64, payload)*
-        while pos + 16 <= len(data):
-            length = struct.unpack_from("<Q", data, pos + 8)[0]
-            if pos + 16 + length > len(data):
-                break
-            pos, n = pos + 16 + length, n + 1
+        pos, n = complete_messages(data)
         if n < 2:
             raise InputError(f"{path}: damaged recording, nothing readable "
                              f"({len(data)} bytes)")

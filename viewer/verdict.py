@@ -420,9 +420,17 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         else:
             where = (f"by the patch written around ({r['x']},{r['y']}) at step {r['step']} "
                      f"(scan {r['scan']})")
-        lines.append(f"fill: {r['src_name']}'s pixel ({sx},{sy}), {where}"
-                     + (f": the last of {len(writes)} writes over this pixel"
-                        if len(writes) > 1 else ""))
+        last = (f": the last of {len(writes)} writes over this pixel" if len(writes) > 1
+                else "")
+        if h.get("ended_early") and h.get("refill"):
+            # (a trial's cut recording said "fill:" of a scan patch that the fill by
+            # selection, past the cut, had redone from another source)
+            lines.append(f"the scans' patch here: {r['src_name']}'s pixel ({sx},{sy}), "
+                         f"{where}{last}; the recording ends before the fill after the "
+                         "scans, which redoes the pixels it replaces: what the clean photo "
+                         "shows here is not recorded")
+        else:
+            lines.append(f"fill: {r['src_name']}'s pixel ({sx},{sy}), {where}{last}")
     if h.get("gt") is not None:
         fin, gt = h.get("final_dynamic"), h["gt"]
         kind = ("correct" if fin == gt else "FALSE NEGATIVE (a mover left in)" if gt
