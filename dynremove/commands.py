@@ -904,6 +904,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     # before the drawing (a trial's --out /proc/x.gif failed after it, as an internal
     # error naming the temporary file)
     io.check_out_file(args.out, "--out")
+    # (and which run, in a --compare recording: a trial's missing --root failed after
+    # the note that the drawing had begun)
+    args.viewer("inspect").resolve_root(rec, args.root or "")
     _note(args, f"drawing a frame per snapshot of {rec} (a minute for a long run)")
     t0 = time.perf_counter()
     out = export_gif(rec, args.out, fps=args.fps, max_side=args.max_side, root=args.root)

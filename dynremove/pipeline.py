@@ -668,6 +668,13 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         if progress:
             progress(f"scan {scan}", done / total)
 
+    every = getattr(sink, "record_every_rows", None) if sink.enabled else None
+    if chunk_rows is None and isinstance(every, (int, np.integer)) and every >= 1:
+        # the sink snapshots the reference at the end of a chunk of rows: chunks that
+        # divide its period make them fall every ``every`` rows (a trial's
+        # --record-every-rows 1 got one every 2-3 rows, the default chunk of H // 50)
+        chunk_rows = max(d for d in range(1, min(every, max(1, H // 50)) + 1)
+                         if every % d == 0)
     L, M_maps, summaries = run_scans(st, params, sink=sink, probe=probe,
                                      sample_static=sample_static, chunk_rows=chunk_rows,
                                      kernel=kernel, progress=scan_progress)

@@ -225,6 +225,26 @@ def test_a_lingering_mover_is_logged_and_told(tmp_path):
     words = " ".join(vd.verdict_lines(h))
     assert "a mover that lingered" in words
     assert "still shows what the reference shows here: the mover that lingered" in words
+    # a source of a dynamic scan's winning cluster that the fill turned down as showing
+    # the mover: the two places in it are told apart (a trial read a contradiction);
+    # not where the scans called the pixel static (there the lingering sources agreed)
+    for j in np.linspace(0, len(ys) - 1, 5).astype(int):
+        h = vi.pixel_history(path, int(xs[j]), int(ys[j]))
+        words = " ".join(vd.verdict_lines(h))
+        dyn = {n for sc in h["scans"] if sc["verdict"] == "dynamic"
+               for n in (sc["win_sources"] or ())}
+        turned = {n for n, r in h["selection"].get("reasons", {}).items()
+                  if r.startswith("still shows")}
+        assert ("in the scan's winning cluster above: its candidate there" in words) == bool(
+            dyn & turned), (dyn, turned, words)
+    # the same pixel as a scan that called it dynamic with that source in A_m would tell
+    name = sorted(turned)[0]
+    h["scans"] = [dict(h["scans"][0], verdict="dynamic",
+                       win_sources=[name, *(h["scans"][0]["win_sources"] or [])])]
+    words = " ".join(vd.verdict_lines(h))
+    clause = words.split("; ")[-1]
+    assert name in clause and "in the scan's winning cluster above: its candidate there" \
+        in clause, words
 
 
 def test_the_region_rule_is_logged_and_told(tmp_path):

@@ -137,6 +137,25 @@ def test_rrd_verify_accepts_file(run, tmp_path):
     assert r.returncode == 0, r.stderr
 
 
+@pytest.mark.parametrize("every", [1, 3])
+def test_a_run_snapshots_every_n_rows_as_asked(tmp_path, every):
+    """A run recorded with ``record_every_rows`` 1 (the teaching demo's) or 3: one
+    reference snapshot per that many rows, at their steps (a trial found one every 2-3
+    rows for 1: the scan's chunks of H // 50 rows set the cadence)."""
+    from dynremove import remove_dynamic
+    from dynremove.evaluation import synth
+
+    sc = synth.make_scene(seed=1, n_views=4, size=(120, 160), n_objects=1)
+    path = tmp_path / "e.rrd"
+    remove_dynamic(sc.images, ref=sc.ref_index, params="paper",
+                   sink=RerunSink(path, record_every_rows=every, skip_unchanged_images=False),
+                   names=sc.names)
+    steps = [st for st, _ in vi.read_snapshots(path)["image"]]
+    H, W = 120, 160
+    first_scan = [st for st in steps if 0 < st < H * W]
+    assert first_scan == [r * W - 1 for r in range(every, H + 1, every)], first_scan[:8]
+
+
 def test_snapshot_cadence(tmp_path):
     every = 6
     path = tmp_path / "cadence.rrd"

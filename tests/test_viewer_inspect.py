@@ -64,6 +64,18 @@ def test_compare_recording_without_root_names_both_runs(compare_rrd, capsys):
                        "runs/compare: pass --root runs/main or --root runs/compare"], err
 
 
+def test_export_of_a_compare_recording_asks_for_the_run_before_drawing(compare_rrd, capsys,
+                                                                      tmp_path):
+    """A trial's export without --root printed "drawing a frame per snapshot" and then
+    failed: the one error line now comes first, and nothing is drawn or written."""
+    rc = main(["export", str(compare_rrd), "--gif", str(tmp_path / "c.gif")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and err == [f"dynremove: error: {compare_rrd} holds two runs, runs/main "
+                               "and runs/compare: pass --root runs/main or --root "
+                               "runs/compare"], err
+    assert not (tmp_path / "c.gif").exists()
+
+
 @pytest.mark.parametrize("root", ["bogus", "runs/other", "runs"])
 def test_compare_recording_with_an_unknown_root(compare_rrd, capsys, root):
     rc, out, err = _inspect(capsys, compare_rrd, "--pixel", "5,5", "--root", root)

@@ -1,7 +1,7 @@
 """Entity paths of a dynremove recording, in one place (users: recordings/README.md).
 
 Every path is relative to an optional *root*, so that two runs can be logged
-side by side in one recording (``--compare``: roots ``runs/a`` and ``runs/b``)::
+side by side in one recording (``--compare``: roots ``runs/main`` and ``runs/compare``)::
 
     >>> p = Paths()
     >>> p(REFERENCE_IMAGE)

@@ -140,7 +140,7 @@ class RerunSink(StepColumns):
     gt_background : (H, W, 3) uint8 BGR ndarray, optional
         Ground-truth clean reference: error image and PSNR at the end.
     root : str
-        Prefix of every entity (two runs side by side: ``runs/a``, ``runs/b``).
+        Prefix of every entity (two runs side by side: ``runs/main``, ``runs/compare``).
     rec : rr.RecordingStream, optional
         Log into this stream (already saved/connected by the caller, who also
         disconnects it); otherwise the sink opens and owns one.

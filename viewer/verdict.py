@@ -373,8 +373,22 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
             # static 3-D test reads: a trial read the two as a contradiction)
             at = (f" at ({fx:.1f}, {fy:.1f}) in it (where the fill's field across L leads)"
                   if fx is not None and fy is not None else "")
+            # a source in the scan's winning cluster that the fill turned down as
+            # showing a mover: the scan's candidate and the fill's sample are two places
+            # in it (a trial read them as a contradiction)
+            # (a scan that called the pixel dynamic: its cluster was not the reference's
+            # content; where it called it static, a lingering mover's sources agree)
+            won = {n for sc in h.get("scans") or () if sc.get("verdict") == "dynamic"
+                   for n in (sc.get("win_sources") or ())}
+            mover = {n for n, r in (sel.get("reasons") or {}).items()
+                     if r.startswith(("still shows", "its own mover", "shows the reference"))}
+            both = sorted(won & mover)
             lines.append(f"fill: filled from source {_src_name(h, k - 1)}{at}{why}"
-                         + (f" (others: {others})" if others else ""))
+                         + (f" (others: {others})" if others else "")
+                         + (f"; {', '.join(both)} in the scan's winning cluster above: its "
+                            "candidate there, propagated from the neighbours' matches, lay "
+                            "elsewhere in it than the fill's sample, which shows the mover"
+                            if both else ""))
         elif sel.get("explained"):
             # ("parallax, not a mover" was read as a certainty by a trial where the
             # one source that showed it had the mover lingering there too)
