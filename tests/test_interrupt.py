@@ -159,9 +159,10 @@ def test_ctrl_c_during_the_scan_says_where_it_ends(tmp_path):
                         "--out", str(gif)], capture_output=True, text=True, cwd=REPO,
                        env=ENV, timeout=60)
     assert r.returncode == 0, r.stderr
-    lines = _clean_lines(r.stderr)  # what export is doing, then that the run was cut
-    assert len(lines) == 2 and "drawing a frame per snapshot" in lines[0], r.stderr
-    assert "the run was interrupted" in lines[1] and gif.stat().st_size > 0
+    lines = _clean_lines(r.stderr)  # that the run was cut (read while choosing the run,
+    # before any drawing), then what export is doing
+    assert len(lines) == 2 and "drawing a frame per snapshot" in lines[1], r.stderr
+    assert "the run was interrupted" in lines[0] and gif.stat().st_size > 0
 
 
 def test_sink_interrupted_before_start(tmp_path):
