@@ -46,28 +46,41 @@ def complete_messages(data: bytes) -> tuple[int, int]:
     after them."""
     import struct
 
+    return _walk_messages(lambda pos: struct.unpack_from("<Q", data, pos + 8)[0], len(data))
+
+
+def _walk_messages(length_at, size: int) -> tuple[int, int]:
+    """``complete_messages`` over a file of ``size`` bytes whose message at ``pos``
+    has the payload length ``length_at(pos)``."""
     pos = 12  # FourCC, version, options; then (kind u64, length u64, payload)*
     n = 0
-    while pos + 16 <= len(data):
-        length = struct.unpack_from("<Q", data, pos + 8)[0]
-        if pos + 16 + length > len(data):
+    while pos + 16 <= size:
+        length = length_at(pos)
+        if pos + 16 + length > size:
             break
         pos, n = pos + 16 + length, n + 1
-    return min(pos, len(data)), n
+    return min(pos, size), n
 
 
 def damage_note(path: str | Path) -> str | None:
     """What ``read_rrd_tolerant`` would say of a recording cut short or damaged (the
     bytes after its last complete message), from its framing alone; None when the
     file ends with a complete message."""
-    data = Path(path).read_bytes()
-    pos, _ = complete_messages(data)
-    end = len(data)
-    if data[-12:-4] == b"RRF2FOOT":  # the 32-byte footer of a recording closed properly
-        end -= 32
+    import struct
+
+    size = Path(path).stat().st_size
+    with open(path, "rb") as f:  # (the messages' headers only: a recording may be GBs)
+        f.seek(max(size - 12, 0))
+        end = size - 32 if f.read(8) == b"RRF2FOOT" else size  # closed properly: a footer
+
+        def length_at(pos: int) -> int:
+            f.seek(pos + 8)
+            return struct.unpack("<Q", f.read(8))[0]
+
+        pos, _ = _walk_messages(length_at, size)
     if pos >= end:
         return None
-    return (f"damaged or cut short after {pos} of {len(data)} bytes: the viewer shows "
+    return (f"damaged or cut short after {pos} of {size} bytes: the viewer shows "
             "what was recorded before the damage")
 
 
