@@ -442,8 +442,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "in masks/) (default: the middle frame)")
     e.add_argument("--methods", default=",".join(METHODS), metavar="LIST",
                    help=f"comma-separated subset of {','.join(METHODS)} (default: all of "
-                        "them; a set of 7 photos of 854x480 with --jobs 2 takes 20-25 s "
-                        "for each preset, 3-4 s for each median stack, under 1 s for telea)")
+                        "them; a set of 7 photos of 854x480 takes about 10 s for the "
+                        "default preset, 8 s for the paper's, 1-4 s for each median stack "
+                        "and under 1 s for telea, on 2 cores with --jobs 2)")
     e.add_argument("--ablation", action="store_true",
                    help="instead of the methods: variants of the preset, each one setting "
                         "changed (listed under --variants); prints mean J / PSNR per variant")
