@@ -424,7 +424,11 @@ def build_parser() -> argparse.ArgumentParser:
                     "image, damage % (pixels outside the true mask + 5 px that were right "
                     "in the input and are wrong in the output, CIE76 dE > 10) and leftover "
                     "% (recoverable true-mask pixels still wrong; free.png gives the "
-                    "recoverable part, the rest is reported as unrecoverable %).")
+                    "recoverable part, the rest is reported as unrecoverable %). "
+                    "--preset and the method flags set the 'dynremove' column (its head "
+                    "stays 'dynremove'); 'paper' is always the paper preset as written, "
+                    "and 'single-scan' the paper's with one scan and no update of the "
+                    "matches (Sec. 3.2.3).")
     e.add_argument("data_dir", metavar="DATA_DIR",
                    help="a folder whose sets (<set>/frames/, below it at any depth) are "
                         "scored: ../shared/data/davis, or what 'dynremove composite' wrote")
