@@ -843,15 +843,10 @@ def cmd_inspect(args: argparse.Namespace) -> int:
                 qx, qy = ins.analysis_to_photo(info, x, y)
                 # (and the photo pixels it covers: a trial's --photo-pixel 1000,2160 gave
                 # analysis pixel (400, 864), whose centre is photo pixel (1001, 2161))
-                aw, ah = int(info["width"]), int(info["height"])
-                span = max(size[0] // aw, size[1] // ah) + 2
-                xs = [p for p in range(max(0, qx - span), min(size[0], qx + span + 1))
-                      if io.photo_to_analysis(p, 0, size, (aw, ah))[0] == x]
-                ys = [p for p in range(max(0, qy - span), min(size[1], qy + span + 1))
-                      if io.photo_to_analysis(0, p, size, (aw, ah))[1] == y]
-                print(f"pixel ({x}, {y}) of the {aw}x{ah} analysis image = photo pixel ({qx}, "
-                      f"{qy}) of the {size[0]}x{size[1]} photos (its centre; it covers x "
-                      f"{xs[0]}–{xs[-1]}, y {ys[0]}–{ys[-1]})")
+                (x0, x1), (y0, y1) = ins.photo_span(info, x, y)
+                print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis "
+                      f"image = photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos "
+                      f"(its centre; it covers x {x0}–{x1}, y {y0}–{y1})")
         hist = ins.pixel_history(path, x, y, root=args.root)
         if size is not None and hist.get("final_dynamic") is False:
             # (before the verdict, whose "not in the final mask" is the analysis

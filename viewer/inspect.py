@@ -40,22 +40,18 @@ def _store_cached(path: str, mtime_ns: int, size: int):
     return read_rrd_tolerant(path)
 
 
-def complete_messages(data: bytes) -> tuple[int, int]:
-    """(bytes, count) of the complete messages at the start of an .rrd file's ``data``
-    (its framing only, nothing decoded): a recording cut short or damaged has bytes
-    after them."""
+def complete_messages(f, size: int) -> tuple[int, int]:
+    """(bytes, count) of the complete messages at the start of an .rrd file of
+    ``size`` bytes, open as ``f`` (a file or a ``BytesIO``): its framing only, the
+    messages' headers read, nothing decoded. A recording cut short or damaged has
+    bytes after them."""
     import struct
 
-    return _walk_messages(lambda pos: struct.unpack_from("<Q", data, pos + 8)[0], len(data))
-
-
-def _walk_messages(length_at, size: int) -> tuple[int, int]:
-    """``complete_messages`` over a file of ``size`` bytes whose message at ``pos``
-    has the payload length ``length_at(pos)``."""
     pos = 12  # FourCC, version, options; then (kind u64, length u64, payload)*
     n = 0
     while pos + 16 <= size:
-        length = length_at(pos)
+        f.seek(pos + 8)
+        length = struct.unpack("<Q", f.read(8))[0]
         if pos + 16 + length > size:
             break
         pos, n = pos + 16 + length, n + 1
@@ -64,20 +60,13 @@ def _walk_messages(length_at, size: int) -> tuple[int, int]:
 
 def damage_note(path: str | Path) -> str | None:
     """What ``read_rrd_tolerant`` would say of a recording cut short or damaged (the
-    bytes after its last complete message), from its framing alone; None when the
-    file ends with a complete message."""
-    import struct
-
+    bytes after its last complete message), from its framing alone (a recording may
+    be GBs); None when the file ends with a complete message."""
     size = Path(path).stat().st_size
-    with open(path, "rb") as f:  # (the messages' headers only: a recording may be GBs)
+    with open(path, "rb") as f:
         f.seek(max(size - 12, 0))
         end = size - 32 if f.read(8) == b"RRF2FOOT" else size  # closed properly: a footer
-
-        def length_at(pos: int) -> int:
-            f.seek(pos + 8)
-            return struct.unpack("<Q", f.read(8))[0]
-
-        pos, _ = _walk_messages(length_at, size)
+        pos, _ = complete_messages(f, size)
     if pos >= end:
         return None
     return (f"damaged or cut short after {pos} of {size} bytes: the viewer shows "
@@ -92,6 +81,7 @@ def read_rrd_tolerant(path: str):
     that is not a recording, or holds no complete message, raises InputError.
     Rerun's own warnings are not shown.
     """
+    from io import BytesIO
     import os
     import sys
     import tempfile
@@ -126,7 +116,7 @@ def read_rrd_tolerant(path: str):
                 note("no footer (the run was interrupted or the file cut): read what "
                      "was recorded")
             return store
-        pos, n = complete_messages(data)
+        pos, n = complete_messages(BytesIO(data), len(data))
         if n < 2:
             raise InputError(f"{path}: damaged recording, nothing readable "
                              f"({len(data)} bytes)")
@@ -824,6 +814,23 @@ def analysis_to_photo(info: dict[str, Any], x: int, y: int) -> tuple[int, int] |
     (W0, H0), W, H = ph, int(info["width"]), int(info["height"])
     return (min(W0 - 1, max(0, int(round((x + 0.5) * W0 / W - 0.5)))),
             min(H0 - 1, max(0, int(round((y + 0.5) * H0 / H - 0.5)))))
+
+
+def photo_span(info: dict[str, Any], x: int, y: int
+               ) -> tuple[tuple[int, int], tuple[int, int]] | None:
+    """The photo pixels that :func:`photo_to_analysis` maps to analysis pixel (x, y):
+    ((x0, x1), (y0, y1)), both inclusive; None when the run analysed the photos at
+    their own size."""
+    c = analysis_to_photo(info, x, y)
+    if c is None:
+        return None
+    size = photo_size(info)
+    span = max(size[0] // int(info["width"]), size[1] // int(info["height"])) + 2
+    xs = [p for p in range(max(0, c[0] - span), min(size[0], c[0] + span + 1))
+          if photo_to_analysis(info, p, 0)[0] == x]
+    ys = [p for p in range(max(0, c[1] - span), min(size[1], c[1] + span + 1))
+          if photo_to_analysis(info, 0, p)[1] == y]
+    return (xs[0], xs[-1]), (ys[0], ys[-1])
 
 
 def outside_message(info: dict[str, Any], x: int, y: int) -> str:

@@ -502,18 +502,20 @@ def summarize(rows: Sequence[dict], methods: Sequence[str]) -> dict[str, dict]:
 
 
 def _check_ref_fits_some(ref: str | int | None, found: Sequence[EvalSet]) -> None:
-    """InputError, once, for an index ``ref`` that is out of range in every set (a
-    trial's ``--ref 99`` was an error row, a progress line and an error line per
-    set). A name that some set lacks stays that set's error."""
-    if ref is None:
+    """InputError, once, for a ``ref`` that ``io.resolve_ref`` finds out of range in
+    every set (a trial's ``--ref 99`` was an error row, a progress line and an error
+    line per set). A name that some set lacks stays that set's error."""
+    if ref is None or str(ref).strip().lower() == "auto":
         return
-    r = str(ref)
-    if not r.lstrip("-").isdigit() or (len(r.lstrip("-")) > 1 and r.lstrip("-").startswith("0")):
-        return  # a name (frames 0001.jpg ...: --ref 0001) or not an index
-    i = int(r)
-    n = max(len(es.frames) for es in found)
-    if not -n <= i < n and not any(Path(f).stem == r or Path(f).name == r
-                                   for es in found for f in es.frames):
+    errors = []
+    for es in found:
+        try:
+            io.resolve_ref(ref, [Path(f).name for f in es.frames])
+            return
+        except InputError as e:
+            errors.append(str(e))
+    if all("out of range" in e for e in errors):
+        n = max(len(es.frames) for es in found)
         raise InputError(f"--ref {ref}: out of range in every set (the largest has {n} "
                          f"frames: 0..{n - 1})")
 
