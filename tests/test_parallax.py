@@ -281,6 +281,57 @@ def test_adaptive_support_finds_a_thin_post_that_the_box_window_misses():
     assert np.median(box[core]) > 12.0 and np.median(weighted[core]) > 12.0
 
 
+def test_the_second_minimum_tells_a_plain_colour_from_a_unique_match():
+    """The post of the test above is unique on its line: beyond 10 px of its match
+    nothing on the line costs less than 1.5 × its cost + 2 ΔE. A plain dark patch
+    in the reference (a shirt) against a source whose line runs along a plain dark
+    bar (a screen) matches too, but as well 10 px and more away: its second
+    minimum is as low as its best (``select_search_unique``'s ratio test)."""
+    h, w = 80, 120
+    rng = np.random.default_rng(5)
+    xx = np.arange(w, dtype=np.float32)[None].repeat(h, 0)
+    grey = 128 + 90 * np.sign(np.sin(2 * np.pi * xx / 9)) + rng.normal(0, 10, (h, w))
+    grey = np.clip(cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 1.0), 0, 255)
+    grey = cv2.cvtColor(grey.astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    k = 20.0 / w
+    red, dark = (30, 30, 220), (35, 30, 30)
+    post = (slice(10, 70), slice(58, 61))
+    shirt = (slice(25, 55), slice(15, 30))
+    ref = grey.copy()
+    ref[post] = red
+    ref[shirt] = dark
+    src = cv2.remap(grey, gx / (1 + k), gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    src[10:70, 58 + 18:61 + 18] = red
+    src[15:65, 10:60] = dark  # the screen: every shift of the search lands on it
+    field = np.stack([gx * (1 + k), gy], -1).astype(np.float32)
+    field[post] = np.stack([gx[post] + 18, gy[post]], -1)
+    F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    view = TwoView(F=F, H=np.eye(3), n_matches=100, n_inliers_F=100, n_inliers_H=100,
+                   parallax_px=10.0)
+    region = np.zeros((h, w), bool)
+    region[post] = True
+    region[shirt] = True
+    lab_r, lab_s = blurred_lab(ref, 1.0), blurred_lab(src, 1.0)
+    visible = ~region
+    visible[15:65, 10:60] = False  # (the screen is no visible match of the wall)
+    cost, mu, second = px.epipolar_search(lab_r, lab_s, view, field, visible, region,
+                                          support_de=5.0, unique_px=10.0)
+    inner = np.zeros((h, w), bool)
+    inner[15:65, 58:61] = True
+    core = np.zeros((h, w), bool)
+    core[30:50, 19:26] = True
+    unique = second > 1.5 * cost + 2.0
+    assert np.median(cost[inner]) < 8.0 and unique[inner].mean() > 0.9
+    assert np.median(cost[core]) < 8.0, np.median(cost[core])  # the shirt is "found"...
+    assert not unique[core].any(), np.median(second[core])  # ... everywhere on the line
+    assert np.isinf(second[~region]).all()
+    # without unique_px the search returns its two maps, the same
+    c2, m2 = px.epipolar_search(lab_r, lab_s, view, field, visible, region, support_de=5.0)
+    np.testing.assert_array_equal(c2, cost)
+    np.testing.assert_array_equal(m2, mu)
+
+
 def test_the_compiled_projection_of_the_search_steps_equals_project():
     """``_project_steps`` (the epipolar search's k steps at n cells) is ``project``
     on broadcast arrays, bit for bit (a plane through the origin's column too:

@@ -1621,6 +1621,30 @@ def test_a_textured_mover_that_moved_is_removed_whatever_the_homography_liked():
     assert _cup_red(r.clean)[cup].mean() < 0.02, _cup_red(r.clean)[cup].mean()
 
 
+def test_with_three_photos_a_plain_shirt_is_not_kept_by_an_ambiguous_line_match():
+    """tim6 as tim1, tim3, tim5 (tim3 the reference): the man standing by the pillar
+    is in tim3 only. His dark grey shirt matched somewhere along tim1's epipolar
+    line (its dark screen, dark chairs), tim5 found nothing, and with one source
+    deciding alone he was kept as static 3-D structure: a dark figure in the clean
+    photo (42 % of the box still dark when measured). Such a match must be unique
+    on its line (``select_search_unique``). The box is drawn by hand inside his
+    shirt in tim3.jpg (720×960)."""
+    from conftest import data_dir
+    from dynremove import io
+
+    d = data_dir() / "bursts" / "tim6" / "frames"
+    if not d.is_dir():
+        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA)")
+    iset = io.load_image_set([d / "tim1.jpg", d / "tim3.jpg", d / "tim5.jpg"])
+    r = remove_dynamic(iset.images, ref=1)
+    shirt = (slice(270, 350), slice(340, 400))
+    dark = lambda im: cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)[shirt] < 100  # noqa: E731
+    assert dark(iset.images[1]).mean() > 0.9  # the input shows his shirt there
+    assert dark(r.clean).mean() < 0.15, dark(r.clean).mean()  # the wall, in the output
+    ev = r.selection.static_evidence[:, shirt[0], shirt[1]]
+    assert (ev == 7).any(0).mean() > 0.1  # (inspect names the ambiguous matches)
+
+
 def test_a_lingering_movers_lettering_is_filled_with_the_rest_of_it():
     """tim6 with tim4.jpg: the cup stands in place in four of the six photos, and the
     minority witnesses fill it from the two that saw the table. Its white letters

@@ -60,7 +60,7 @@ _REASON_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 12
 # the static 3-D structure test (EVIDENCE): green where a source counts for "static"
 _EVIDENCE_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 140),
                      3: (240, 200, 40, 140), 4: (200, 40, 200, 150), 5: (230, 40, 40, 160),
-                     6: (120, 120, 120, 120)}
+                     6: (120, 120, 120, 120), 7: (240, 120, 40, 150)}
 
 
 def _fill_match(sel: Any, c: int) -> np.ndarray:

@@ -597,7 +597,7 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                 else f" (ΔE {de[n]:.1f}{at})")
 
     def named(code: int) -> list[str]:
-        return [n + (on_line(n) if code in (2, 3, 5) and n in de else "")
+        return [n + (on_line(n) if code in (2, 3, 5, 7) and n in de else "")
                 for n, c in ev.items() if c == code]
 
     groups = [(1, "its flow match shows it"),
@@ -609,7 +609,10 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                   + (f", and nothing on the epipolar line is within ΔE {search_de:.1f}"
                      if isinstance(search_de, float) and search_de == search_de
                      and any(n in de for n, c in ev.items() if c == 5) else "")),
-              (6, "outside the frame")]
+              (6, "outside the frame"),
+              (7, "found on the epipolar line, but as well elsewhere on it (a plain "
+                  "colour along the line; --select-search-unique), and the other source "
+                  "found nothing: that does not count alone")]
     parts = [f"{what}: {', '.join(who)}" for code, what in groups if (who := named(code))]
     counted = sum(c in (1, 2) for c in ev.values())
     passed = bool(sel.get("explained"))

@@ -356,8 +356,8 @@ def sweep_fields(src_labs: list[np.ndarray], views: list[TwoView], model: Parall
 def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np.ndarray,
                     visible: np.ndarray, region: np.ndarray, *, scale: float = 0.5,
                     box: int = 5, step_px: float = 1.0, line_px: float = 1.5,
-                    max_steps: int = 256, support_de: float = 0.0
-                    ) -> tuple[np.ndarray, np.ndarray]:
+                    max_steps: int = 256, support_de: float = 0.0, unique_px: float = 0.0
+                    ) -> tuple[np.ndarray, ...]:
     """Best colour match of each ``region`` pixel along its epipolar line in one source.
 
     A static reference point lies, in the source, on its epipolar line at
@@ -378,6 +378,13 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     bollard, a chimney against the sky) then compares that structure, not the
     background around it, whose parallax differs.
 
+    With ``unique_px`` > 0 the search also returns the cost of the best match
+    farther than ``unique_px`` (source pixels, along the line) from the best one:
+    the second minimum of the ratio test (Lowe, IJCV 2004, on the line's cost
+    curve; the uniqueness test of stereo matching, Scharstein & Szeliski, IJCV
+    2002). A plain colour (a dark shirt) matches all along a plain stretch of
+    the line (a dark screen): its second minimum is as low as its best.
+
     lab_r, lab_s : (H, W, 3) float32 Lab; view : TwoView with F; field : (H, W, 2)
     float32 flow matches; visible, region : (H, W) bool.
 
@@ -388,12 +395,17 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
         where the source has no F or too few visible matches on their lines).
     mu : (H, W) float32
         The μ of that best match (NaN elsewhere).
+    second : (H, W) float32
+        Only with ``unique_px`` > 0: the best cost farther than ``unique_px``
+        from the best match (capped at 30 ΔE, inf where ``cost`` is inf).
     """
     Hh, Ww = region.shape
     cost = np.full((Hh, Ww), np.inf, np.float32)
     best_mu = np.full((Hh, Ww), np.nan, np.float32)
+    second = np.full((Hh, Ww), np.inf, np.float32)
+    out = (cost, best_mu, second) if unique_px > 0 else (cost, best_mu)
     if view.F is None or not region.any():
-        return cost, best_mu
+        return out
     e = epipole(view.F)
     ys, xs = np.nonzero(visible)
     if len(ys) > 40000:
@@ -403,7 +415,7 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     m = field[ys, xs].astype(np.float64)
     good = sampson_sq(view.F, np.stack([gx, gy], -1), m) <= line_px ** 2
     if good.sum() < 200:
-        return cost, best_mu
+        return out
     mus = _mu_of(view.H, e, gx[good], gy[good], m[good, 0], m[good, 1])
     lo, hi = np.percentile(mus, [1, 99])
     span = max(hi - lo, 1e-9)
@@ -430,6 +442,8 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     c_best = np.full(len(qy), np.inf, np.float32)
     m_best = np.full(len(qy), np.nan, np.float32)
     steps = np.linspace(lo, hi, n_steps)
+    # every step's window cost, kept for the second minimum (n cells × n_steps)
+    curve = np.empty((len(qy), n_steps), np.float32) if unique_px > 0 else None
     chunk = 32  # steps per pass: the window sums run on one image of
     # `chunk` channels, over the box of the sampled cells (box // 2 wider, so that
     # the sums at the region's cells read what the whole image's would)
@@ -452,6 +466,8 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
             bf = cv2.boxFilter(buf[..., :k], -1, (box, box)).reshape(bh, bw, k)[qy_b, qx_b]
         else:
             bf = _weighted_window(buf[..., :k], qy_b, qx_b, weights, box)
+        if curve is not None:
+            curve[:, i0:i0 + k] = bf
         j = np.argmin(bf, axis=1)  # the first of equal costs, as a sequential sweep
         c = bf[np.arange(len(qy)), j]
         better = c < c_best
@@ -465,7 +481,18 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     mu_u = cv2.resize(mimg, (Ww, Hh), interpolation=cv2.INTER_NEAREST)
     cost[region] = cu[region]
     best_mu[region] = mu_u[region]
-    return cost, best_mu
+    if curve is not None:
+        # the steps within unique_px of each cell's best one (the same first-of-equal
+        # best as above) are left out; the rest's minimum is the second
+        j_best = np.argmin(curve, axis=1)
+        near = int(np.ceil(unique_px * (n_steps - 1) / max(span_px, 1e-9)))
+        idx = np.arange(n_steps)
+        far = np.abs(idx[None] - j_best[:, None]) > near
+        c2 = np.where(far, curve, _CAP).min(axis=1) if n_steps > 1 else np.full(len(qy), _CAP)
+        c2img = np.full((hh, ww), _CAP, np.float32)
+        c2img[qy, qx] = np.minimum(c2, _CAP)
+        second[region] = cv2.resize(c2img, (Ww, Hh), interpolation=cv2.INTER_LINEAR)[region]
+    return out
 
 
 @numba.njit(cache=True, nogil=True)

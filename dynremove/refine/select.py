@@ -20,7 +20,9 @@ that the scan flagged with doubled content.
    structure against the sky, far off the plane) may instead be found by a
    search along its epipolar line (``parallax.epipolar_search``, its window
    weighted by colour likeness to the centre: ``select_search_support_de``); that weaker
-   evidence counts where at least two sources, and half of them, explain it.
+   evidence counts where at least two sources, and half of them, explain it. Where
+   one source's match would decide alone (three photos or two) against a source
+   that found nothing, it must be unique on its line (``select_search_unique``).
    **A mover that lingered** (``_minority_witnesses``, ``select_minority``):
    where the reference and most sources show an object and two or more
    sources, agreeing, show the scene's common colours behind it, L takes the
@@ -232,8 +234,16 @@ EVIDENCE = {0: "not in L",
                "that sees the pixel shows something else there",
             4: "its match agrees, but in the movers' colours",
             5: "its match differs and nothing on its epipolar line matches",
-            6: "outside its frame"}
+            6: "outside its frame",
+            7: "shows the reference's content on its epipolar line, but as well elsewhere "
+               "on it (a plain colour matching along the line), and the other source "
+               "found nothing there: an ambiguous match does not count alone"}
 EV_FLOW, EV_LINE, EV_LINE_ALONE, EV_MOVER_COLOUR, EV_NOT_FOUND, EV_UNSEEN = 1, 2, 3, 4, 5, 6
+EV_AMBIGUOUS = 7
+# ``select_search_unique``'s ratio test: the second minimum lies farther than this
+# along the line (source px: the search window's width, 5 cells at half scale) and
+# must cost more than select_search_unique × the best + _UNIQUE_DE (ΔE)
+_UNIQUE_PX, _UNIQUE_DE = 10.0, 2.0
 
 
 _BINS = 12  # per Lab axis, in the movers' colour model
@@ -1240,6 +1250,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     votes = np.zeros((S, H, W), np.float32)
     matched = np.zeros((S, H, W), bool)  # the flow match on its line, the reference's colour
     searched = np.zeros((S, H, W), bool)  # in L, found by the epipolar search instead
+    # ... and there, unique on the line (``select_search_unique``; tested where one
+    # source's match decides alone: two sources or one)
+    unique = np.ones((S, H, W), bool)
+    test_unique = S <= 2 and P.select_search_unique > 0
     line_de = np.full((S, H, W), np.nan, np.float32)  # best ΔE on the line, where searched
     line_xy = (np.full((S, H, W, 2), np.nan, np.float32)  # ... and where it lies
                if mode == "parallax" and P.select_search_de > 0 else None)
@@ -1311,9 +1325,13 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
             lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
-            cost, mu = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4),
-                                       mask & ~ok, support_de=P.select_search_support_de)
+            res = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok,
+                                  support_de=P.select_search_support_de,
+                                  unique_px=_UNIQUE_PX if test_unique else 0.0)
+            cost, mu = res[0], res[1]
             searched[k] = cost < P.select_search_de
+            if test_unique:
+                unique[k] = res[2] > P.select_search_unique * cost + _UNIQUE_DE
             line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
             line_xy[k] = line_points(v, mu)  # (NaN where not searched)
         matched[k] = ok
@@ -1392,6 +1410,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                                  np.ceil(0.5 * seen.sum(0) - 1e-6)), _EXPLAIN_CAP).astype(np.int64)
     flow_vote = votes > 0.5
     line_found = np.zeros((S, H, W), bool)
+    ambiguous = np.zeros((S, H, W), bool)  # (EV_AMBIGUOUS)
     if searched.any():
         # the epipolar search is weaker evidence (any colour on the line may
         # match): it counts where at least two sources, and half of them, agree;
@@ -1401,11 +1420,16 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # that only one of two sources sees, the rider hiding it in the other, was
         # refilled with the wall (v3 entry-P10+bmx-trees damage 0.86 -> 0.51 %;
         # with the flow's followed copies not counted against it, DAVIS
-        # car-roundabout J 0.816 -> 0.586: the car kept)
+        # car-roundabout J 0.816 -> 0.586: the car kept). Where one source's match
+        # decides alone (need 1) and no other source found the content, that match
+        # must be unique on its line: with three photos of ``bursts/tim6`` (tim1,
+        # tim3, tim5) the standing man's dark shirt matched the dark screen all
+        # along tim1's line and he stayed as a dark figure (README, session 58)
         shown = matched | searched
         against = seen & ~shown & ((p_flow < 0.5) | off_line)
         line_found = searched & (
-            (shown.sum(0) >= np.maximum(2, need)) | ~against.any(0))[None]
+            (shown.sum(0) >= np.maximum(2, need))[None] | (~against.any(0))[None] & unique)
+        ambiguous = searched & ~line_found & ~unique & (~against.any(0))[None]
         votes = np.maximum(votes, line_found.astype(np.float32))
     explained = mask & ((votes > 0.5).sum(0) >= need) & (p_ref < 0.5)
     if mode == "scan":
@@ -1431,6 +1455,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # why each source did or did not count towards ``explained`` (for inspect)
     evidence = np.where(np.broadcast_to(mask, (S, H, W)), EV_NOT_FOUND, 0).astype(np.uint8)
     evidence[mask[None] & searched & ~line_found] = EV_LINE_ALONE
+    evidence[mask[None] & ambiguous] = EV_AMBIGUOUS
     evidence[mask[None] & line_found & ~flow_vote] = EV_LINE
     evidence[mask[None] & matched & ~flow_vote & ~line_found] = EV_MOVER_COLOUR
     evidence[mask[None] & flow_vote] = EV_FLOW
