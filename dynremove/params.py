@@ -91,7 +91,7 @@ class Params:
     min_region_px: int = 64  # drop dynamic components smaller than this many analysis px (paper preset 0)
     clean_majority: bool = True  # where the set is flat (median parallax ≤ --select-parallax-px), the clean-up also keeps the regions of a majority filter of L (binary median, the opening's window) that hold part of what the opening alone keeps: a slow mover's holed scan map is kept
     refine_tau: float = 16.0  # pixel votes at L's border (refine.mask.refine_mask): a source agrees with the reference under this CIE76 ΔE; 0 = off
-    refine_shrink_frac: float = 0.8  # drop a rim pixel when this share of sources agree
+    refine_shrink_frac: float = 1.0  # drop a rim pixel when this share of the sources that see it agree (1.0: all of them; 0.8 before session 58)
     refine_rim_px: int = 3  # width (analysis px) of the inner rim that may be dropped
     refine_ring_px: int = 6  # width (analysis px) of the outer ring that may be added (no source agrees)
     refine_iters: int = 2  # refinement passes

@@ -118,7 +118,7 @@ ABLATIONS: dict[str, dict[str, Any]] = {
     "t_r-0.4": {"t_r": 0.4},
     "no-clean": {"clean_mask": False, "min_region_px": 0},
     "no-refine": {"refine_tau": 0.0},
-    "refine-unanimous": {"refine_shrink_frac": 1.0},
+    "refine-shrink-0.8": {"refine_shrink_frac": 0.8},  # the default until session 58
     "no-snap": {"snap": False},
     "no-realign": {"fuse_realign": 0},
     "fuse-medoid": {"fuse_combine": "medoid", "fuse_realign": 0},
