@@ -2,7 +2,7 @@
 
 Usage::
 
-    python examples/burst_panel.py [DATA_DIR] [--out examples/bursts_panel.png]
+    python examples/burst_panel.py [DATA_DIR] [--out examples/bursts_panel.jpg]
     python examples/burst_panel.py --views 1,3,4 --out examples/bursts_three_panel.jpg
 
 DATA_DIR defaults to ``$DYNREMOVE_DATA`` or ``../shared/data``; the bursts are the
@@ -47,9 +47,9 @@ def main(argv: list[str] | None = None) -> int:
                     help="the data folder, which holds bursts/<set>/frames/*.jpg (default "
                          "$DYNREMOVE_DATA, else ../shared/data beside the project: "
                          "%(default)s)")
-    ap.add_argument("--out", default=str(REPO / "examples" / "bursts_panel.png"),
+    ap.add_argument("--out", default=str(REPO / "examples" / "bursts_panel.jpg"),
                     help="the panel image, .png or .jpg (default: the README's, "
-                         "examples/bursts_panel.png in the project)")
+                         "examples/bursts_panel.jpg in the project)")
     ap.add_argument("--height", type=int, default=360, help="row height (px)")
     ap.add_argument("--views", default=None,
                     help="only these frames of each burst, 0-based, e.g. 1,3,4 (default: all)")

@@ -622,7 +622,7 @@ def test_the_static_test_is_told(method_run):
             (bool(sel.explained[y, x]), filled)]
         c = int(counted[y, x])
         assert line.startswith("static 3-D structure test: " + head
-                               + f"{c} source{'s' if c != 1 else ''} count as showing the "
+                               + f"{c} source{'s count' if c != 1 else ' counts'} as showing the "
                                f"reference's content here, {need} needed"), line
         if filled:
             assert h["source_names"][sel.label[y, x] - 1] in line

@@ -728,6 +728,11 @@ def test_what_the_cut_weighed_is_told_with_the_consensus_or_the_suspect():
         vd.weighed_words(sel, 2)
     assert "in short" not in vd.weighed_words(
         {**sel, "support": {"reference": 0.5, "sources": 2.0}})
+    assert "most backing" in w and "ties" not in w, w
+    # a tie, as printed (1.49 against 1.49: a trial read "the most backing" there)
+    tie = vd.weighed_words({**sel, "support": {"reference": 1.4912, "sources": 1.4876}})
+    assert "ties with the best-supported source, and a tie keeps the reference" in tie \
+        and "most backing" not in tie, tie
     sel["support"] = {}
     w = vd.weighed_words(sel)
     assert "--select-ref-cost" in w and "here nothing" in w, w  # a three-photo rule set it to 0
@@ -765,6 +770,8 @@ def test_one_source_s_epipolar_evidence_is_told_when_it_counted_alone():
 
     alone = line({"a": 2, "b": 5})
     assert "kept as static" in alone and "counts from one source here" in alone, alone
+    # (not "no other source contradicts it" beside b's "nothing alike": the rule)
+    assert "own copy of the mover" in alone and "contradicts it" not in alone, alone
     assert "counts from one source" not in line({"a": 2, "b": 2})
 
 

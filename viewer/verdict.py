@@ -553,13 +553,17 @@ def weighed_words(sel: dict[str, Any], n_sources: int = 0) -> str | None:
                 "best-supported source (each weight, 0–1, counts a photo)")
         if sup["reference"] >= sup["sources"]:
             # (a trial had to read the code to learn why a cup stayed: the sources of a
-            # three-photo set disagreed, one showing the table, one its own cup)
+            # three-photo set disagreed, one showing the table, one its own cup; and
+            # another read "the most backing" of 1.49 against 1.49: a tie, which the
+            # reference wins, ``select_fill``'s consensus)
+            tied = f"{sup['reference']:.2f}" == f"{sup['sources']:.2f}"
             txt += ("; in short: the other photos do not agree with one another on "
-                    "anything else here, so what the reference shows has the most "
-                    "backing and stays" + (" (with three photos, two sources that "
-                                           "disagree with each other cannot outvote the "
-                                           "reference; more photos can)"
-                                           if n_sources == 2 else ""))
+                    "anything else here, so what the reference shows "
+                    + ("ties with the best-supported source, and a tie keeps the "
+                       "reference" if tied else "has the most backing and stays")
+                    + (" (with three photos, two sources that disagree with each other "
+                       "cannot outvote the reference; more photos can)"
+                       if n_sources == 2 else ""))
     else:
         txt += ("; the reference was the suspect here: the consensus is the sources' own, "
                 "and keeping the reference costs --select-ref-cost, or, where it agrees "
@@ -619,11 +623,14 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     if 2 in ev.values() and sum(c in (1, 2, 4) for c in ev.values()) < max(2, need):
         # (``select_fill``: the epipolar search's weaker evidence counts from one
         # source where no other source that sees the pixel contradicts it)
-        parts.append("the epipolar search's evidence counts from one source here, as no "
-                     "other source contradicts it: where their match differs, it shows "
-                     "the movers' colours")
+        # (a trial read "no other source contradicts it" beside another source's
+        # "nothing alike" on the line, which showed plain wall: the rule's words now)
+        parts.append("the epipolar search's evidence counts from one source here: every "
+                     "other source that did not find the content shows the movers' "
+                     "colours at its flow match, which is taken for its own copy of the "
+                     "mover hiding the content, not for a contradiction")
     # ("3 of the 2 needed" read as a bug to a trial: more may count than are needed)
-    evidence = (f"{counted} source{'s' if counted != 1 else ''} count as showing the "
+    evidence = (f"{counted} source{'s count' if counted != 1 else ' counts'} as showing the "
                 f"reference's content here, {need} needed (" + "; ".join(parts) + ")")
     p = sel.get("ref_mover_p")
     if passed:
