@@ -203,6 +203,8 @@ def test_the_blends_offset_is_recorded_and_told(method_run):
     y, x = np.unravel_index(int(np.argmax(mag)), mag.shape)
     h = vi.pixel_history(method_run["path"], int(x), int(y))
     assert h["selection"]["offset"] == [int(c) for c in want[y, x]]
+    if method_run["res"].dynamic[y, x] and run_sel.label[y, x] > 0:  # what the headline reads
+        assert h["clean_input"][0] == [int(c) for c in method_run["res"].clean[y, x]]
     words = " ".join(vd.verdict_lines(h))
     told = "the blend added B/G/R " + "/".join(f"{int(c):+d}" for c in want[y, x])
     assert (told in words) == (mag[y, x] >= 1)

@@ -893,3 +893,27 @@ def test_offsets_at_the_recording_s_clip_are_not_read_as_measurements():
 
     assert levels_words([-128, 5, 127]) == "≤ -128/+5/≥ +127"
     assert levels_words([-3, 0, 12]) == "-3/+0/+12"
+
+
+def test_a_fill_the_blend_took_back_to_the_mover_is_said_so():
+    """A fresh-user trial (tim1, tim3, tim5; tim3 the reference) read "removed (in the
+    final mask), filled from tim1" at a pixel still the cup's red: the source's sample
+    was table wood, and the blend's offset, asked for by a ring lying on the cup's
+    kept parts, took it back to red. The headline now says so; an exposure offset
+    (a few levels) or a fill far from the input adds nothing."""
+    def head(clean, ref, offset):
+        h = {"final_dynamic": True, "source_names": ["tim1.jpg", "tim5.jpg"],
+             "selection": {"source": 1, "inpainted": 0, "offset": offset},
+             "clean_input": (clean, ref)}
+        return vd.outcome_line(h)
+    back = head([67, 70, 160], [43, 44, 148], [-49, -72, -18])
+    assert back.startswith("removed (in the final mask), filled from tim1.jpg, but the "
+                           "blend's correction took it back near what the reference showed"), back
+    assert "ΔE 10.8 from the input" in back, back
+    # table wood written over the cup, with an exposure offset: removed, no more
+    assert head([118, 143, 180], [43, 44, 148], [3, 2, 3]) == \
+        "removed (in the final mask), filled from tim1.jpg"
+    # a recording without the images (cut short): the headline as before
+    h = {"final_dynamic": True, "source_names": ["a", "b"],
+         "selection": {"source": 2, "inpainted": 0, "offset": [-49, -72, -18]}}
+    assert vd.outcome_line(h) == "removed (in the final mask), filled from b"

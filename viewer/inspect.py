@@ -436,6 +436,24 @@ def read_final_image(path: str | Path, *, root: str = "", scan: bool = False
     return decode(rows[0][1]) if rows else None
 
 
+def read_input_reference(path: str | Path, *, root: str = "") -> np.ndarray | None:
+    """The reference as the run was given it (BGR; the recording's JPEG), or None."""
+    rows = _blob_rows(load_store(path), P.Paths(root)(P.REFERENCE_INPUT), index=None)
+    return decode(rows[0][1]) if rows else None
+
+
+def clean_and_input(path: str | Path, x: int, y: int, *, root: str = ""
+                    ) -> tuple[list[int], list[int]] | None:
+    """The clean photo's and the input reference's B, G, R at analysis pixel (x, y)
+    (the input as the recording's JPEG holds it, so within a few levels), or None
+    where the recording lacks either image."""
+    out, ref = read_final_image(path, root=root), read_input_reference(path, root=root)
+    if out is None or ref is None or out.shape[:2] != ref.shape[:2] or out.ndim != 3 \
+            or ref.ndim != 3:
+        return None
+    return [int(c) for c in out[y, x, :3]], [int(c) for c in ref[y, x, :3]]
+
+
 def read_final_dynamic(path: str | Path, *, root: str = "") -> np.ndarray | None:
     """Final L as an (H, W) bool array, or None (run not finished)."""
     rows = _image_rows(load_store(path), P.Paths(root)(P.RESULT_DYNAMIC),
@@ -769,6 +787,12 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
         if "fuse" in params else None,
         interrupted=_where_cut(load_store(path), root, x, y, H, W),
         photo=photo_size(info),
+        # how far the clean photo is from the input here: where the fill replaced the
+        # pixel, the blend's correction may bring the reference's colour back (a trial
+        # read "removed, filled from tim1" on a pixel still the cup's red)
+        clean_input=(clean_and_input(path, x, y, root=root)
+                     if inside and L is not None and L[y, x] and sel.get("source", 0) > 0
+                     else None),
     )
 
 

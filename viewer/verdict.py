@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
+import cv2
+import numpy as np
+
 from dynremove.events import CASE_BOTH_IN_CLUSTER, CASE_GEOMETRY, CASE_ONE_IN_CLUSTER
 from dynremove.refine.parallax import SEARCH_CAP_DE as _LINE_CAP
 from dynremove.refine.select import MISFIT_MOVER_P
@@ -455,6 +458,37 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     return lines
 
 
+# a filled pixel that the blend's correction took nearer the input than the chosen
+# source's sample, and within this CIE76 ΔE of the input, "shows nearly what the
+# reference showed" (twice the fill's --select-tau of 10: the input is the
+# recording's JPEG)
+_BACK_DE = 20.0
+
+
+def _lab_de(a: list[int], b: list[int]) -> float:
+    """CIE76 ΔE between two B, G, R colours (0–255)."""
+    px = np.array([[a, b]], np.float32) / 255.0
+    lab = cv2.cvtColor(px, cv2.COLOR_BGR2Lab)[0]
+    return float(np.linalg.norm(lab[0] - lab[1]))
+
+
+def _brought_back(h: dict[str, Any]) -> str:
+    """Where the blend's offset took a filled pixel back near the input reference (a
+    trial read "removed, filled from tim1" on a pixel still the cup's red: the ring
+    around the region lay on the cup's kept parts), the words that say so; else ""."""
+    got, off = h.get("clean_input"), (h.get("selection") or {}).get("offset")
+    if not got or not off:
+        return ""
+    clean, ref = got
+    sample = [min(255, max(0, c - o)) for c, o in zip(clean, off)]
+    to_ref, to_sample = _lab_de(clean, ref), _lab_de(clean, sample)
+    if to_ref >= _BACK_DE or to_ref >= to_sample:
+        return ""
+    return (f", but the blend's correction took it back near what the reference showed "
+            f"here (ΔE {to_ref:.1f} from the input, {to_sample:.1f} from the source's "
+            "sample): the clean photo still shows much of it")
+
+
 def outcome_line(h: dict[str, Any]) -> str:
     """What became of the pixel, in a few words: "removed (in the final mask), filled
     from view1.png" or "kept (not in the final mask)". Needs ``final_dynamic``."""
@@ -470,7 +504,7 @@ def outcome_line(h: dict[str, Any]) -> str:
     if sel.get("inpainted"):
         return "removed (in the final mask), inpainted: no source shows the background there"
     if k > 0:
-        return f"removed (in the final mask), filled from {_src_name(h, k - 1)}"
+        return f"removed (in the final mask), filled from {_src_name(h, k - 1)}" + _brought_back(h)
     if "source" in sel:
         return "in the final mask, but the reference kept there"
     return "removed (in the final mask)"
