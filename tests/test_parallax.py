@@ -236,14 +236,11 @@ def test_the_anchor_is_the_source_of_widest_parallax_not_the_noisiest():
                                np.abs(np.array(true_k[:3]) / true_k[2]), rtol=0.05)
 
 
-def test_adaptive_support_finds_a_thin_post_that_the_box_window_misses():
-    """A post 3 px wide stands 8 px of parallax in front of the striped wall
-    behind it (horizontal epipolar lines; the wall's parallax a ramp of 0-20 px,
-    10 px behind the post). The plain 5 × 5 window (10 px) compares mostly the
-    wall around the post, which moves with another parallax: the post is not
-    found on its line (ΔE over the search's 8). Weighted by colour likeness to
-    the centre (Yoon & Kweon, 2006) it is, at its parallax. A mover pasted into
-    the reference (a colour the source never shows) stays unfound either way."""
+def _post_before_a_striped_wall():
+    """The scene of the thin-post tests: a striped wall (80 × 120 px, horizontal
+    epipolar lines, its parallax a ramp of 0-20 px) and a red post 3 px wide at 18 px
+    of parallax. Returns the reference without and the source with the post drawn
+    (BGR uint8), the true matches (H, W, 2), the view and the post's slices."""
     h, w = 80, 120
     rng = np.random.default_rng(5)
     xx = np.arange(w, dtype=np.float32)[None].repeat(h, 0)
@@ -252,19 +249,34 @@ def test_adaptive_support_finds_a_thin_post_that_the_box_window_misses():
     grey = cv2.cvtColor(grey.astype(np.uint8), cv2.COLOR_GRAY2BGR)
     gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
     k = 20.0 / w  # the wall: x_s = x + 20 x / W
-    red, green = (30, 30, 220), (40, 200, 40)
     post = (slice(10, 70), slice(58, 61))
-    mover = (slice(20, 50), slice(90, 110))
-    ref = grey.copy()
-    ref[post] = red
-    ref[mover] = green
     src = cv2.remap(grey, gx / (1 + k), gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-    src[10:70, 58 + 18:61 + 18] = red  # the post's parallax: 18 px
+    src[10:70, 58 + 18:61 + 18] = _RED  # the post's parallax: 18 px
     field = np.stack([gx * (1 + k), gy], -1).astype(np.float32)
     field[post] = np.stack([gx[post] + 18, gy[post]], -1)
     F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # x_s on row y_r
     view = TwoView(F=F, H=np.eye(3), n_matches=100, n_inliers_F=100, n_inliers_H=100,
                    parallax_px=10.0)
+    return grey, src, field, view, post
+
+
+_RED = (30, 30, 220)
+
+
+def test_adaptive_support_finds_a_thin_post_that_the_box_window_misses():
+    """A post 3 px wide stands 8 px of parallax in front of the striped wall
+    behind it (horizontal epipolar lines; the wall's parallax a ramp of 0-20 px,
+    10 px behind the post). The plain 5 × 5 window (10 px) compares mostly the
+    wall around the post, which moves with another parallax: the post is not
+    found on its line (ΔE over the search's 8). Weighted by colour likeness to
+    the centre (Yoon & Kweon, 2006) it is, at its parallax. A mover pasted into
+    the reference (a colour the source never shows) stays unfound either way."""
+    grey, src, field, view, post = _post_before_a_striped_wall()
+    h, w = grey.shape[:2]
+    mover = (slice(20, 50), slice(90, 110))
+    ref = grey.copy()
+    ref[post] = _RED
+    ref[mover] = (40, 200, 40)
     region = np.zeros((h, w), bool)
     region[post] = True
     region[mover] = True
@@ -287,28 +299,14 @@ def test_the_second_minimum_tells_a_plain_colour_from_a_unique_match():
     in the reference (a shirt) against a source whose line runs along a plain dark
     bar (a screen) matches too, but as well 10 px and more away: its second
     minimum is as low as its best (``select_search_unique``'s ratio test)."""
-    h, w = 80, 120
-    rng = np.random.default_rng(5)
-    xx = np.arange(w, dtype=np.float32)[None].repeat(h, 0)
-    grey = 128 + 90 * np.sign(np.sin(2 * np.pi * xx / 9)) + rng.normal(0, 10, (h, w))
-    grey = np.clip(cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 1.0), 0, 255)
-    grey = cv2.cvtColor(grey.astype(np.uint8), cv2.COLOR_GRAY2BGR)
-    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
-    k = 20.0 / w
-    red, dark = (30, 30, 220), (35, 30, 30)
-    post = (slice(10, 70), slice(58, 61))
+    grey, src, field, view, post = _post_before_a_striped_wall()
+    h, w = grey.shape[:2]
+    dark = (35, 30, 30)
     shirt = (slice(25, 55), slice(15, 30))
     ref = grey.copy()
-    ref[post] = red
+    ref[post] = _RED
     ref[shirt] = dark
-    src = cv2.remap(grey, gx / (1 + k), gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
-    src[10:70, 58 + 18:61 + 18] = red
     src[15:65, 10:60] = dark  # the screen: every shift of the search lands on it
-    field = np.stack([gx * (1 + k), gy], -1).astype(np.float32)
-    field[post] = np.stack([gx[post] + 18, gy[post]], -1)
-    F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    view = TwoView(F=F, H=np.eye(3), n_matches=100, n_inliers_F=100, n_inliers_H=100,
-                   parallax_px=10.0)
     region = np.zeros((h, w), bool)
     region[post] = True
     region[shirt] = True
