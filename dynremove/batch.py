@@ -3,11 +3,14 @@
 A *set* below ROOT is a folder holding images directly, a folder with a
 ``frames/`` sub-folder (the ``eval`` layout; ``masks/<ref stem>.png`` there, if
 present, gives the Jaccard of the result), or a video file. ROOT itself may be a
-set. Each set's outputs are those of ``dynremove run`` (:func:`write_outputs`)
-in ``DIR/<set>/``; ``DIR/summary.json`` and ``DIR/summary.csv`` list every set
-with its status (``ok``, ``error``), whether it was skipped (not re-run), figures,
-seconds, notes (those of its ``report.json``: unaligned sources, a blurry
-reference, ...) and error message.
+set. A file named as a video that cannot be read is a set that fails; an earlier
+run's outputs and an earlier batch's DIR below ROOT are not sets. Each set's
+outputs are those of ``dynremove run`` (:func:`write_outputs`) in ``DIR/<set>/``
+(a video named as another set keeps its suffix: ``camel.mp4``);
+``DIR/summary.json`` and ``DIR/summary.csv`` list every set with its status
+(``ok``, ``error``), whether it was skipped (not re-run), figures, seconds, notes
+(those of its ``report.json``: unaligned sources, a blurry reference, ...) and
+error message.
 
 Resume: a set whose ``report.json`` carries the same *batch key* (a hash of the
 parameters, the options and the bytes of every input file) and whose images
@@ -277,12 +280,25 @@ class BatchSet:
 
 
 def _images_in(folder: Path) -> list[Path]:
+    """The photos of a folder, without an earlier run's outputs (``earlier_outputs``)."""
     try:
         files = sorted((q for q in folder.iterdir()
                         if q.is_file() and not q.name.startswith(".")), key=io.natural_key)
     except OSError:
         return []
-    return [q for q in files if q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q)]
+    ours = earlier_outputs(folder)
+    return [q for q in files if q.name not in ours
+            and (q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q))]
+
+
+def earlier_outputs(folder: Path) -> set[str]:
+    """The names of an earlier run's outputs in ``folder`` (``io.RUN_OUTPUTS`` beside a
+    report.json, as ``run`` skips them), or an empty set."""
+    try:
+        names = {q.name for q in folder.iterdir() if q.is_file()}
+    except OSError:
+        return set()
+    return set(io.RUN_OUTPUTS) & names if "report.json" in names else set()
 
 
 def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
@@ -311,6 +327,11 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
     def walk(d: Path) -> None:
         if d.resolve() in skip:
             return
+        if d != root and (d / "summary.json").is_file() and (d / "summary.csv").is_file():
+            # an earlier batch's --out inside ROOT: its sets' outputs are not photos
+            notes.append(f"{name_of(d)}: an earlier dynremove batch's outputs (its "
+                         "summary.json and summary.csv): not searched")
+            return
         fr = d / "frames"
         if fr.is_dir():
             imgs = _images_in(fr)
@@ -326,8 +347,13 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
         if len(imgs) >= 2:
             found.append(BatchSet(name_of(d), tuple(imgs)))
             kept = {q.name for q in imgs}
+            ours = earlier_outputs(d)
+            if ours:  # (as ``run`` on the folder says)
+                notes.append(f"{name_of(d)}: skipped {', '.join(sorted(ours))}: the outputs "
+                             "of an earlier dynremove run (its report.json is beside them)")
+                ours |= {"report.json"}
             other = [q.name for q in entries if q.is_file() and q.name not in kept
-                     and not io.is_video_file(q)]
+                     and q.name not in ours and not io.is_video_file(q)]
             if other:  # (as ``run`` on the folder says)
                 notes.append(io.skipped_note(name_of(d), other))
             subs = [q.name for q in entries if q.is_dir() and q.name.lower() not in SKIP_DIRS
@@ -339,19 +365,49 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
             return
         if len(imgs) == 1:
             notes.append(f"{name_of(d)}: one photo only ({imgs[0].name}): not a set")
+        if not entries and d != root:  # (a trial's empty folder went unmentioned)
+            notes.append(f"{name_of(d)}: an empty folder: not a set")
+        ours = earlier_outputs(d)
+        if ours and not imgs:
+            # (a trial's batch into a folder inside ROOT: the next batch over ROOT ran
+            # each set's clean.png, dynamic_mask.png and coverage.png as three photos)
+            notes.append(f"{name_of(d)}: the outputs of an earlier dynremove run "
+                         f"({', '.join(sorted(ours))} beside its report.json): not a set")
         for q in entries:
             if q.is_dir() and q.name.lower() not in SKIP_DIRS:
                 walk(q)
-            elif q.is_file() and io.is_video_file(q):
+            elif q.is_file() and (io.is_video_file(q) or q.suffix.lower() in io.VIDEO_SUFFIXES):
+                # a file named as a video that cannot be read is a set that fails, in
+                # the summary and the exit code (a fresh-user trial's fake.mp4 vanished
+                # without a word, then with a note only)
                 rel = q.relative_to(root)
                 found.append(BatchSet(rel.with_suffix("").as_posix(), (q,)))
-            elif q.is_file() and q.suffix.lower() in io.VIDEO_SUFFIXES:
-                # (a fresh-user trial's text file named fake.mp4 vanished without a word)
-                notes.append(f"{q.relative_to(root).as_posix()}: named as a video, but its "
-                             "content is not one that can be read: not a set")
 
     walk(root)
-    return sorted(found, key=lambda s: s.name)
+    return sorted(_distinct_names(found), key=lambda s: s.name)
+
+
+def _distinct_names(sets: list[BatchSet]) -> list[BatchSet]:
+    """Each set's output folder is named after it: a video named as a folder or another
+    video (``camel/``, ``camel.mp4``, ``camel.avi``) keeps its suffix (``camel.mp4``), so
+    that no two sets write into one folder (a fresh-user trial lost two of three that
+    way, and a resume re-ran them every time). InputError if two names still clash."""
+    count: dict[str, int] = {}
+    for bs in sets:
+        count[bs.name] = count.get(bs.name, 0) + 1
+    out = []
+    for bs in sets:
+        src = Path(bs.inputs[0])
+        if count[bs.name] > 1 and len(bs.inputs) == 1 and src.is_file():
+            bs = BatchSet(bs.name + src.suffix, bs.inputs, bs.gt)
+        out.append(bs)
+    seen: dict[str, BatchSet] = {}
+    for bs in out:
+        if bs.name in seen:
+            raise InputError(f"two sets would write to one output folder {bs.name!r}: "
+                             f"{seen[bs.name].inputs[0]} and {bs.inputs[0]} (rename one)")
+        seen[bs.name] = bs
+    return out
 
 
 # --- one set ----------------------------------------------------------------------------

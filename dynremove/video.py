@@ -33,6 +33,8 @@ def parse_span(span: str | None, n_total: int) -> tuple[int, int]:
     if not sep or start < 0 or end < 0:
         raise InputError(f"--span {span}: expected START:END, frame numbers >= 0 "
                          "(either may be empty)")
+    if start >= end:  # (a trial's 10:5 was told the clip's length, not the order)
+        raise InputError(f"--span {span}: END must be greater than START (END is excluded)")
     end = min(end, n_total)
     if start >= end:
         raise InputError(f"--span {span}: no frames (the clip has {n_total}: 0..{n_total - 1})")

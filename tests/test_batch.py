@@ -288,9 +288,14 @@ def test_what_the_search_does_not_run_is_said(tmp_path, capsys):
     r2 = tmp_path / "root2"
     write_set(r2 / "trip", s.images)
     write_set(r2 / "lonely", s.images[:1])
+    (r2 / "void").mkdir()
     notes = []
     assert [x.name for x in batch.find_sets(r2, notes=notes)] == ["trip"]
-    assert notes == ["lonely: one photo only (view0.png): not a set"]
+    assert notes == ["lonely: one photo only (view0.png): not a set",
+                     "void: an empty folder: not a set"]
+    (r2 / "void").rmdir()
+    notes = []
+    assert [x.name for x in batch.find_sets(r2, notes=notes)] == ["trip"]
     out = tmp_path / "out"
     assert main(["batch", str(r2), "--out", str(out), "--max-scans", "1"]) == 0
     o, err = capsys.readouterr()
@@ -304,12 +309,17 @@ def test_what_the_search_does_not_run_is_said(tmp_path, capsys):
     assert [len(x.inputs) for x in batch.find_sets(r2, notes=notes)] == [3]
     assert notes == ["lonely: one photo only (view0.png): not a set",
                      "trip: skipped 2 non-image file(s): Thumbs.db, notes.txt"]
-    # a file named as a video that is not one (a trial's text file named fake.mp4)
+    # a file named as a video that is not one (a trial's text file named fake.mp4): a
+    # set that fails, in the summary and the exit code (a later trial found the note
+    # alone too easy to miss among many videos)
     (r2 / "fake.mp4").write_text("not a video")
-    notes = []
-    assert [x.name for x in batch.find_sets(r2, notes=notes)] == ["trip"]
-    assert "fake.mp4: named as a video, but its content is not one that can be read: " \
-           "not a set" in notes, notes
+    assert [x.name for x in batch.find_sets(r2)] == ["fake", "trip"]
+    out2 = tmp_path / "out2"
+    assert main(["batch", str(r2), "--out", str(out2), *FAST]) == 1
+    rows = summary_rows(out2)
+    assert rows["fake"]["status"] == "error" and "named as a video" in rows["fake"]["error"]
+    assert rows["trip"]["status"] == "ok"
+    assert "dynremove: error: fake: " in capsys.readouterr().err
 
 
 def test_a_set_that_fails_after_an_earlier_run_says_its_outputs_are_old(tmp_path, capsys):
@@ -364,6 +374,58 @@ def test_root_may_be_one_video_and_a_file_that_is_not_is_refused(tmp_path, capsy
     assert not (tmp_path / "o2").exists()
     assert main(["batch", str(tmp_path / "nothing"), "--out", str(tmp_path / "o3")]) == 2
     assert "no such folder" in capsys.readouterr().err and not (tmp_path / "o3").exists()
+
+
+def test_sets_named_alike_write_to_their_own_folders(tmp_path, capsys):
+    """A fresh-user trial's ROOT held camel/ (photos), camel.mp4 and camel.avi: all three
+    wrote to out/camel, two results were lost, the summary had three rows of one set and
+    a resume re-ran all three every time. A video named as another set keeps its suffix."""
+    s = synth.make_scene(seed=1, n_views=4, size=(64, 80), n_objects=1)
+    r = tmp_path / "root"
+    write_set(r / "camel", s.images)
+    for name in ("camel.avi", "camel.mkv"):
+        vw = cv2.VideoWriter(str(r / name), cv2.VideoWriter_fourcc(*"MJPG"), 5, (80, 64))
+        for im in s.images:
+            vw.write(im)
+        vw.release()
+    (r / "walk.avi").write_bytes((r / "camel.avi").read_bytes())  # no clash: its stem
+    assert [x.name for x in batch.find_sets(r)] == ["camel", "camel.avi", "camel.mkv", "walk"]
+    out = tmp_path / "out"
+    assert main(["batch", str(r), "--out", str(out), *FAST]) == 0
+    rows = summary_rows(out)
+    assert set(rows) == {"camel", "camel.avi", "camel.mkv", "walk"}
+    assert all((out / n / "report.json").is_file() for n in rows)
+    # and a resume skips all four
+    assert main(["batch", str(r), "--out", str(out), *FAST]) == 0
+    assert all(row["skipped"] == "True" for row in summary_rows(out).values())
+    capsys.readouterr()
+
+
+def test_an_earlier_runs_outputs_inside_root_are_not_a_set(tmp_path, capsys):
+    """A trial ran ``batch root --out root/x``, then ``batch root --out b``: the second
+    batch ran each of x's sets (clean.png, dynamic_mask.png, coverage.png) as three
+    photos. An earlier batch's --out (its summaries) is not searched, and a run's
+    outputs beside its report.json are not photos, as ``run`` on the folder says."""
+    s = synth.make_scene(seed=1, n_views=4, size=(64, 80), n_objects=1)
+    r = tmp_path / "root"
+    write_set(r / "trip", s.images)
+    assert main(["batch", str(r), "--out", str(r / "x"), *FAST]) == 0
+    assert main(["run", str(r / "trip"), "--out", str(r / "one"), *FAST]) == 0
+    notes: list[str] = []
+    assert [x.name for x in batch.find_sets(r, notes=notes)] == ["trip"]
+    assert notes == ["one: the outputs of an earlier dynremove run (clean.png, coverage.png, "
+                     "dynamic_mask.png beside its report.json): not a set",
+                     "x: an earlier dynremove batch's outputs (its summary.json and "
+                     "summary.csv): not searched"], notes
+    # beside the photos of a set, they are not photos of it
+    for n in ("clean.png", "dynamic_mask.png", "coverage.png", "report.json"):
+        (r / "trip" / n).write_bytes((r / "one" / n).read_bytes())
+    notes = []
+    assert [len(x.inputs) for x in batch.find_sets(r, notes=notes)] == [4]
+    assert "trip: skipped clean.png, coverage.png, dynamic_mask.png: the outputs of an " \
+           "earlier dynremove run (its report.json is beside them)" in notes, notes
+    assert not any("non-image" in n for n in notes), notes
+    capsys.readouterr()
 
 
 def test_frames_applies_to_the_video_sets_of_a_mixed_root(tmp_path, capsys):

@@ -163,6 +163,8 @@ def test_video_pick_even_and_span(tmp_path, scene):
 @pytest.mark.parametrize("argv, words", [
     (["--span", "30:40"], ["--span 30:40", "no frames"]),
     (["--span", "abc"], ["--span abc", "START:END"]),
+    # (a trial's reversed span was told the clip's length, not the order)
+    (["--span", "6:2"], ["--span 6:2", "END must be greater than START"]),
 ])
 def test_video_bad_options(tmp_path, capsys, scene, argv, words):
     clip = tmp_path / "c.avi"

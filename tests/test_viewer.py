@@ -433,6 +433,14 @@ def test_export_gif_and_mp4(run, tmp_path):
     cap = cv2.VideoCapture(str(mp4))
     assert cap.isOpened() and int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(frames)
     cap.release()
+    # an odd --max-side: the frames' sides are even and at most it (a trial's 101 gave
+    # 102 px frames: the MP4 writer padded them)
+    odd = export.render_frames(run["path"], max_side=101)
+    assert max(odd[0].shape[:2]) <= 101 and all(v % 2 == 0 for v in odd[0].shape[:2])
+    mp4 = export.export_gif(run["path"], tmp_path / "odd.mp4", fps=5, max_side=101)
+    cap = cv2.VideoCapture(str(mp4))
+    assert int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)) <= 101
+    cap.release()
 
 
 def test_failed_export_keeps_the_file_that_was_there(run, tmp_path, monkeypatch):

@@ -54,7 +54,9 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
     dyn_steps = np.array([s for s, _ in snaps["dynamic"]])
     W2 = 2 * W + 8
     scale = min(1.0, max_side / max(W2, H))
-    out_w, out_h = max(2, int(round(W2 * scale))), max(2, int(round(H * scale)))
+    # even sides, at most max_side: MP4's codecs need even ones (padding them made
+    # --max-side 101 give 102 px frames: a fresh-user trial)
+    out_w, out_h = (max(2, int(round(v * scale)) // 2 * 2) for v in (W2, H))
     scan_of = {}
     t = vi._arrow(store, p(P.REFERENCE_IMAGE))
     if t is not None:
