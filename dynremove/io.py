@@ -781,8 +781,13 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     if isinstance(ref, int) or (isinstance(ref, str) and ref.lstrip("-").isdigit()):
         i = int(ref)
         if not -len(names) <= i < len(names):
+            clip = {n.rpartition("#")[0] for n in names if "#" in n}
+            # (a trial gave a video's frame number: an index counts the frames taken)
+            frame = (f"; an index counts the frames taken from the clip, {clip.pop()}#N "
+                     "names its frame N" if len(clip) == 1 and all("#" in n for n in names)
+                     else "")
             raise InputError(f"{what}: out of range, there are {len(names)} images "
-                             f"(0..{len(names) - 1})")
+                             f"(0..{len(names) - 1}){frame}")
         return i % len(names)
     ref = str(ref)
     if is_path_ref(ref):
