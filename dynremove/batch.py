@@ -280,25 +280,15 @@ class BatchSet:
 
 
 def _images_in(folder: Path) -> list[Path]:
-    """The photos of a folder, without an earlier run's outputs (``earlier_outputs``)."""
+    """The photos of a folder, without an earlier run's outputs (``io.earlier_outputs``)."""
     try:
         files = sorted((q for q in folder.iterdir()
                         if q.is_file() and not q.name.startswith(".")), key=io.natural_key)
     except OSError:
         return []
-    ours = earlier_outputs(folder)
+    ours = io.earlier_outputs(q.name for q in files)
     return [q for q in files if q.name not in ours
             and (q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q))]
-
-
-def earlier_outputs(folder: Path) -> set[str]:
-    """The names of an earlier run's outputs in ``folder`` (``io.RUN_OUTPUTS`` beside a
-    report.json, as ``run`` skips them), or an empty set."""
-    try:
-        names = {q.name for q in folder.iterdir() if q.is_file()}
-    except OSError:
-        return set()
-    return set(io.RUN_OUTPUTS) & names if "report.json" in names else set()
 
 
 def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
@@ -344,16 +334,15 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
             entries = sorted(q for q in d.iterdir() if not q.name.startswith("."))
         except OSError:
             entries = []
+        ours = io.earlier_outputs(q.name for q in entries if q.is_file())
         if len(imgs) >= 2:
             found.append(BatchSet(name_of(d), tuple(imgs)))
             kept = {q.name for q in imgs}
-            ours = earlier_outputs(d)
             if ours:  # (as ``run`` on the folder says)
-                notes.append(f"{name_of(d)}: skipped {', '.join(sorted(ours))}: the outputs "
-                             "of an earlier dynremove run (its report.json is beside them)")
-                ours |= {"report.json"}
+                notes.append(io.outputs_note(name_of(d), ours))
             other = [q.name for q in entries if q.is_file() and q.name not in kept
-                     and q.name not in ours and not io.is_video_file(q)]
+                     and not (ours and q.name in (*ours, "report.json"))
+                     and not io.is_video_file(q)]
             if other:  # (as ``run`` on the folder says)
                 notes.append(io.skipped_note(name_of(d), other))
             subs = [q.name for q in entries if q.is_dir() and q.name.lower() not in SKIP_DIRS
@@ -367,7 +356,6 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
             notes.append(f"{name_of(d)}: one photo only ({imgs[0].name}): not a set")
         if not entries and d != root:  # (a trial's empty folder went unmentioned)
             notes.append(f"{name_of(d)}: an empty folder: not a set")
-        ours = earlier_outputs(d)
         if ours and not imgs:
             # (a trial's batch into a folder inside ROOT: the next batch over ROOT ran
             # each set's clean.png, dynamic_mask.png and coverage.png as three photos)

@@ -16,7 +16,7 @@ import tempfile
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any, Iterable, Iterator, Sequence
 
 import cv2
 import numpy as np
@@ -142,6 +142,19 @@ def skipped_note(where: str | os.PathLike, names: list[str]) -> str:
 
 # what ``dynremove run`` writes beside its report.json (``batch.write_outputs``)
 RUN_OUTPUTS = ("clean.png", "dynamic_mask.png", "coverage.png")
+
+
+def earlier_outputs(names: Iterable[str]) -> set[str]:
+    """Of a folder's file ``names``, an earlier run's outputs (``RUN_OUTPUTS`` beside a
+    report.json): never photos of a set (``run`` and ``batch``)."""
+    names = set(names)
+    return set(RUN_OUTPUTS) & names if "report.json" in names else set()
+
+
+def outputs_note(where: str | os.PathLike, ours: Iterable[str]) -> str:
+    """The note on the earlier run's outputs skipped in a folder (``run`` and ``batch``)."""
+    return (f"{where}: skipped {', '.join(sorted(ours))}: the outputs of an earlier "
+            "dynremove run (its report.json is beside them)")
 
 
 def conform_op(shape: tuple[int, int], target: tuple[int, int]) -> dict | None:
@@ -288,11 +301,9 @@ def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
             files = sorted((q for q in entries if q.is_file() and not q.name.startswith(".")),
                            key=natural_key)
             imgs, videos, skipped = [], [], []
-            ours = ({q.name for q in files if q.name in RUN_OUTPUTS}
-                    if any(q.name == "report.json" for q in files) else set())
+            ours = earlier_outputs(q.name for q in files)
             if ours:
-                notes.append(f"{p}: skipped {', '.join(sorted(ours))}: the outputs of an "
-                             "earlier dynremove run (its report.json is beside them)")
+                notes.append(outputs_note(p, ours))
             for q in files:
                 if q.name in ours:
                     continue

@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import cv2
 import numpy as np
 
 from dynremove.events import CASE_BOTH_IN_CLUSTER, CASE_GEOMETRY, CASE_ONE_IN_CLUSTER
+from dynremove.refine.colour import delta_e
+from dynremove.refine.fields import blurred_lab
 from dynremove.refine.parallax import SEARCH_CAP_DE as _LINE_CAP
 from dynremove.refine.select import MISFIT_MOVER_P
 
@@ -466,10 +467,9 @@ _BACK_DE = 20.0
 
 
 def _lab_de(a: list[int], b: list[int]) -> float:
-    """CIE76 ΔE between two B, G, R colours (0–255)."""
-    px = np.array([[a, b]], np.float32) / 255.0
-    lab = cv2.cvtColor(px, cv2.COLOR_BGR2Lab)[0]
-    return float(np.linalg.norm(lab[0] - lab[1]))
+    """CIE76 ΔE between two B, G, R colours (0–255), as the fill measures it."""
+    lab = blurred_lab(np.array([[a, b]], np.uint8), 0.0)[0]
+    return float(delta_e(lab[0], lab[1]))
 
 
 def _brought_back(h: dict[str, Any]) -> str:
