@@ -126,6 +126,7 @@ class Params:
     select_minority_one: bool = True  # with three photos (two sources), --select-minority's region also where one source saw the scene and the other still shows the reference's content there, L taking only its part outside L: the rest of a mover the scans found in part (the region at least 0.2 % of the image, 20 % of it in L)
     select_track_movers: bool = True  # where the set is flat (see --select-parallax-px), a source shows the reference's mover where the flow followed it (30 % of a region of L found in its colour, off its epipolar line): that source never fills there
     select_complete: float = 0.7  # decide each region of L whole where the fill decided most of it, a share in (0.5, 1]: a region replaced at least this much is a mover (its kept pieces within --select-complete-px are replaced too); one replaced less than 1 - this is static (its replaced pieces keep the reference); in between, as the fill chose (0 = off)
+    select_keep_partial: float = 0.5  # a region of L that the fill replaced only in part (between 1 - --select-complete and --select-complete of it) is kept whole where its kept part has the movers' colours (mean P(mover) at least this) and, on most of it, no source shows what the reference shows: the rest of a mover that no photo shows free, kept beside its replaced part, left it broken (a cup with holes); half a mover is not removed (0 = off)
     select_complete_px: int = 6  # how far (analysis px) --select-complete's replacement reaches from a region's replaced pixels (0: none; the static rule still applies)
     select_halo_px: int = 2  # the replaced region also takes a rim this wide (analysis px) of kept pixels next to it where the chosen source is free and within --select-tau of the reference and the nearest replaced pixel has the movers' colours: a mover's blurred edge, which the cut keeps as close enough to the scene, left its outline (0 = off)
     select_misfit_levels: float = 20.0  # a replaced region whose fill the blend had to shift by more than this (B/G/R levels: the median over the region of its largest channel's offset) to meet the photo around it, while the reference there lacks the movers' colours (mean P under 0.6), keeps the reference: the fill shows other content than the scene there, a static part flagged in error (0 = off)
@@ -177,6 +178,9 @@ class Params:
         if self.select_complete != 0 and not 0.5 < self.select_complete <= 1.0:
             raise ValueError(f"select_complete must be 0 (off) or in (0.5, 1], got "
                              f"{self.select_complete}")
+        if not 0.0 <= self.select_keep_partial <= 1.0:
+            raise ValueError(f"select_keep_partial must be in [0, 1] (0 = off), got "
+                             f"{self.select_keep_partial}")
         if self.select_minority != 0 and not self.select_minority >= 1:
             raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",

@@ -34,8 +34,9 @@ from dynremove.refine.duplicates import agreement_with_reference, duplicate_sour
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
-from dynremove.refine.select import (FOLLOWED, OUTSIDE, OWN_MOVER, STILL_LINGERING, Selection,
-                                     median_parallax_px, select_fill, unconfirmed_fill)
+from dynremove.refine.select import (FOLLOWED, OUTSIDE, OWN_MOVER, PARTIAL_KEPT, STILL_LINGERING,
+                                     Selection, median_parallax_px, select_fill,
+                                     unconfirmed_fill)
 from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
@@ -789,6 +790,16 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "that saw the background is enough), --select-minority 0 the whole step"
                    if len(srcs) == 2 and params.select_minority_one else
                    "; --select-minority 0 turns this step off"))
+            warnings.warn(msgs[-1], stacklevel=2)
+    if selection is not None and selection.completed is not None:
+        n_pk = int((selection.completed == PARTIAL_KEPT).sum())
+        if n_pk >= 5e-4 * selection.completed.size:
+            msgs.append(f"{n_pk} px that the fill would have replaced were kept as the "
+                        "reference shows them, with the rest of their mover: the fill could "
+                        "replace only part of it, and over the rest no other photo shows "
+                        "the background (they show the mover there too, or movers of their "
+                        "own), so the mover is kept whole rather than left with holes "
+                        "(--select-keep-partial 0 replaces the part it can)")
             warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and dyn.any():
         # most of the fill resting on one photo that the others contradict: three

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import cv2
@@ -13,6 +14,7 @@ from dynremove import preset, remove_dynamic
 from dynremove.evaluation import synth
 from dynremove.refine.montage import expansion_labels, offset_blend, ring_agrees, ring_offset
 from dynremove.refine.morphology import dilate_disc
+from dynremove.refine.select import PARTIAL_KEPT, complete_regions, partial_movers
 from lingering import paste_at_same_spot, warp_mover  # tests/lingering.py
 
 
@@ -1628,6 +1630,19 @@ def test_a_textured_mover_that_moved_is_removed_whatever_the_homography_liked():
     assert _cup_red(r.clean)[cup].mean() < 0.02, _cup_red(r.clean)[cup].mean()
 
 
+@functools.lru_cache(maxsize=1)
+def _tim6_three():
+    """tim6 as three photos, tim1, tim3, tim5 (tim3 the reference): (ImageSet, Result)."""
+    from conftest import data_dir
+    from dynremove import io
+
+    d = data_dir() / "bursts" / "tim6" / "frames"
+    if not d.is_dir():
+        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA)")
+    iset = io.load_image_set([d / "tim1.jpg", d / "tim3.jpg", d / "tim5.jpg"])
+    return iset, remove_dynamic(iset.images, ref=1)
+
+
 def test_with_three_photos_a_plain_shirt_is_not_kept_by_an_ambiguous_line_match():
     """tim6 as tim1, tim3, tim5 (tim3 the reference): the man standing by the pillar
     is in tim3 only. His dark grey shirt matched somewhere along tim1's epipolar
@@ -1636,20 +1651,71 @@ def test_with_three_photos_a_plain_shirt_is_not_kept_by_an_ambiguous_line_match(
     photo (42 % of the box still dark when measured). Such a match must be unique
     on its line (``select_search_unique``). The box is drawn by hand inside his
     shirt in tim3.jpg (720×960)."""
-    from conftest import data_dir
-    from dynremove import io
-
-    d = data_dir() / "bursts" / "tim6" / "frames"
-    if not d.is_dir():
-        pytest.skip(f"real data not found at {d} (set DYNREMOVE_DATA)")
-    iset = io.load_image_set([d / "tim1.jpg", d / "tim3.jpg", d / "tim5.jpg"])
-    r = remove_dynamic(iset.images, ref=1)
+    iset, r = _tim6_three()
     shirt = (slice(270, 350), slice(340, 400))
     dark = lambda im: cv2.cvtColor(im, cv2.COLOR_BGR2GRAY)[shirt] < 100  # noqa: E731
     assert dark(iset.images[1]).mean() > 0.9  # the input shows his shirt there
     assert dark(r.clean).mean() < 0.15, dark(r.clean).mean()  # the wall, in the output
     ev = r.selection.static_evidence[:, shirt[0], shirt[1]]
     assert (ev == 7).any(0).mean() > 0.1  # (inspect names the ambiguous matches)
+
+
+def test_with_three_photos_a_mover_replaced_only_in_part_is_kept_whole():
+    """tim6 as tim1, tim3, tim5 (tim3 the reference): the cup moved by a few
+    centimetres between the shots, so each source shows its own cup over most of
+    the reference's. The graph cut replaced the parts that one source saw past
+    (about half of the cup's region of L) and kept the rest: a cup with holes,
+    the table showing through its sleeve (26 % of the box changed when
+    measured). Its kept part has the movers' colours and no source shows it as the
+    reference does, so the cup is kept whole (``select_keep_partial``), and a note
+    says so. The box is drawn by hand inside the cup of tim3.jpg (720×960)."""
+    iset, r = _tim6_three()
+    cup = (slice(630, 760), slice(135, 205))
+    lab = lambda im: cv2.cvtColor(im.astype(np.float32) / 255, cv2.COLOR_BGR2Lab)  # noqa: E731
+    changed = np.linalg.norm(lab(r.clean) - lab(iset.images[1]), axis=2)[cup] > 10
+    assert changed.mean() < 0.02, changed.mean()
+    assert (r.selection.completed[cup] == PARTIAL_KEPT).mean() > 0.2
+    assert any("kept whole rather than left with holes" in w for w in r.warnings), r.warnings
+
+
+@pytest.mark.parametrize("p, ok", [(0.0, True), (0.5, True), (1.0, True), (-0.1, False),
+                                   (1.5, False)])
+def test_select_keep_partial_is_a_probability_or_off(p, ok):
+    if ok:
+        assert preset("default").replace(select_keep_partial=p).select_keep_partial == p
+    else:
+        with pytest.raises(ValueError, match="select_keep_partial must be in"):
+            preset("default").replace(select_keep_partial=p)
+
+
+def test_partial_movers_keeps_the_rest_of_a_mover_not_the_scene_the_sources_confirm():
+    """``partial_movers`` picks only regions replaced in part (between 1 - share and
+    share) whose kept part has the movers' colours and is shown by no source; and
+    ``complete_regions`` then gives their replaced pixels (and a margin run that
+    only continued them) back to the reference, marked PARTIAL_KEPT."""
+    comp = np.zeros((10, 30), np.intp)
+    comp[1:9, 1:9], comp[1:9, 11:19], comp[1:9, 21:29] = 1, 2, 3
+    label = np.zeros((10, 30), np.intp)
+    label[1:5, 1:9] = label[1:5, 11:19] = 1  # regions 1, 2: half replaced
+    label[1:9, 21:29] = 2  # region 3: replaced whole
+    label[0, 1:9] = 1  # a margin run (outside L) that only continues region 1
+    core = comp > 0
+    frac = np.array([0.0, 0.5, 0.5, 1.0])
+    p = np.full((10, 30), 0.8)
+    shown = np.zeros((10, 30), bool)
+    shown[5:9, 11:19] = True  # region 2's kept half: the sources show it (scene)
+    part = partial_movers(comp, frac, label, p, shown, 0.7, 0.5)
+    assert part.tolist() == [False, True, False, False]
+    # with the scene's colours it is no mover's rest either
+    assert not partial_movers(comp, frac, label, np.full((10, 30), 0.3), shown, 0.7,
+                              0.5).any()
+    allowed = np.ones((3, 10, 30), bool)
+    out, changed = complete_regions(label, core, allowed, 0.7, 0, regions=(comp, frac),
+                                    partial=part)
+    assert (out[comp == 1] == 0).all() and (changed[1:5, 1:9] == PARTIAL_KEPT).all()
+    assert (out[0, 1:9] == 0).all() and (changed[0, 1:9] == PARTIAL_KEPT).all()
+    assert (out[comp == 2] == label[comp == 2]).all()  # as the cut chose
+    assert (out[comp == 3] == 2).all()
 
 
 def test_a_lingering_movers_lettering_is_filled_with_the_rest_of_it():

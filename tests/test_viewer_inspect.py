@@ -712,6 +712,34 @@ def test_a_region_kept_because_its_fill_did_not_fit_is_told_so():
     assert vd.outcome_line(h) == "kept (not in the final mask)"
 
 
+def test_a_mover_kept_whole_because_only_part_of_it_could_go_is_told_so():
+    """Code 4 of ``completed`` (``select.partial_movers``): the fill line, the static
+    test line, the region's share and ``--failures`` say that the reference was kept
+    with the rest of a mover that the fill could replace only in part."""
+    import numpy as np
+
+    from viewer import inspect as vi
+
+    h = {"final_dynamic": False, "source_names": ["a.png", "b.png"], "replacements": [],
+         "gt": None, "x": 1, "y": 1, "t_r": 0.3, "decisions": [],
+         "selection": {"source": 0, "completed": 4, "region_share": 0.46,
+                       "region_rule": {"select_complete": 0.7, "select_complete_px": 6},
+                       "evidence": {"a.png": 0, "b.png": 0}, "static_need": 2,
+                       "explained": 0, "ref_mover_p": 0.8}}
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")][0]
+    assert fill.startswith("fill: reference kept") and "--select-keep-partial" in fill \
+        and "replaced 46 % of its region of L" in fill and "mover's rest" in fill, fill
+    assert "--select-keep-partial" in vd.static_test_line(h)
+    region = np.ones((4, 4), bool)
+    st = {n: np.zeros((4, 4), bool) for n in vi.STAGE_ORDER}
+    for n in ("scan", "clean", "votes", "snap"):
+        st[n][:] = True
+    comp = np.full((4, 4), 4, np.uint8)
+    why, share = vi.failure_cause("FN", region, st, {"completed": comp})
+    assert (why, share) == ("partial", 1.0)
+    assert "--select-keep-partial" in vd.failure_words(why, share)
+
+
 def test_what_the_cut_weighed_is_told_with_the_consensus_or_the_suspect():
     """Where the photomontage kept the reference as the cheapest label, inspect gives
     the two data costs and, where the reference took part in the fill's colour

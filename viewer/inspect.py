@@ -552,7 +552,8 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     that most photos show, found by two or more sources that saw the background),
     ``completed`` (1: kept by the graph cut, replaced because its region of L was
     replaced almost whole; 2: the reverse; 3: kept, as its region's fill did not fit the
-    photo around it, ``select.misfit_regions``), ``region_share`` (uint16: the share of
+    photo around it, ``select.misfit_regions``; 4: kept whole with a mover replaced only
+    in part, ``select.partial_movers``), ``region_share`` (uint16: the share of
     the pixel's region of L the graph cut replaced × P_SCALE, DE_NONE outside; with
     ``region_rule``, the run's --select-complete and --select-complete-px),
     ``line_de``, ``line_x``, ``line_y`` (per source, uint16: the epipolar search's
@@ -893,7 +894,8 @@ def failure_causes(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
     For a missed region ("FN"): never flagged, dropped by the step after the last
     one that had it (``STAGE_ORDER``), or, where the fill by selection dropped it,
     kept as static 3-D structure, kept because its fill did not fit
-    (``completed`` 3), or kept with its region of L (``completed`` 2). For a false
+    (``completed`` 3), kept with its region of L (``completed`` 2), or kept whole
+    with a mover the fill could replace only in part (``completed`` 4). For a false
     positive ("FP"): flagged by the scans, or added by the first step that had it
     (a mover that lingered, where the fill by selection added it so).
     Returns ``[(cause, share), ...]``, largest share first (a cause: a key of
@@ -918,6 +920,7 @@ def failure_causes(kind: str, region: np.ndarray, stages: dict[str, np.ndarray],
         if comp is not None:
             causes[by_sel & (comp[region] == 3)] = "misfit"
             causes[by_sel & (comp[region] == 2)] = "region"
+            causes[by_sel & (comp[region] == 4)] = "partial"
     else:
         # added by the first step that had it (all have it at the end)
         added = np.array(["scan"] + ["added:" + n for n in names[1:]])

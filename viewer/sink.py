@@ -465,7 +465,9 @@ class RerunSink(StepColumns):
                     [(1, "replaced with its region of L", (255, 140, 0, 160)),
                      (2, "kept with its region of L", (0, 160, 255, 160)),
                      (3, "kept: its fill did not fit the photo around it",
-                      (160, 0, 255, 160))]),
+                      (160, 0, 255, 160)),
+                     (4, "kept whole: only part of a mover could be replaced",
+                      (255, 0, 160, 160))]),
                     rr.SegmentationImage(np.asarray(sel.completed, np.uint8)), static=True)
             if getattr(sel, "region_share", None) is not None:
                 self.rec.log(self.p(P.RESULT_REGION_SHARE), rr.DepthImage(

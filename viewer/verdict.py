@@ -419,6 +419,14 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                          f"{MISFIT_MOVER_P:g}): "
                          "the source shows other content than the scene here, a static "
                          "part flagged in error")
+        elif sel.get("completed") == 4:
+            region = region_words(sel)
+            lines.append("fill: reference kept — the photomontage took a source here, but it "
+                         "replaced only part of this region of L, and the part it kept has "
+                         "the movers' colours with no source showing it as the reference "
+                         "does: the rest of a mover that no photo shows free, so the mover "
+                         "is kept whole rather than left with holes (--select-keep-partial)"
+                         + (f"; {region}" if region else ""))
         else:
             lines.append("fill: reference kept" + (" (not in the final mask)"
                                                      if not h.get("final_dynamic") else ""))
@@ -563,6 +571,9 @@ def region_words(sel: dict[str, Any]) -> str | None:
     elif f < 1.0 - share:
         tail = (f"under {lo:.0f} % (1 − --select-complete {share:g}): static, the "
                 "reference kept whole")
+    elif sel.get("completed") == 4:
+        tail = (f"between {lo:.0f} and {hi:.0f} %, its kept part the mover's rest: the "
+                "reference kept whole (--select-keep-partial)")
     else:
         tail = f"between {lo:.0f} and {hi:.0f} %: each pixel as the cut decided"
     return f"{head} ({tail})"
@@ -700,6 +711,10 @@ def static_test_line(h: dict[str, Any]) -> str | None:
         return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
                 "photomontage took a source here, but the reference is kept: the fill did "
                 "not fit the photo around its region (--select-misfit-levels)")
+    if sel.get("completed") == 4:
+        return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
+                "photomontage took a source here, but the reference is kept with the rest "
+                "of its mover, which no photo shows free (--select-keep-partial)")
     region = region_words(sel)
     weighed = weighed_words(sel, len(h.get("source_names") or []))
     cost = sel.get("data_cost") or {}
@@ -839,6 +854,8 @@ FAILURE_CAUSES = {
                  "geometry expects)",
     "misfit": "kept: its fill did not fit the photo around it (--select-misfit-levels)",
     "region": "kept with its region of L (--select-complete)",
+    "partial": "kept whole with its mover, which the fill could replace only in part "
+               "(--select-keep-partial)",
     "lingering": "added as a mover that lingered (--select-minority)",
 }
 
