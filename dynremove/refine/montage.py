@@ -38,6 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.colour import delta_e, pairwise_delta_e
+from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.fields import harmonic_fill
 from dynremove.refine.morphology import dilate_disc
 
@@ -225,9 +226,8 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
         band &= ~suspect
     by, bx = np.nonzero(band)
     ref_ring = reference[ry, rx]
-    for lbl in np.unique(labels[replaced]):
-        if lbl == 0:
-            continue
+
+    def blend(lbl):
         sel = replaced & (labels == lbl)
         diff = labs[0, ry, rx] - labs[lbl, ry, rx]
         local = band_light(labs[0, by, bx] - labs[lbl, by, bx], usable[lbl, by, bx],
@@ -235,11 +235,19 @@ def offset_blend(reference: npt.NDArray[np.uint8], candidates: npt.NDArray[np.ui
         good = ring_agrees(diff, usable[lbl, ry, rx], max_de, local=local)
         sy, sx = np.nonzero(sel)
         off = ring_offset(ref_ring, candidates[lbl, ry, rx], good, (ry, rx), sel)
-        out[sy, sx] = add_offset(candidates[lbl, sy, sx], off)
+        writes = [(sy, sx, add_offset(candidates[lbl, sy, sx], off))]
         for cy, cx, coff in component_offsets(ref_ring, candidates[lbl, ry, rx], diff,
                                               usable[lbl, ry, rx], ring, sel, replaced,
                                               ring_px=ring_px, max_de=max_de):
-            out[cy, cx] = add_offset(candidates[lbl, cy, cx], coff)
+            writes.append((cy, cx, add_offset(candidates[lbl, cy, cx], coff)))
+        return writes
+
+    # each source's part on a thread (each reads the inputs only); written in
+    # label order, as a loop would
+    lbls = [int(v) for v in np.unique(labels[replaced]) if v != 0]
+    for writes in for_each_source(lambda i: blend(lbls[i]), len(lbls)):
+        for wy, wx, val in writes:
+            out[wy, wx] = val
     return out
 
 
