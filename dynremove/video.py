@@ -20,8 +20,13 @@ VIDEO_FRAMES = 7  # frames taken from a video by default
 
 
 # --- video --------------------------------------------------------------------------
-def parse_span(span: str | None, n_total: int) -> tuple[int, int]:
-    """``START:END`` frame numbers (END excluded; either may be empty) -> (start, end)."""
+def parse_span(span: str | None, n_total: int, notes: list[str] | None = None
+               ) -> tuple[int, int]:
+    """``START:END`` frame numbers (END excluded; either may be empty) -> (start, end).
+
+    An END past the clip is cut to it; with ``notes``, a line saying so is appended
+    (a trial's ``--span 30:50`` on a clip of 35 frames was cut without a word).
+    Raises InputError on a malformed span or one with no frame in the clip."""
     if not span:
         return 0, n_total
     a, sep, b = span.partition(":")
@@ -35,6 +40,9 @@ def parse_span(span: str | None, n_total: int) -> tuple[int, int]:
                          "(either may be empty)")
     if start >= end:  # (a trial's 10:5 was told the clip's length, not the order)
         raise InputError(f"--span {span}: END must be greater than START (END is excluded)")
+    if end > n_total and start < n_total and notes is not None:
+        notes.append(f"--span {span}: the clip has {n_total} frames (0..{n_total - 1}): "
+                     f"the span taken is {start}:{n_total}")
     end = min(end, n_total)
     if start >= end:
         raise InputError(f"--span {span}: no frames (the clip has {n_total}: 0..{n_total - 1})")
@@ -95,11 +103,11 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
                 n_total += 1
             cap.release()
             cap = cv2.VideoCapture(str(p))
-        start, end = parse_span(span, n_total)
+        notes: list[str] = []
+        start, end = parse_span(span, n_total, notes)
         n = min(n_want, end - start)
         if n < 2:
             raise InputError(f"{p}: need at least 2 frames, the span has {end - start}")
-        notes = []
         if n < n_want:
             notes.append(f"{p.name}: only {n} frames in the span, all taken")
         edges = [start + round(k * (end - start) / n) for k in range(n + 1)]

@@ -151,6 +151,12 @@ def test_video_pick_even_and_span(tmp_path, scene):
     write_clip(clip, frames)
     imgs, idx, notes = video.read_video(clip, frames=4, span="4:16", pick="even")
     assert idx == [5, 8, 11, 14] and len(imgs) == 4
+    assert not any("the span taken" in n for n in notes), notes
+    # an END past the clip is cut to it, and a note says so (a trial's --span 30:50
+    # on a 35-frame clip was cut without a word)
+    _, idx, notes = video.read_video(clip, frames=4, span="12:50", pick="even")
+    assert idx[-1] < 20 and any("--span 12:50: the clip has 20 frames" in n
+                                and "the span taken is 12:20" in n for n in notes), notes
     # sharpest: a blurred frame is never taken when its window has a sharp one
     frames = [scene.images[i % 5] if i % 2 else cv2.GaussianBlur(scene.images[i % 5],
                                                                   (0, 0), 3)
