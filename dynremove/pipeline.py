@@ -799,7 +799,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "replace only part of it, and over the rest no other photo shows "
                         "the background (they show the mover there too, or movers of their "
                         "own), so the mover is kept whole rather than left with holes "
-                        "(--select-keep-partial 0 replaces the part it can)")
+                        "(--select-keep-partial 0 turns this rule off)")
             warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and dyn.any():
         # most of the fill resting on one photo that the others contradict: three
@@ -839,12 +839,21 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         warnings.warn(msgs[-1], stacklevel=2)
     if not dyn.any():
         flagged = int(sum(int(sm["n_dynamic"]) for sm in summaries))
-        msgs.append("nothing was found moving in the reference: the clean image is the "
-                    "reference unchanged" + (
-                        f" (the scans flagged {flagged} px, scattered in pieces that the "
-                        "clean-up of L removed: each thinner than its opening, or under "
-                        f"--min-region-px {params.min_region_px} px)"
-                        if flagged and params.clean_mask else ""))
+        n_pre = int(pre_fill.sum()) if selection is not None else 0
+        if n_pre:
+            # found, then kept by the fill (a trial read "nothing was found moving"
+            # right after the note that a mover was kept whole)
+            msgs.append("nothing was removed: the clean image is the reference unchanged "
+                        f"(the steps before the fill found {n_pre} px moving, and the fill "
+                        "kept them as the reference shows them: the notes above, and "
+                        "'dynremove inspect' on a recording, say why)")
+        else:
+            msgs.append("nothing was found moving in the reference: the clean image is the "
+                        "reference unchanged" + (
+                            f" (the scans flagged {flagged} px, scattered in pieces that the "
+                            "clean-up of L removed: each thinner than its opening, or under "
+                            f"--min-region-px {params.min_region_px} px)"
+                            if flagged and params.clean_mask else ""))
         warnings.warn(msgs[-1], stacklevel=2)
     last = int(summaries[-1]["n_dynamic"]) if summaries else 0
     if params.max_scans > 1 and len(summaries) == params.max_scans and last > 0:

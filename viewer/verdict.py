@@ -572,8 +572,7 @@ def region_words(sel: dict[str, Any]) -> str | None:
         tail = (f"under {lo:.0f} % (1 − --select-complete {share:g}): static, the "
                 "reference kept whole")
     elif sel.get("completed") == 4:
-        tail = (f"between {lo:.0f} and {hi:.0f} %, its kept part the mover's rest: the "
-                "reference kept whole (--select-keep-partial)")
+        tail = f"between {lo:.0f} and {hi:.0f} %"
     else:
         tail = f"between {lo:.0f} and {hi:.0f} %: each pixel as the cut decided"
     return f"{head} ({tail})"
@@ -713,8 +712,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                 "not fit the photo around its region (--select-misfit-levels)")
     if sel.get("completed") == 4:
         return ("static 3-D structure test: not passed (" + evidence + why_not + "); the "
-                "photomontage took a source here, but the reference is kept with the rest "
-                "of its mover, which no photo shows free (--select-keep-partial)")
+                "reference is kept all the same, with the rest of its mover (see the fill "
+                "line)")
     region = region_words(sel)
     weighed = weighed_words(sel, len(h.get("source_names") or []))
     cost = sel.get("data_cost") or {}
