@@ -1552,14 +1552,22 @@ def test_a_region_kept_whole_takes_back_the_margin_its_fragments_reached():
     assert (out[20:30, 31:33] == 1).all() and (out[20:30, 25:31] == 0).all()
 
 
-@pytest.mark.parametrize("share, ok", [(0.0, True), (0.7, True), (1.0, True), (0.5, False),
-                                       (1.5, False)])
-def test_select_complete_is_off_or_a_majority_share(share, ok):
+@pytest.mark.parametrize("field, value, ok", [
+    ("select_complete", 0.0, True), ("select_complete", 0.7, True),
+    ("select_complete", 1.0, True), ("select_complete", 0.5, False),
+    ("select_complete", 1.5, False),
+    # --select-keep-partial: a P(mover), or 0 (off)
+    ("select_keep_partial", 0.0, True), ("select_keep_partial", 0.5, True),
+    ("select_keep_partial", 1.0, True), ("select_keep_partial", -0.1, False),
+    ("select_keep_partial", 1.5, False)])
+def test_the_region_rules_take_their_ranges_only(field, value, ok):
+    """--select-complete is 0 (off) or a majority share; --select-keep-partial 0 (off)
+    or a probability."""
     if ok:
-        assert preset("default").replace(select_complete=share).select_complete == share
+        assert getattr(preset("default").replace(**{field: value}), field) == value
     else:
-        with pytest.raises(ValueError, match="select_complete must be 0"):
-            preset("default").replace(select_complete=share)
+        with pytest.raises(ValueError, match=f"{field} must be"):
+            preset("default").replace(**{field: value})
 
 
 def test_completion_removes_the_fragments_of_a_real_mover(davis, tmp_path):
@@ -1676,16 +1684,6 @@ def test_with_three_photos_a_mover_replaced_only_in_part_is_kept_whole():
     assert changed.mean() < 0.02, changed.mean()
     assert (r.selection.completed[cup] == PARTIAL_KEPT).mean() > 0.2
     assert any("kept whole rather than left with holes" in w for w in r.warnings), r.warnings
-
-
-@pytest.mark.parametrize("p, ok", [(0.0, True), (0.5, True), (1.0, True), (-0.1, False),
-                                   (1.5, False)])
-def test_select_keep_partial_is_a_probability_or_off(p, ok):
-    if ok:
-        assert preset("default").replace(select_keep_partial=p).select_keep_partial == p
-    else:
-        with pytest.raises(ValueError, match="select_keep_partial must be in"):
-            preset("default").replace(select_keep_partial=p)
 
 
 def test_a_mover_found_and_kept_whole_is_not_called_nothing_found():
