@@ -652,7 +652,9 @@ def static_test_line(h: dict[str, Any]) -> str | None:
               (2, "found on the epipolar line"),
               (3, "found on the epipolar line, but too few others are for that to count "
                   "while another source that sees it shows something else"),
-              (4, "its flow match agrees, in the movers' colours"),
+              # (a trial read "0 count (its flow match agrees ...)" as a contradiction)
+              (4, "not counted: its flow match agrees, but in the movers' colours, so it "
+                  "may show its own copy of the mover"),
               (5, "not found: its flow match differs"
                   + (f", and nothing on the epipolar line is within ΔE {search_de:.1f}"
                      if isinstance(search_de, float) and search_de == search_de
