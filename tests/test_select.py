@@ -1725,6 +1725,11 @@ def test_partial_movers_keeps_the_rest_of_a_mover_not_the_scene_the_sources_conf
     # with the scene's colours it is no mover's rest either
     assert not partial_movers(comp, frac, label, np.full((10, 30), 0.3), shown, 0.7,
                               0.5).any()
+    # nor where no source sees the kept half (outside every other frame: the fill
+    # inpaints it with the replaced half, and the mover goes whole)
+    unseen = np.ones((10, 30), bool)
+    unseen[5:9, 1:9] = False
+    assert not partial_movers(comp, frac, label, p, shown, 0.7, 0.5, seen=unseen).any()
     allowed = np.ones((3, 10, 30), bool)
     out, changed = complete_regions(label, core, allowed, 0.7, 0, regions=(comp, frac),
                                     partial=part)

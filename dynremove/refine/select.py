@@ -1207,6 +1207,7 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
 def partial_movers(comp: npt.NDArray[np.intp], frac: npt.NDArray[np.floating],
                    label: npt.NDArray[np.intp], p_ref: npt.NDArray[np.floating],
                    shown: npt.NDArray[np.bool_], share: float, min_p: float, *,
+                   seen: npt.NDArray[np.bool_] | None = None,
                    max_shown: float = _PARTIAL_AGREE) -> npt.NDArray[np.bool_]:
     """The regions of L replaced only in part whose kept part is the rest of a mover.
 
@@ -1219,7 +1220,10 @@ def partial_movers(comp: npt.NDArray[np.intp], frac: npt.NDArray[np.floating],
     few centimetres: each source shows its own cup over part of it). Replacing
     the other part leaves the mover broken (a cup with holes, half a tube);
     such a region is kept whole. A kept part that the sources confirm (a mask
-    that reached over static scene beside the mover) leaves the region as it is.
+    that reached over static scene beside the mover) leaves the region as it is,
+    and so does one that no source sees at all (``seen``): outside every other
+    frame, it is inpainted with the replaced part (``unseen_part_of_replaced``),
+    so the mover goes whole that way.
 
     Parameters
     ----------
@@ -1238,6 +1242,10 @@ def partial_movers(comp: npt.NDArray[np.intp], frac: npt.NDArray[np.floating],
         ``Params.select_complete``, in (0.5, 1].
     min_p : float
         ``Params.select_keep_partial``, in (0, 1].
+    seen : (h, w) bool ndarray, optional
+        Where some source sees the pixel (inside its frame, with content); only
+        those kept pixels are judged, and a region kept mostly where none sees
+        it is left as it is (default: every pixel seen).
     max_shown : float
 
     Returns
@@ -1263,14 +1271,17 @@ def partial_movers(comp: npt.NDArray[np.intp], frac: npt.NDArray[np.floating],
     between[0] = False
     if not between.any():
         return between
-    kept = (comp > 0) & (label == 0)
+    kept_all = (comp > 0) & (label == 0)
+    n_kept = np.bincount(comp[kept_all], minlength=n)
+    kept = kept_all if seen is None else kept_all & seen
     idx = comp[kept]
     cnt = np.bincount(idx, minlength=n).astype(np.float64)
     p = np.nan_to_num(np.asarray(p_ref, np.float64), nan=0.0)[kept]
     p_mean = np.bincount(idx, weights=p, minlength=n) / np.maximum(cnt, 1)
     shown_share = np.bincount(idx, weights=shown[kept].astype(np.float64),
                               minlength=n) / np.maximum(cnt, 1)
-    return between & (cnt > 0) & (p_mean >= min_p) & (shown_share < max_shown)
+    return (between & (cnt > 0) & (2 * cnt >= n_kept) & (p_mean >= min_p)
+            & (shown_share < max_shown))
 
 
 def median_parallax_px(views: list[TwoView], field: str = "parallax_px") -> float:
@@ -1712,7 +1723,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # unchanged; README, session 59)
         partial = (partial_movers(rcomp, rfrac, lab, p_mover[0],
                                   ((dist[0, 1:] < tau) & usable[1:]).any(0),
-                                  P.select_complete, P.select_keep_partial)
+                                  P.select_complete, P.select_keep_partial,
+                                  seen=usable[1:].any(0))
                    if P.select_keep_partial > 0 else None)
         lab, region_rule = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
                                             P.select_complete_px, regions=(rcomp, rfrac),
