@@ -74,13 +74,15 @@ def sharpness(img: np.ndarray, valid: np.ndarray | None = None, *,
 
 
 def read_video(path: str | os.PathLike, *, frames: int | None = None,
-               span: str | None = None, pick: str = "sharpest"
+               span: str | None = None, pick: str = "sharpest", _replan: bool = True
                ) -> tuple[list[np.ndarray], list[int], list[str]]:
     """Take ``frames`` frames (default 7) from a clip, one per even window of ``span``.
 
     ``pick="sharpest"``: the frame of each window with the largest variance of the
     Laplacian; ``"even"``: the window's centre. Returns images (BGR uint8), their
-    frame numbers (0-based) and notes. Read with OpenCV (FFmpeg) in one pass.
+    frame numbers (0-based) and notes. Read with OpenCV (FFmpeg) in one pass; a
+    clip that cannot be read up to the frame count it reports (a truncated file)
+    is read a second time, its windows over the frames it has.
     """
     p = Path(path)
     n_want = VIDEO_FRAMES if frames is None else int(frames)
@@ -117,9 +119,11 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
         i, k = start, 0
         last = centres[-1] if pick == "even" else end - 1
+        stopped = None  # the first frame that could not be read (a truncated clip)
         while i <= last:
             ok = cap.grab()
             if not ok:
+                stopped = i
                 break
             while k + 1 < n and i >= edges[k + 1]:
                 k += 1
@@ -138,6 +142,16 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
     finally:
         cap.release()
     got = [(idx, fr) for _, idx, fr in best if fr is not None]
+    if stopped is not None and len(got) < n and stopped - start >= 2 and _replan:
+        # a clip that ends before the frame count it reports (a truncated file):
+        # the windows again, over the frames it has (a trial's clip gave 4 frames
+        # of 12 that could be read, where it had enough for all 7)
+        imgs, idx, again = read_video(p, frames=n_want, span=f"{start}:{stopped}",
+                                      pick=pick, _replan=False)
+        return imgs, idx, [f"{p.name}: the clip reports {n_total} frames but could be read "
+                           f"only up to frame {stopped - 1} (truncated?): the frames were "
+                           f"chosen from {start}:{stopped}"] + [
+                               n for n in again if not n.startswith("--span")]
     if len(got) < 2:
         raise InputError(f"{p}: could read {len(got)} frame(s) of the span "
                          f"{start}:{end} (truncated or unsupported video)")

@@ -145,6 +145,28 @@ def test_video_frames_as_photos(tmp_path, capsys, clip_scene):
     assert abs(jv - jp) <= 0.05, (jv, jp)
 
 
+def test_a_truncated_clip_gives_its_frames_from_what_it_has(tmp_path, scene):
+    """A clip cut short (its header still counts every frame) was read over windows
+    of the whole count: the windows past its end had no frame (a trial's clip gave 4
+    of 12 readable). The windows are planned again over the frames it has, with a
+    note."""
+    frames = [cv2.resize(scene.images[i % 5], (96, 72)) for i in range(24)]
+    clip = tmp_path / "c.avi"
+    write_clip(clip, frames)
+    data = clip.read_bytes()
+    cut = tmp_path / "cut.avi"
+    cut.write_bytes(data[:len(data) // 2])
+    cap = cv2.VideoCapture(str(cut))
+    counted, readable = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0
+    while cap.grab():
+        readable += 1
+    cap.release()
+    assert counted == 24 and 7 <= readable < 24, (counted, readable)  # the condition
+    imgs, idx, notes = video.read_video(cut, frames=7, pick="even")
+    assert len(imgs) == 7 and max(idx) < readable, idx
+    assert any("could be read only up to frame" in n and "truncated" in n for n in notes), notes
+
+
 def test_video_pick_even_and_span(tmp_path, scene):
     frames = [cv2.resize(scene.images[i % 5], (96, 72)) for i in range(20)]
     clip = tmp_path / "c.avi"
