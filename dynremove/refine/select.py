@@ -1247,6 +1247,8 @@ def partial_movers(comp: npt.NDArray[np.intp], frac: npt.NDArray[np.floating],
         those kept pixels are judged, and a region kept mostly where none sees
         it is left as it is (default: every pixel seen).
     max_shown : float
+        The kept part counts as the mover's only where ``shown`` covers less than
+        this share of its judged pixels (default ``_PARTIAL_AGREE``, 0.5).
 
     Returns
     -------
@@ -1719,7 +1721,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     if P.select_complete > 0:
         # a region replaced only in part whose kept part is the mover's rest, which
         # no source showed free: kept whole (tim6 as tim1, tim3, tim5: a cup with
-        # holes and half a tube before; 12 composites damage 0.282 -> 0.265 %, DAVIS J
+        # holes and half a tube before; 12 composites damage 0.282 -> 0.263 %, DAVIS J
         # unchanged; README, session 59)
         partial = (partial_movers(rcomp, rfrac, lab, p_mover[0],
                                   ((dist[0, 1:] < tau) & usable[1:]).any(0),
