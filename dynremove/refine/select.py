@@ -1175,19 +1175,19 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         # with no pixel of ``core`` left, next to a reverted pixel
         m, rc = cv2.connectedComponents((out != 0).astype(np.uint8), connectivity=8)
         has_core = np.bincount(rc[core], minlength=m) > 0
-        near_back = cv2.dilate(back.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-        touch = np.zeros(m, bool)
-        touch[np.unique(rc[near_back])] = True
-        trail = (touch & ~has_core)[rc] & (rc > 0) & allowed[0]
+
+        def touching(pixels):  # the replaced components next to ``pixels``, (m,) bool
+            near = cv2.dilate(pixels.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+            t = np.zeros(m, bool)
+            t[np.unique(rc[near])] = True
+            return t
+
+        trail = (touching(back) & ~has_core)[rc] & (rc > 0) & allowed[0]
         out[trail] = 0
         changed[trail] = 2
-        if partial is not None and (changed == PARTIAL_KEPT).any():
+        if partial is not None:
             # (a trail next to a region kept whole as a part of a mover says so)
-            near_p = cv2.dilate((changed == PARTIAL_KEPT).astype(np.uint8),
-                                np.ones((3, 3), np.uint8)) > 0
-            touch_p = np.zeros(m, bool)
-            touch_p[np.unique(rc[near_p])] = True
-            changed[trail & touch_p[rc]] = PARTIAL_KEPT
+            changed[trail & touching(changed == PARTIAL_KEPT)[rc]] = PARTIAL_KEPT
     whole = frac >= share
     whole[0] = False
     todo = whole[comp] & ~rep
