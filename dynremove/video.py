@@ -148,10 +148,11 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
         # of 12 that could be read, where it had enough for all 7)
         imgs, idx, again = read_video(p, frames=n_want, span=f"{start}:{stopped}",
                                       pick=pick, _replan=False)
-        return imgs, idx, [f"{p.name}: the clip reports {n_total} frames but could be read "
-                           f"only up to frame {stopped - 1} (truncated?): the frames were "
-                           f"chosen from {start}:{stopped}"] + [
-                               n for n in again if not n.startswith("--span")]
+        # (the user's --span note stays; the first pass's other notes were of its windows)
+        said = [n for n in notes if n.startswith("--span")]
+        return imgs, idx, said + [f"{p.name}: the clip reports {n_total} frames but could be "
+                                  f"read only up to frame {stopped - 1} (truncated?): the "
+                                  f"frames were chosen from {start}:{stopped}"] + again
     if len(got) < 2:
         raise InputError(f"{p}: could read {len(got)} frame(s) of the span "
                          f"{start}:{end} (truncated or unsupported video)")

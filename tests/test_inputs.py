@@ -165,6 +165,9 @@ def test_a_truncated_clip_gives_its_frames_from_what_it_has(tmp_path, scene):
     imgs, idx, notes = video.read_video(cut, frames=7, pick="even")
     assert len(imgs) == 7 and max(idx) < readable, idx
     assert any("could be read only up to frame" in n and "truncated" in n for n in notes), notes
+    # a --span past the header's count keeps its note through the second reading
+    _, _, notes = video.read_video(cut, frames=4, span="2:40", pick="even")
+    assert any(n.startswith("--span 2:40: the clip has 24 frames") for n in notes), notes
 
 
 def test_video_pick_even_and_span(tmp_path, scene):
