@@ -122,6 +122,7 @@ class Params:
     select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px, weighted: see --select-search-support-de) is under this (0 = off)
     select_search_support_de: float = 5.0  # the epipolar search's window weighs its cells by their colour's likeness to the centre's, exp(-dE / this) in CIE76 dE (adaptive support weights, Yoon & Kweon 2006), so that a thin structure is compared, not the background around it (0 = a plain box)
     select_search_unique: float = 1.5  # with three photos or two, where one source's epipolar match would keep a pixel of L as static while the other source found nothing, that match must be unique: the best match farther than 10 px along the line must cost more than this × its ΔE + 2 (a ratio test: a plain dark shirt matches all along a dark screen; 0 = off)
+    select_search_against_de: float = 16.0  # in a 3-D set, where fewer than two sources found a pixel of L's content on their epipolar lines, another source that sees the pixel contradicts them when nothing on its own line comes within this CIE76 dE, even where its flow match has the movers' colours (a copy of the reference's mover would match on the line: a dark screen's edge beside a man's head is no copy of him; 0 = off: such a source never contradicts)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)
     select_minority_one: bool = True  # with three photos (two sources), --select-minority's region also where one source saw the scene and the other still shows the reference's content there, L taking only its part outside L: the rest of a mover the scans found in part (the region at least 0.2 % of the image, 20 % of it in L)
     select_track_movers: bool = True  # where the set is flat (see --select-parallax-px), a source shows the reference's mover where the flow followed it (30 % of a region of L found in its colour, off its epipolar line): that source never fills there
@@ -185,7 +186,8 @@ class Params:
             raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
                      "select_parallax_px", "select_margin_px", "select_search_de",
-                     "select_search_support_de", "select_search_unique", "select_complete_px",
+                     "select_search_support_de", "select_search_unique",
+                     "select_search_against_de", "select_complete_px",
                      "select_halo_px",
                      "select_misfit_levels"):
             if getattr(self, name) < 0:

@@ -804,6 +804,19 @@ def test_one_source_s_epipolar_evidence_is_told_when_it_counted_alone():
     # (not "no other source contradicts it" beside b's "nothing alike": the rule)
     assert "own copy of the mover" in alone and "contradicts it" not in alone, alone
     assert "counts from one source" not in line({"a": 2, "b": 2})
+    # with --select-search-against-de recorded, the excuse names it, and so does the
+    # contradiction where it held (b found nothing near the content on its line)
+    def line_at(evidence, explained):
+        h = dict(x=1, y=1, final_dynamic=False, source_names=list(evidence),
+                 selection=dict(evidence=evidence, static_need=1, explained=explained,
+                                ref_mover_p=0.3, source=0, completed=0,
+                                thresholds={"select_search_de": 8.0,
+                                            "select_search_against_de": 16.0}))
+        return vd.static_test_line(h)
+
+    assert "something within ΔE 16.0 on its epipolar line" in line_at({"a": 2, "b": 5}, 1)
+    against = line_at({"a": 3, "b": 5}, 0)
+    assert "nothing within ΔE 16.0 on its line" in against, against
 
 
 def test_a_pixel_the_fill_added_names_the_rule_that_did():

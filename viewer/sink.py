@@ -541,7 +541,9 @@ class RerunSink(StepColumns):
                              rr.AnyValues(select_search_de=float(params.get("select_search_de",
                                                                              float("nan"))),
                                           select_tau=float(params.get("select_tau",
-                                                                      float("nan")))),
+                                                                      float("nan"))),
+                                          select_search_against_de=float(params.get(
+                                              "select_search_against_de", float("nan")))),
                              static=True)
                 self.rec.log(self.p(P.RESULT_REF_MOVER_P), rr.DepthImage(
                     _quantised(sel.ref_mover_p, P.P_SCALE), meter=float(P.P_SCALE),

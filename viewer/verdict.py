@@ -636,6 +636,9 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     de = sel.get("line_de") or {}
     lx, ly = sel.get("line_x") or {}, sel.get("line_y") or {}
     search_de = (sel.get("thresholds") or {}).get("select_search_de")
+    against_de = (sel.get("thresholds") or {}).get("select_search_against_de")
+    near = (f" and something within ΔE {against_de:.1f} on its epipolar line"
+            if isinstance(against_de, float) and against_de > 0 else "")
 
     def on_line(n: str) -> str:
         at = f" at ({lx[n]:.0f}, {ly[n]:.0f}) in it" if n in lx and n in ly else ""
@@ -651,7 +654,10 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     groups = [(1, "its flow match shows it"),
               (2, "found on the epipolar line"),
               (3, "found on the epipolar line, but too few others are for that to count "
-                  "while another source that sees it shows something else"),
+                  "while another source that sees it shows something else"
+                  + (f" (outside the movers' colours, or with nothing within ΔE "
+                     f"{against_de:.1f} on its line: no copy of the mover)"
+                     if isinstance(against_de, float) and against_de > 0 else "")),
               # (a trial read "0 count (its flow match agrees ...)" as a contradiction)
               (4, "not counted: its flow match agrees, but in the movers' colours, so it "
                   "may show its own copy of the mover"),
@@ -673,8 +679,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
         # "nothing alike" on the line, which showed plain wall: the rule's words now)
         parts.append("the epipolar search's evidence counts from one source here: every "
                      "other source that did not find the content shows the movers' "
-                     "colours at its flow match, which is taken for its own copy of the "
-                     "mover hiding the content, not for a contradiction")
+                     f"colours at its flow match{near}, which is taken for its own copy "
+                     "of the mover hiding the content, not for a contradiction")
     # ("3 of the 2 needed" read as a bug to a trial: more may count than are needed)
     evidence = (f"{counted} source{'s count' if counted != 1 else ' counts'} as showing the "
                 f"reference's content here, {need} needed (" + "; ".join(parts) + ")")

@@ -23,6 +23,11 @@ that the scan flagged with doubled content.
    evidence counts where at least two sources, and half of them, explain it. Where
    one source's match would decide alone (three photos or two) against a source
    that found nothing, it must be unique on its line (``select_search_unique``).
+   A source that did not find the content counts against such a match where its
+   flow match lacks the movers' colours, or where nothing on its line comes
+   near the content (``select_search_against_de``): only a source whose flow
+   match has the movers' colours, and whose line holds something like the
+   content, may be showing its own copy of the mover over it.
    **A mover that lingered** (``_minority_witnesses``, ``select_minority``):
    where the reference and most sources show an object and two or more
    sources, agreeing, show the scene's common colours behind it, L takes the
@@ -1538,6 +1543,16 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # along tim1's line and he stayed as a dark figure (README, session 58)
         shown = matched | searched
         against = seen & ~shown & ((p_flow < 0.5) | off_line)
+        if P.select_search_against_de > 0:
+            # ... but a source whose line holds nothing within select_search_against_de
+            # of the reference's content shows no copy of the reference's mover
+            # there (a copy would match on the line): it contradicts, whatever the
+            # colour at its flow match. tim6 as tim1, tim3, tim5: the man's head
+            # beside the screen matched the screen on tim1's line alone, tim5's
+            # samples at the screen's edge had the movers' dark colours, and the
+            # head stayed in the clean photo (70 % of a box inside it dark; 10 %
+            # with the rule). (NaN, not searched, is no contradiction.)
+            against |= seen & ~shown & (line_de >= P.select_search_against_de)
         line_found = searched & (
             (shown.sum(0) >= np.maximum(2, need))[None] | (~against.any(0))[None] & unique)
         ambiguous = searched & ~line_found & ~unique & (~against.any(0))[None]
