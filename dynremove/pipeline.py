@@ -794,8 +794,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     if selection is not None and selection.completed is not None:
         n_pk = int((selection.completed == PARTIAL_KEPT).sum())
         if n_pk >= 5e-4 * selection.completed.size:
+            # (where: a trial read the note as covering another mover of the photo,
+            # left with holes by other rules)
             msgs.append(f"{n_pk} px that the fill would have replaced were kept as the "
-                        "reference shows them, with the rest of their mover: the fill could "
+                        f"reference shows them ({_where(selection.completed == PARTIAL_KEPT)}), "
+                        "with the rest of their mover: the fill could "
                         "replace only part of it, and over the rest no other photo shows "
                         "the background (they show the mover there too, or movers of their "
                         "own), so the mover is kept whole rather than left with holes "
@@ -855,6 +858,21 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                             f"--min-region-px {params.min_region_px} px)"
                             if flagged and params.clean_mask else ""))
         warnings.warn(msgs[-1], stacklevel=2)
+    elif selection is not None:
+        # almost nothing left of much that was flagged: said, as where nothing is (a
+        # fresh-user trial on tim4, tim5, tim6: 23 468 px flagged, 42 removed, no note)
+        flagged = int(summaries[0]["n_dynamic"]) if summaries else 0
+        n_dyn, n_pre = int(dyn.sum()), int(pre_fill.sum())
+        if flagged >= 2e-3 * dyn.size and n_dyn < LITTLE_REMOVED * flagged:
+            n_ex = int((pre_fill & selection.explained).sum())
+            msgs.append(
+                f"little was removed: {n_dyn} px ({_where(dyn)}), of the {flagged} px the "
+                f"scans flagged: the clean-up of L and the border steps after it left {n_pre} px, "
+                f"and the fill kept {n_pre - n_dyn} of those as the reference shows them"
+                + (f" ({n_ex} px as static 3-D structure that other photos show in place)"
+                   if n_ex else "")
+                + ": 'dynremove inspect' on a recording says why at each pixel")
+            warnings.warn(msgs[-1], stacklevel=2)
     last = int(summaries[-1]["n_dynamic"]) if summaries else 0
     if params.max_scans > 1 and len(summaries) == params.max_scans and last > 0:
         # the paper's scans alternate until one calls no pixel dynamic; the cap stops
@@ -883,6 +901,27 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         gray_sources=gray_note is not None)
     sink.finish(result)
     return result
+
+
+# a run that removes less than this share of what the scans flagged says so
+LITTLE_REMOVED = 0.1
+
+
+def _where(mask: np.ndarray, n: int = 3) -> str:
+    """Where ``mask`` (H, W) bool lies, in words: the boxes of its ``n`` largest parts
+    (8-connected after a 5 px closing; x then y, in the analysed image's pixels, as
+    ``inspect --pixel`` counts), largest first, and how many more parts there are."""
+    joined = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
+    k, _, stats, _ = cv2.connectedComponentsWithStats(joined | mask.astype(np.uint8),
+                                                       connectivity=8)
+    if k <= 1:
+        return "nowhere"
+    order = 1 + np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")
+    boxes = [f"x {x}–{x + w - 1}, y {y}–{y + h - 1}" for x, y, w, h, _ in
+             (stats[i] for i in order[:n])]
+    more = k - 1 - len(boxes)
+    return "at " + "; ".join(boxes) + (f"; and {more} smaller part{'s' * (more > 1)}"
+                                       if more > 0 else "")
 
 
 def _names(who: list[str]) -> str:

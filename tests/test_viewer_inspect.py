@@ -802,7 +802,10 @@ def test_one_source_s_epipolar_evidence_is_told_when_it_counted_alone():
     alone = line({"a": 2, "b": 5})
     assert "kept as static" in alone and "counts from one source here" in alone, alone
     # (not "no other source contradicts it" beside b's "nothing alike": the rule)
-    assert "own copy of the mover" in alone and "contradicts it" not in alone, alone
+    assert "a copy of the mover in that photo" in alone and "contradicts it" not in alone, alone
+    # (an assumption, said as one: a trial found the man in one photo only, and the
+    # words had told of "its own copy of the mover" in another)
+    assert "it assumes one" in alone, alone
     assert "counts from one source" not in line({"a": 2, "b": 2})
     # with --select-search-against-de recorded, the excuse names it, and so does the
     # contradiction where it held (b found nothing near the content on its line)

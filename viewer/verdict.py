@@ -679,8 +679,10 @@ def static_test_line(h: dict[str, Any]) -> str | None:
         # "nothing alike" on the line, which showed plain wall: the rule's words now)
         parts.append("the epipolar search's evidence counts from one source here: every "
                      "other source that did not find the content shows the movers' "
-                     f"colours at its flow match{near}, which is taken for its own copy "
-                     "of the mover hiding the content, not for a contradiction")
+                     f"colours at its flow match{near}; the rule cannot tell that from "
+                     "a copy of the mover in that photo hiding the content (it assumes "
+                     "one, whether or not the photo shows the mover), so it is not "
+                     "counted as a contradiction")
     # ("3 of the 2 needed" read as a bug to a trial: more may count than are needed)
     evidence = (f"{counted} source{'s count' if counted != 1 else ' counts'} as showing the "
                 f"reference's content here, {need} needed (" + "; ".join(parts) + ")")
