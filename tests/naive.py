@@ -17,7 +17,7 @@ from dynremove.refine.fields import blurred_lab
 from dynremove.refine.montage import (BAND_AGREE, BAND_PX, BAND_SIGMA_PX, DECAY_PX,
                                       LIGHT_DECAY_PX, LIGHT_SCALE_PX, LIGHT_SIGMA_PX, PLATEAU_PX,
                                       band_light, component_offsets, consistent_departures,
-                                      gaussian_mean_at, pairwise_distance)
+                                      gaussian_mean_at, light_only, pairwise_distance)
 from dynremove.refine.morphology import dilate_disc
 from dynremove.refine.select import mixture_detail
 from dynremove.refine.upsample import grow_replaced
@@ -154,6 +154,7 @@ def offset_blend(reference, candidates, labels, replaced, usable, labs, *,
             # the departure's light part (its mean along the ring) and the rest
             dep = (d - m)[gy, gx]
             light = gaussian_mean_at(gy, gx, dep, gy, gx, light_scale_px)
+            light = light_only(src[gy, gx], m, light)
             field = np.zeros(d.shape[:2] + (6,), np.float32)
             field[gy, gx, :3] = light
             field[gy, gx, 3:] = dep - light

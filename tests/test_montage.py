@@ -140,3 +140,30 @@ def test_alpha_expansion_on_the_movable_pixels_equals_the_whole_grid(rng, start)
     assert np.array_equal(fast, want)
     assert (fast != 0).sum() > 50  # the sources took part of it: not a trivial labelling
     assert allowed[fast, np.arange(H)[:, None], np.arange(W)[None]].all()
+
+
+def test_light_like_keeps_light_and_drops_a_hue_carried_in_from_the_ring():
+    """``montage.light_like``: a change of exposure and white balance (gains 1.2 ×
+    1.06 / 1.00 / 0.94 on B / G / R) is kept byte for byte; an offset that turns a
+    brown table green (+19 / +32 / -35 levels, measured on tim1-tim4 of
+    ``bursts/tim6``) keeps only its change of brightness, so the pixel stays brown;
+    between the two spreads the hue change is kept in part."""
+    from dynremove.refine.montage import CONTENT_SPREAD, LIGHT_FLOOR, LIGHT_SPREAD, light_like
+
+    brown = np.array([[94, 117, 136], [101, 121, 138]], np.uint8)
+    lit = np.clip(np.round(brown * np.array([1.2 * 1.06, 1.2, 1.2 * 0.94])), 0, 255
+                  ).astype(np.uint8)
+    np.testing.assert_array_equal(light_like(brown, lit), lit)
+    green = np.clip(brown.astype(int) + [19, 32, -35], 0, 255).astype(np.uint8)
+    out = light_like(brown, green).astype(int)
+    assert (out[:, 2] > out[:, 1]).all() and (out[:, 1] > out[:, 0]).all(), out  # R > G > B
+    gain = lambda a, b: np.log((b.astype(float) + LIGHT_FLOOR) / (a + LIGHT_FLOOR))  # noqa: E731
+    spread = np.ptp(gain(brown, out), axis=1)
+    assert (spread < 0.02).all(), spread  # one gain: brightness only
+    np.testing.assert_allclose(gain(brown, out).mean(1), gain(brown, green).mean(1), atol=0.01)
+    # half-way between the spreads: half the departure kept
+    lg = np.array([[0.0, 0.0, -(LIGHT_SPREAD + CONTENT_SPREAD) / 2]])
+    s = np.array([[120, 120, 120]], np.uint8)
+    mid = np.clip((s + LIGHT_FLOOR) * np.exp(lg) - LIGHT_FLOOR + 0.5, 0, 255).astype(np.uint8)
+    half = np.ptp(gain(s, light_like(s, mid)), axis=1)
+    assert 0.35 * np.ptp(gain(s, mid)) < half[0] < 0.65 * np.ptp(gain(s, mid)), half

@@ -458,6 +458,74 @@ def ring_agrees(difference: npt.NDArray[np.float32], usable: npt.NDArray[np.bool
     return good
 
 
+# ``light_like``: the spread (natural log) of the B, G and R gains that a fill's
+# offset keeps in full, and the one from which it keeps only their mean (white
+# balance of ±6 % spans 0.12); the levels added to both sides of a gain (dark
+# pixels' noise is no hue)
+LIGHT_SPREAD, CONTENT_SPREAD, LIGHT_FLOOR = 0.15, 0.3, 32.0
+
+
+def light_like(source: npt.NDArray[np.uint8], written: npt.NDArray[np.uint8], *,
+               light: float = LIGHT_SPREAD, content: float = CONTENT_SPREAD,
+               floor: float = LIGHT_FLOOR) -> npt.NDArray[np.uint8]:
+    """``written`` with the change from ``source`` kept to what light does.
+
+    Light (exposure, white balance, shade, glare) scales the three channels
+    alike; an offset that raises one channel and lowers another by tens of
+    levels is content carried in from the ring around the region (the ring
+    showed a source's own mover there, and the band beyond confirmed it as
+    light): it turned a brown table green (tim1-tim4 of ``bursts/tim6``, tim2 the
+    reference: +19/+32/-35 levels). Per pixel, the B/G/R gains ``(written +
+    floor) / (source + floor)`` are taken in logs; their departures from their
+    mean are kept in full where they spread by at most ``light``, not at all
+    from ``content`` up (the mean, the change of brightness, is kept), and in
+    proportion between. Pixels within ``light`` are returned as written.
+
+    Parameters
+    ----------
+    source, written : (N, 3) uint8 ndarrays
+        The chosen source's value and what the blend wrote, at N pixels.
+
+    Returns
+    -------
+    (N, 3) uint8 ndarray
+    """
+    s = source.astype(np.float32) + floor
+    lg = np.log((written.astype(np.float32) + floor) / s)
+    spread = lg.max(1) - lg.min(1)
+    over = spread > light
+    out = written.copy()
+    if over.any():
+        g = lg[over]
+        mean = g.mean(1, keepdims=True)
+        keep = np.clip((content - spread[over]) / (content - light), 0.0, 1.0)
+        v = s[over] * np.exp(mean + (g - mean) * keep[:, None]) - floor + 0.5
+        out[over] = np.clip(v, 0, 255).astype(np.uint8)
+    return out
+
+
+def light_only(src: npt.NDArray[np.uint8], med: npt.NDArray[np.float32],
+               light: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+    """The ring's departures' light part (``ring_offset``), kept to what light does.
+
+    ``src`` (R, 3) uint8 the source at R ring pixels, ``med`` (3,) the ring's median
+    offset (the photos' exposure and white balance, taken as given), ``light``
+    (R, 3) float32 the departure's light part there (levels). Judged by
+    ``light_like`` against the source plus the median offset, where it changes
+    the hue the hue change is dropped: the light part spreads 30 px into the fill
+    (``LIGHT_DECAY_PX``), and a hue carried in from a ring that shows a source's
+    own mover painted colours no photo shows (tim1-tim4 of ``bursts/tim6``: a
+    brown table green). Returns (R, 3) float32; ``light`` where it was light-like.
+    """
+    base = np.clip(src.astype(np.float32) + med + 0.5, 0, 255).astype(np.uint8)
+    written = np.clip(base.astype(np.float32) + light + 0.5, 0, 255).astype(np.uint8)
+    kept = light_like(base, written)
+    changed = (kept != written).any(1)
+    out = np.array(light, np.float32, copy=True)
+    out[changed] = kept[changed].astype(np.float32) - base[changed]
+    return out
+
+
 def add_offset(source: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32]
                ) -> npt.NDArray[np.uint8]:
     """``source + offset`` rounded to uint8 (``(N, 3)`` arrays), as ``offset_blend`` writes."""
@@ -529,6 +597,7 @@ def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8]
     C = d.shape[1]
     dep = (d - med)[ok]
     light = gaussian_mean_at(gy[ok], gx[ok], dep, gy[ok], gx[ok], light_scale_px)
+    light = light_only(src_ring[good][ok], med, light)
     field = np.zeros(sel.shape + (2 * C,), np.float32)
     field[gy[ok], gx[ok], :C] = light
     field[gy[ok], gx[ok], C:] = dep - light
