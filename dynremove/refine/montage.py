@@ -484,7 +484,7 @@ def light_like(source: npt.NDArray[np.uint8], written: npt.NDArray[np.uint8], *,
     Parameters
     ----------
     source, written : (N, 3) uint8 ndarrays
-        The chosen source's value and what the blend wrote, at N pixels.
+        A value before and after the change, at N pixels (B, G, R levels).
 
     Returns
     -------
@@ -572,8 +572,9 @@ def ring_offset(ref_ring: npt.NDArray[np.uint8], src_ring: npt.NDArray[np.uint8]
         ``reference - source`` (the photos' exposure and white-balance
         difference) plus the membrane (harmonic) interpolation of each ring
         pixel's departure from it (``fields.harmonic_fill``), faded with the
-        distance to the ring (its light part slowly, the rest fast); the median
-        alone (0 without any) when fewer than ``min_ring_px`` ring pixels are good.
+        distance to the ring (its light part slowly, the rest fast; the light
+        part kept to what light does, ``light_only``); the median alone (0
+        without any) when fewer than ``min_ring_px`` ring pixels are good.
 
     Notes
     -----
