@@ -72,8 +72,9 @@ that the scan flagged with doubled content.
    copy of it, keeps the reference whole (``partial_movers``): the rest of
    the mover was seen free nowhere, and half a mover is worse than a whole one.
 5. **Blend** (``montage.offset_blend``): exposure and white-balance
-   differences leave no edge; what it writes is kept to what light does
-   (``montage.light_like``: an offset that changes the hue is content). A
+   differences leave no edge; the light part of its offset, which spreads
+   into the fill, is kept to what light does (``montage.light_only``: a change
+   of hue is content, only its brightness is kept). A
    replaced region that the blend had to shift by more than light does
    (``select_misfit_levels``), where the reference lacks the movers' colours,
    keeps the reference (``misfit_regions``): its fill shows other content than
