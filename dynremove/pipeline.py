@@ -912,8 +912,7 @@ def _where(mask: np.ndarray, n: int = 3) -> str:
     (8-connected after a 5 px closing; x then y, in the analysed image's pixels, as
     ``inspect --pixel`` counts), largest first, and how many more parts there are."""
     joined = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((5, 5), np.uint8))
-    k, _, stats, _ = cv2.connectedComponentsWithStats(joined | mask.astype(np.uint8),
-                                                       connectivity=8)
+    k, _, stats, _ = cv2.connectedComponentsWithStats(joined, connectivity=8)
     if k <= 1:
         return "nowhere"
     order = 1 + np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")

@@ -637,8 +637,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
     lx, ly = sel.get("line_x") or {}, sel.get("line_y") or {}
     search_de = (sel.get("thresholds") or {}).get("select_search_de")
     against_de = (sel.get("thresholds") or {}).get("select_search_against_de")
-    near = (f" and something within ΔE {against_de:.1f} on its epipolar line"
-            if isinstance(against_de, float) and against_de > 0 else "")
+    against_on = isinstance(against_de, float) and against_de > 0
+    near = f" and something within ΔE {against_de:.1f} on its epipolar line" if against_on else ""
 
     def on_line(n: str) -> str:
         at = f" at ({lx[n]:.0f}, {ly[n]:.0f}) in it" if n in lx and n in ly else ""
@@ -657,7 +657,7 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                   "while another source that sees it shows something else"
                   + (f" (outside the movers' colours, or with nothing within ΔE "
                      f"{against_de:.1f} on its line: no copy of the mover)"
-                     if isinstance(against_de, float) and against_de > 0 else "")),
+                     if against_on else "")),
               # (a trial read "0 count (its flow match agrees ...)" as a contradiction)
               (4, "not counted: its flow match agrees, but in the movers' colours, so it "
                   "may show its own copy of the mover"),

@@ -74,12 +74,12 @@ that the scan flagged with doubled content.
 5. **Blend** (``montage.offset_blend``): exposure and white-balance
    differences leave no edge; the light part of its offset, which spreads
    into the fill, is kept to what light does (``montage.light_only``: a change
-   of hue is content, only its brightness is kept). A
-   replaced region that the blend had to shift by more than light does
-   (``select_misfit_levels``), where the reference lacks the movers' colours,
-   keeps the reference (``misfit_regions``): its fill shows other content than
-   the scene there. Pixels of L that no source
-   shows free are inpainted (OpenCV Telea) and reported.
+   of hue is content, only its brightness is kept). A replaced region that
+   the blend had to shift by more than light does (``select_misfit_levels``),
+   where the reference lacks the movers' colours, keeps the reference
+   (``misfit_regions``): its fill shows other content than the scene there.
+   Pixels of L that no source shows free are inpainted (OpenCV Telea) and
+   reported.
 """
 
 from __future__ import annotations
@@ -1886,11 +1886,11 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "OUTSIDE", "OWN_MOVER",
-           "PARTIAL_KEPT", "partial_movers",
-           "REASONS", "STILL_LINGERING",
+           "PARTIAL_KEPT", "REASONS", "STILL_LINGERING",
            "Selection", "attach_shadow", "capped_growth", "complete_regions", "darker",
            "grow_into_rim",
            "median_parallax_px", "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
-           "misfit_regions", "mixture_detail", "reference_cost", "region_shares",
+           "misfit_regions", "mixture_detail", "partial_movers", "reference_cost",
+           "region_shares",
            "select_fill"]
