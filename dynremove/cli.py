@@ -301,7 +301,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reference: index (0-based, in input order; negative counts from "
                         "the end, -1 = the last), file name or stem (one that no other "
                         "input has; digits that name a file are that file: 0002 is "
-                        "0002.jpg), "
+                        "0002.jpg; where they are also an index of another image, as "
+                        "1 with 1.jpg 2.jpg 3.jpg, the run stops and says how to give "
+                        "either), "
                         "path (exactly that input) or 'auto' (the sharpest frame with "
                         "the most keypoint matches); default: the middle image. The run "
                         "names the one it takes")
