@@ -120,3 +120,23 @@ def test_a_file_given_as_the_data_folder_says_so(tmp_path, capsys):
     assert f"{f}: is a file, not a folder" in capsys.readouterr().err
     assert main(["eval", str(tmp_path / "nothing"), "--quiet"]) == 2
     assert "nothing: no such folder" in capsys.readouterr().err
+
+
+def test_sets_reached_through_symbolic_links_are_found(odd_set, tmp_path):
+    """A folder of links to sets (a fresh-user trial linked two DAVIS sets into one
+    folder: ``eval`` said "no set with a frames/ folder" while ``batch`` ran both, and
+    ``composite`` said the same of it). Each real folder is searched once: a second
+    link to it, or a link back to an ancestor, adds nothing."""
+    import shutil
+
+    shutil.copytree(odd_set / "odd", tmp_path / "odd2")
+    links = tmp_path / "links"
+    links.mkdir()
+    (links / "a").symlink_to(odd_set / "odd", target_is_directory=True)
+    (links / "b").symlink_to(tmp_path / "odd2", target_is_directory=True)
+    (links / "c").symlink_to(odd_set / "odd", target_is_directory=True)  # "a" again
+    (links / "loop").symlink_to(links, target_is_directory=True)
+    sets = find_sets(links)
+    assert [s.name for s in sets] == ["a", "b"]
+    assert [p.name for p in sets[0].frames] == [p.name for p in find_sets(odd_set)[0].frames]
+    assert [s.name for s in find_sets(links, "b")] == ["b"]

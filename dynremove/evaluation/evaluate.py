@@ -73,6 +73,7 @@ from __future__ import annotations
 
 import dataclasses
 import fnmatch
+import os
 import math
 import sys
 import time
@@ -166,6 +167,24 @@ def image_files(folder: Path) -> list[Path]:
     return [q for q in files if q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q)]
 
 
+def _frames_folders(root: Path) -> list[Path]:
+    """Every folder named ``frames`` below ``root`` (itself included), sorted; folders
+    reached through symbolic links are searched too, as ``batch`` does (a fresh-user
+    trial's folder of links to DAVIS sets read as "no set": ``Path.rglob`` does not
+    follow them), each real folder once (a link to an ancestor ends there)."""
+    out, seen = [], set()
+    for dirpath, dirnames, _ in os.walk(root, followlinks=True):
+        real = os.path.realpath(dirpath)
+        if real in seen:
+            dirnames[:] = []
+            continue
+        seen.add(real)
+        dirnames.sort()
+        if "frames" in dirnames:
+            out.append(Path(dirpath) / "frames")
+    return sorted(out)
+
+
 def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) -> list[EvalSet]:
     """Every ``<set>/frames/`` folder below ``data_dir`` (itself included), sorted by name.
 
@@ -180,9 +199,7 @@ def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) 
         for p in ([pattern] if isinstance(pattern, str) else pattern):
             pats.extend(s.strip() for s in p.split(",") if s.strip())
     found = []
-    cands = [root / "frames"] if (root / "frames").is_dir() else []
-    cands += sorted(p for p in root.rglob("frames") if p.is_dir() and p != root / "frames")
-    for fr in cands:
+    for fr in _frames_folders(root):
         set_dir = fr.parent
         name = set_dir.relative_to(root).as_posix() if set_dir != root else root.name
         if pats and not any(fnmatch.fnmatch(name, p) or fnmatch.fnmatch(set_dir.name, p)
