@@ -567,6 +567,7 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     if not sets:
         raise InputError(f"{root}: no sets found (a set is a folder of at least 2 images, "
                          "a folder with frames/, or a video)")
+    existed = Path(out).exists()
     out = io.prepare_out_dir(out)
     prev = _previous_rows(out)
     options = {"params": params.to_dict(), "preset": preset_name, "max_side": max_side,
@@ -588,7 +589,14 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
         rows, workers = _run_all(sets, out, options, jobs=jobs, scheduler=scheduler,
                                  on_done=on_done, prev=prev, results=results,
                                  on_start=on_start, on_note=on_note)
-    except BaseException:
+    except BaseException as e:
+        if isinstance(e, InputError) and not results:
+            # a set-up error before any set ran (--scheduler: no Dask, no cluster): no
+            # summary, and no empty --out left behind; an earlier summary stays as it
+            # was (a fresh-user trial found it rewritten as "interrupted")
+            if not existed and not any(out.iterdir()):
+                out.rmdir()
+            raise
         # interrupted (Ctrl-C, SIGTERM) or failed: the summary still lists the sets
         # that finished (each set's own outputs are already whole on disk), and says
         # how many did not run; the same command again resumes

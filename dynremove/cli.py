@@ -187,8 +187,11 @@ def parse_set_ref(s: str) -> str:
 
 def parse_jobs(s: str) -> int:
     v = _integer(s)
-    if v == 0:
-        raise argparse.ArgumentTypeError("--jobs must not be 0 (use -1 for all cores)")
+    if v == 0 or v < -1:
+        # (joblib reads -5 as "all cores but 4", one at a time on 2 cores: a trial's
+        # --jobs -5 ran and was recorded as such, the help saying only "-1 = all cores")
+        raise argparse.ArgumentTypeError(f"--jobs must be a count of at least 1, or -1 for "
+                                         f"all cores, got {v}")
     return v
 
 

@@ -228,6 +228,19 @@ def test_dask_scheduler_without_the_extra_or_cluster(tmp_path, root, capsys, mon
                "tcp://127.0.0.1:1", "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2 and "dynremove[dask]" in err and "Traceback" not in err
+    # a set-up error before any set ran leaves no --out behind, and an earlier batch's
+    # summary as it was (a fresh-user trial found it rewritten: "interrupted", every
+    # finished set noted as cut short)
+    assert not (tmp_path / "o").exists()
+    done = tmp_path / "done"
+    done.mkdir()
+    (done / "summary.json").write_text('{"sets": []}')
+    (done / "summary.csv").write_text("set\n")
+    rc = main(["batch", str(root), "--out", str(done), "--scheduler", "tcp://127.0.0.1:1",
+               "--quiet"])
+    capsys.readouterr()
+    assert rc == 2 and (done / "summary.json").read_text() == '{"sets": []}'
+    assert (done / "summary.csv").read_text() == "set\n"
 
 
 def test_dask_local_cluster_gives_the_same_masks_as_jobs_1(tmp_path, root, capsys):

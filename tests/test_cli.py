@@ -723,3 +723,19 @@ def test_run_help_opens_with_the_few_flags_that_matter(capsys):
     groups = [ln for ln in text.splitlines() if ln and not ln.startswith(" ") and ln.endswith(":")]
     assert groups[-1].startswith("method parameters")  # the last group, as the text says
     assert "the method parameters (the last group below)" in " ".join(text.split())
+
+
+@pytest.mark.parametrize("cmd", ["batch", "eval"])
+@pytest.mark.parametrize("jobs", ["0", "-5"])
+def test_jobs_is_a_count_or_all_cores(tmp_path, capsys, cmd, jobs):
+    """``--jobs -5`` ran (joblib: all cores but four, one at a time here) and was
+    recorded as -5 while the help names only -1 (a fresh-user trial): refused, as 0 is,
+    in one line and with exit code 2, before any work."""
+    args = [cmd, str(tmp_path), "--jobs", jobs] + (["--out", str(tmp_path / "o")]
+                                                    if cmd == "batch" else [])
+    with pytest.raises(SystemExit) as e:
+        main(args)
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "Traceback" not in err
+    assert f"--jobs must be a count of at least 1, or -1 for all cores, got {jobs}" in err
+    assert not (tmp_path / "o").exists()

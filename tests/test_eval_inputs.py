@@ -140,3 +140,13 @@ def test_sets_reached_through_symbolic_links_are_found(odd_set, tmp_path):
     assert [s.name for s in sets] == ["a", "b"]
     assert [p.name for p in sets[0].frames] == [p.name for p in find_sets(odd_set)[0].frames]
     assert [s.name for s in find_sets(links, "b")] == ["b"]
+
+
+def test_a_sets_pattern_that_matches_nothing_is_an_error(odd_set, capsys):
+    """``--sets odd,odx``: the typo was dropped without a word and only ``odd`` scored
+    (a fresh-user trial); now nothing runs and the message names the pattern and the
+    sets there are."""
+    rc = main(["eval", str(odd_set), "--methods", "median", "--sets", "odd,odx", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "Traceback" not in err
+    assert f"--sets: 'odx' matches no set (the sets below {odd_set}: odd)" in err

@@ -326,7 +326,8 @@ def test_composite_batch_refuses_no_sets_and_names_earlier_ones(tmp_path, capsys
     args = ["composite", str(static), str(tmp_path / "objects"), "--out", str(tmp_path / "c"),
             "--n-views", "5"]
     assert main(args + ["--n-sets", "-3"]) == 2
-    assert "--n-sets must be >= 1 (or left out" in capsys.readouterr().err
+    assert ("--n-sets must be at least 1, or 0 (the default: one set from STATIC_DIR "
+            "itself), got -3") in capsys.readouterr().err
     (tmp_path / "c" / "old+set").mkdir(parents=True)
     (tmp_path / "c" / "old+set" / "composite.json").write_text("{}")
     assert main(args + ["--n-sets", "1"]) == 0

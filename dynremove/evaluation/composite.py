@@ -481,8 +481,10 @@ def make_composites(static_root: str | os.PathLike, objects_root: str | os.PathL
     """
 
     if n_sets < 1:
-        raise InputError(f"--n-sets must be >= 1 (or left out: one set from STATIC_DIR "
-                         f"itself), got {n_sets}")
+        # (0, the CLI's default, is one set from STATIC_DIR itself: handled by the
+        # caller; a trial read ">= 1" against the help's "default 0")
+        raise InputError(f"--n-sets must be at least 1, or 0 (the default: one set from "
+                         f"STATIC_DIR itself), got {n_sets}")
     root = Path(static_root)
     io.require_folder(root)
     statics = static_sets(root, n_views)

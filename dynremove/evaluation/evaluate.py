@@ -185,6 +185,27 @@ def _frames_folders(root: Path) -> list[Path]:
     return sorted(out)
 
 
+def _patterns(pattern: str | Sequence[str] | None) -> list[str]:
+    """``--sets``' globs: comma-separated, or a list of such strings."""
+    pats: list[str] = []
+    if pattern:
+        for p in ([pattern] if isinstance(pattern, str) else pattern):
+            pats.extend(s.strip() for s in p.split(",") if s.strip())
+    return pats
+
+
+def _matches(name: str, pat: str) -> bool:
+    """Whether the set ``name`` (``davis/camel``) or its last part matches ``pat``."""
+    return fnmatch.fnmatch(name, pat) or fnmatch.fnmatch(name.rpartition("/")[2], pat)
+
+
+def unmatched_patterns(found: Sequence[EvalSet], pattern: str | Sequence[str] | None
+                       ) -> list[str]:
+    """The globs of ``pattern`` that match none of ``found`` (a trial's typo in
+    ``--sets camel,camle`` was dropped without a word)."""
+    return [p for p in _patterns(pattern) if not any(_matches(s.name, p) for s in found)]
+
+
 def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) -> list[EvalSet]:
     """Every ``<set>/frames/`` folder below ``data_dir`` (itself included), sorted by name.
 
@@ -194,16 +215,12 @@ def find_sets(data_dir: str | Path, pattern: str | Sequence[str] | None = None) 
     """
     root = Path(data_dir)
     io.require_folder(root)
-    pats: list[str] = []
-    if pattern:
-        for p in ([pattern] if isinstance(pattern, str) else pattern):
-            pats.extend(s.strip() for s in p.split(",") if s.strip())
+    pats = _patterns(pattern)
     found = []
     for fr in _frames_folders(root):
         set_dir = fr.parent
         name = set_dir.relative_to(root).as_posix() if set_dir != root else root.name
-        if pats and not any(fnmatch.fnmatch(name, p) or fnmatch.fnmatch(set_dir.name, p)
-                            for p in pats):
+        if pats and not any(_matches(name, p) for p in pats):
             continue
         frames = image_files(fr)
         if len(frames) >= 2:
@@ -537,6 +554,18 @@ def _check_ref_fits_some(ref: str | int | None, found: Sequence[EvalSet]) -> Non
                          f"frames: 0..{n - 1})")
 
 
+def _check_patterns(found: Sequence[EvalSet], sets: str | None, data_dir: str | Path) -> None:
+    """An ``InputError`` naming the ``--sets`` globs that match no set found, and the
+    sets there are."""
+    missed = unmatched_patterns(found, sets)
+    if missed:
+        every = [x.name for x in find_sets(data_dir)]
+        raise InputError(f"--sets: {', '.join(repr(p) for p in missed)} "
+                         f"match{'es' if len(missed) == 1 else ''} no set (the sets below "
+                         f"{data_dir}: {', '.join(every[:12])}"
+                         f"{f' and {len(every) - 12} more' if len(every) > 12 else ''})")
+
+
 def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | None = None,
              preset_name: str = "default", methods: Sequence[str] = METHODS,
              jobs: int = 1, max_side: int | None = None, ref: str | int | None = None,
@@ -550,6 +579,7 @@ def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | Non
     if not found:
         raise InputError(f"{data_dir}: no set with a frames/ folder"
                          + (f" matching {sets!r}" if sets else ""))
+    _check_patterns(found, sets, data_dir)
     _check_ref_fits_some(ref, found)
     variants = []
     for m in methods:
@@ -624,6 +654,7 @@ def run_ablation(data_dir: str | Path, *, base: Any, names: Sequence[str] | None
     if not found:
         raise InputError(f"{data_dir}: no set with a frames/ folder"
                          + (f" matching {sets!r}" if sets else ""))
+    _check_patterns(found, sets, data_dir)
     t0 = time.perf_counter()
     results = _run_parallel(found, [(n, d) for n, _, d in variants], jobs=jobs,
                             max_side=max_side, ref=ref,
