@@ -50,7 +50,7 @@ from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
 from dynremove.refine.concurrency import one_thread_per_worker
 from dynremove.pipeline import full_resolution_output, remove_dynamic
-from dynremove.video import auto_reference, blurry_reference_note
+from dynremove.video import auto_reference, blurry_reference_note, parse_span
 
 OUTPUT_FILES = (*io.RUN_OUTPUTS, "report.json")
 SUMMARY_FIELDS = ("set", "status", "skipped", "n_images", "reference", "dynamic_fraction",
@@ -558,9 +558,21 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     if Path(out).resolve() == Path(root).resolve():
         raise InputError(f"--out {out}: is ROOT itself (the search would meet the outputs "
                          "and skip them); choose a folder beside it, or one below it")
+    if span:  # its form and order, before any set runs (a trial's 9:3 failed at the
+        # first video, after the sets before it had run)
+        parse_span(span, sys.maxsize)
     notes: list[str] = []
     # (the sets first: a ROOT with none leaves no empty --out folder behind)
     sets = find_sets(root, exclude=[Path(out)], notes=notes)
+    if (frames is not None or span) and not any(
+            len(bs.inputs) == 1 and io.is_video_file(Path(bs.inputs[0])) for bs in sets):
+        # (a trial's --span on folders of photos ran them all without a word, and a
+        # changed span ran them all again: it is no part of their options now)
+        given = " and ".join(f for f, v in (("--frames", frames), ("--span", span))
+                             if v is not None and v != "")
+        notes.append(f"{given}: {'they take' if ' and ' in given else 'it takes'} frames "
+                     "from a video, and no set here is one: ignored")
+        frames, span = None, None
     for n in notes:
         if on_note is not None:
             on_note(n)

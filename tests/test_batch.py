@@ -460,6 +460,31 @@ def test_frames_applies_to_the_video_sets_of_a_mixed_root(tmp_path, capsys):
     assert len(json.loads((out / "clip" / "report.json").read_text())["inputs"]) == 4
 
 
+def test_span_is_checked_first_and_ignored_without_a_video(tmp_path, capsys):
+    """A trial's ``batch --span 9:3`` ran the photo sets before failing at the video
+    set, and ``--span abc`` over folders of photos ran them all without a word (and a
+    changed span ran them again on resume). The span's form is checked before any set
+    runs; without a video among the sets, ``--frames``/``--span`` are said to be
+    ignored and are no part of the sets' options (a resume skips them)."""
+    s = synth.make_scene(seed=1, n_views=4, size=(64, 80), n_objects=1)
+    r = tmp_path / "root"
+    write_set(r / "photos", s.images)
+    out = tmp_path / "out"
+    for bad, said in (("9:3", "END must be greater than START"), ("abc", "expected START:END")):
+        assert main(["batch", str(r), "--out", str(out), "--span", bad, *FAST]) == 2
+        err = capsys.readouterr().err
+        assert f"--span {bad}: {said}" in err and "Traceback" not in err
+        assert not out.exists()
+    assert main(["batch", str(r), "--out", str(out), "--span", "0:3", "--frames", "3"]) == 0
+    err = capsys.readouterr().err
+    said = ("--frames and --span: they take frames from a video, and no set here is one: "
+            "ignored")
+    assert said in err and said in json.loads((out / "summary.json").read_text())["notes"]
+    assert main(["batch", str(r), "--out", str(out), "--span", "1:3"]) == 0
+    assert summary_rows(out)["photos"]["skipped"] in ("True", "true", "1")
+    capsys.readouterr()
+
+
 def test_batch_scores_at_the_size_written(tmp_path, root, capsys):
     """Fresh-user trial: with --max-side below the photos' size, batch read the true
     mask at the analysis size and enlarged it again, so the same mask scored J 0.570
