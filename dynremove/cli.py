@@ -548,7 +548,9 @@ def build_parser() -> argparse.ArgumentParser:
     x.add_argument("--gif", "--out", dest="out", required=True, metavar="OUT",
                    help="output .gif or .mp4")
     x.add_argument("--fps", type=parse_fps, default=10.0,
-                   help="frames per second, in (0, 100] (default 10)")
+                   help="frames per second, in (0, 100] (default 10); a GIF holds its "
+                        "frame delay in whole hundredths of a second, 20 ms at least, so it "
+                        "gets the nearest it can (30 -> 33.3 fps, 100 -> 50 fps), and says so")
     x.add_argument("--max-side", type=parse_side, default=480, metavar="PX",
                    help="longest side of the frames in px, at least 16 (default 480)")
     x.add_argument("--root", default="",

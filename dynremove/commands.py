@@ -905,7 +905,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     _note(args, f"drawing a frame per snapshot of {rec} (a minute for a long run)")
     t0 = time.perf_counter()
     out = export_gif(rec, args.out, fps=args.fps, max_side=args.max_side, root=args.root)
-    print(f"wrote {out} (drawn in {time.perf_counter() - t0:.0f} s)")
+    rate = ""
+    if str(out).lower().endswith(".gif"):
+        delay = args.viewer("export").gif_delay_ms(args.fps)
+        if abs(1000.0 / delay - args.fps) > 0.05:  # (a trial's --fps 100 played at 50)
+            rate = (f"; {delay} ms a frame, {1000.0 / delay:.1f} fps: a GIF holds whole "
+                    f"hundredths of a second, 20 ms at least, not --fps {args.fps:g}")
+    print(f"wrote {out} (drawn in {time.perf_counter() - t0:.0f} s{rate})")
     return EXIT_OK
 
 

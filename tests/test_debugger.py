@@ -447,6 +447,27 @@ def test_view_web_on_a_busy_port_names_it(fabricated, capsys):
     assert str(taken) in err[0] and "--web-port" in err[0] and "display" not in err[0]
 
 
+@pytest.mark.parametrize("fps, delay, said", [("100", 20, "20 ms a frame, 50.0 fps"),
+                                               ("30", 30, "30 ms a frame, 33.3 fps"),
+                                               ("10", 100, None)])
+def test_a_gif_rate_it_cannot_hold_is_said(fabricated, tmp_path, capsys, fps, delay, said):
+    """A GIF holds its frame delay in whole hundredths of a second, 20 ms at least:
+    a trial's --fps 100 played at 50 fps and --fps 30 at 33.3, with no word. The
+    delay written is the one said; a rate it holds is not remarked on."""
+    from PIL import Image
+
+    out = tmp_path / "x.gif"
+    assert main(["export", str(fabricated["path"]), "--gif", str(out), "--fps", fps,
+                 "--max-side", "64"]) == 0
+    line = capsys.readouterr().out
+    with Image.open(out) as im:
+        assert im.info["duration"] == delay
+    if said:
+        assert said in line and f"not --fps {fps}" in line
+    else:
+        assert "ms a frame" not in line
+
+
 def test_export_refuses_other_suffixes(fabricated, tmp_path, capsys):
     assert main(["export", str(fabricated["path"]), "--gif", str(tmp_path / "x.txt")]) == 2
     assert not (tmp_path / "x.txt").exists()

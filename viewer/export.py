@@ -175,6 +175,13 @@ def gif_palette(frames: list[np.ndarray], n_colors: int = 256) -> Image.Image:
                             dither=Image.Dither.NONE)
 
 
+def gif_delay_ms(fps: float) -> int:
+    """The frame delay a GIF holds for ``fps``: whole hundredths of a second, at least
+    2 (browsers show shorter delays as 100 ms), so 30 fps is written as 30 ms (33.3 fps)
+    and 100 fps as 20 ms (50 fps)."""
+    return 10 * max(2, int(round(100 / max(fps, 1e-3))))
+
+
 def write_gif(frames: list[np.ndarray], out_path: str | Path, *, fps: float = 10,
               loop: int = 0) -> None:
     """Frames (BGR uint8, same size) → animated GIF89a with one global palette.
@@ -188,6 +195,6 @@ def write_gif(frames: list[np.ndarray], out_path: str | Path, *, fps: float = 10
     pal = gif_palette(frames)
     images = [Image.fromarray(np.ascontiguousarray(f[..., ::-1]), "RGB")
               .quantize(palette=pal, dither=Image.Dither.NONE) for f in frames]
-    delay_ms = 10 * max(2, int(round(100 / max(fps, 1e-3))))
+    delay_ms = gif_delay_ms(fps)
     images[0].save(out_path, format="GIF", save_all=True, append_images=images[1:],
                    duration=delay_ms, loop=loop, optimize=False)
