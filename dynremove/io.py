@@ -794,8 +794,12 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
         if not -len(names) <= i < len(names):
             clip = {n.rpartition("#")[0] for n in names if "#" in n}
             # (a trial gave a video's frame number: an index counts the frames taken)
-            frame = (f"; an index counts the frames taken from the clip, {clip.pop()}#N "
-                     "names its frame N" if len(clip) == 1 and all("#" in n for n in names)
+            # (a second trial then named a frame that was not taken: only those can be)
+            frame = (f"; an index counts the frames taken from the clip, and "
+                     f"{clip.pop()}#N names one of them by its frame number N ("
+                     f"{', '.join(n.rpartition('/')[2] for n in names[:4])}"
+                     f"{', …' if len(names) > 4 else ''}; --span and --frames choose "
+                     "which are taken)" if len(clip) == 1 and all("#" in n for n in names)
                      else "")
             raise InputError(f"{what}: out of range, there are {len(names)} images "
                              f"(0..{len(names) - 1}){frame}")
