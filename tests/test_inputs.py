@@ -197,7 +197,8 @@ def test_video_pick_even_and_span(tmp_path, scene):
     # (a trial's reversed span was told the clip's length, not the order)
     (["--span", "6:2"], ["--span 6:2", "END must be greater than START"]),
     # (a trial gave a frame number of the clip: an index counts the frames taken)
-    (["--ref", "16"], ["--ref 16", "out of range", "c.avi#N names one of them by its frame number N (c.avi#"]),
+    (["--ref", "16"], ["--ref 16", "out of range",
+                       "c.avi#N names one of them by its frame number N (c.avi#"]),
 ])
 def test_video_bad_options(tmp_path, capsys, scene, argv, words):
     clip = tmp_path / "c.avi"
