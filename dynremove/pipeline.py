@@ -33,9 +33,9 @@ from dynremove.refine.concurrency import for_each_source, numba_threads_safe
 from dynremove.refine.duplicates import agreement_with_reference, duplicate_sources
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
-from dynremove.refine.morphology import clean_mask, fill_holes
+from dynremove.refine.morphology import clean_mask
 from dynremove.refine.select import (FOLLOWED, OUTSIDE, OWN_MOVER, PARTIAL_KEPT, STILL_LINGERING,
-                                     Selection, median_parallax_px, select_fill,
+                                     Selection, kept_pieces, median_parallax_px, select_fill,
                                      unconfirmed_fill)
 from dynremove.refine.upsample import full_resolution
 
@@ -805,23 +805,20 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "(--select-keep-partial 0 turns this rule off)")
             warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and dyn.any():
-        # islands of the reference inside the replaced region: the fill took a mover
-        # around them and kept them (the static 3-D test found them in photos that show
-        # the mover in place too, or the seam cost kept them). A fresh-user trial found
-        # tim6's cup (tim2-tim5, tim4 the reference) left as a see-through ghost with its
-        # letters, and nothing said. Measured (share of the replaced region): 2.9-9.0 %
-        # on the 3- and 4-photo tim6 sets that show such fragments, at most 0.1 % on the
-        # three 6-photo bursts and the 3-photo desk and sanitizer sets, 1.5 % on a
-        # composite where a statue is seen between a camel's legs (README, session 61)
-        islands = fill_holes(dyn) & ~dyn
-        n_is = int(islands.sum())
-        if n_is >= 5e-4 * dyn.size and n_is >= KEPT_ISLANDS * dyn.sum():
-            msgs.append(f"{n_is} px enclosed by the replaced region ({100 * n_is / dyn.sum():.0f} % "
+        # pieces of a mover left inside the replaced region: islands of the reference
+        # that the fill kept because photos showing the mover in place vouch for them.
+        # A fresh-user trial found tim6's cup (tim2-tim5, tim4 the reference) left as a
+        # see-through ghost with its letters, and nothing said (README, session 61)
+        pieces = kept_pieces(selection, dyn)
+        n_pc = int(pieces.sum())
+        if n_pc >= 2e-4 * dyn.size and n_pc >= KEPT_PIECES * dyn.sum():
+            msgs.append(f"{n_pc} px enclosed by the replaced region ({100 * n_pc / dyn.sum():.0f} % "
                         f"of its area) were kept as the reference shows them "
-                        f"({_where(islands)}): pieces of a mover left over the fill (its "
-                        "lettering or parts that other photos show in place), or static "
-                        "scene seen through the mover: look at them ('dynremove inspect "
-                        "--pixel' on a recording says why each was kept)")
+                        f"({_where(pieces)}): the photos that show them in place show the "
+                        "mover around them too, so these are likely pieces of the mover left "
+                        "over the fill (its lettering, parts of it that stayed in place in "
+                        "those photos): look at them ('dynremove inspect --pixel' on a "
+                        "recording says why each was kept)")
             warnings.warn(msgs[-1], stacklevel=2)
         # most of the fill resting on one photo that the others contradict: three
         # photos whose movers overlap (a fresh-user trial on tim6 as tim3, tim4, tim5
@@ -923,9 +920,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
 
 # a run that removes less than this share of what the scans flagged says so
 LITTLE_REMOVED = 0.1
-# a replaced region enclosing kept pixels of at least this share of its area (and
-# 0.05 % of the photo) says so
-KEPT_ISLANDS = 0.02
+# kept pieces of a mover inside the replaced region (``select.kept_pieces``) of at
+# least this share of its area (and 0.02 % of the photo) are said: 1.2-6.0 % on the
+# 3- and 4-photo tim6 sets that show them, at most 0.2 % on the composites and DAVIS
+KEPT_PIECES = 0.01
 
 
 def _where(mask: np.ndarray, n: int = 3) -> str:

@@ -930,10 +930,13 @@ def test_pieces_of_the_reference_kept_inside_the_fill_are_told():
     stands in place in tim3, tim4 and tim5 and elsewhere in tim2. The fill replaced
     most of it from tim2, while the static 3-D test kept its letters and lid pieces,
     which tim3 and tim5 show in place: a see-through ghost of the cup, and nothing
-    said. The run now names the pixels the replaced region encloses and keeps (6 % of
-    its area here, every one on the cup and the tube: x 250-420, y 600-880)."""
+    said. The run now names the kept islands that only such photos vouch for
+    (``kept_pieces``: 2.4 % of the replaced region here, all on the cup: x 250-420,
+    y 600-880); the islands the scene shows through a mover, vouched for by photos
+    that show the scene around them, are not named."""
     from dynremove import io
     from dynremove.refine.morphology import fill_holes
+    from dynremove.refine.select import kept_pieces
 
     root = _data_root() / "bursts" / "tim6" / "frames"
     if not root.is_dir():
@@ -942,9 +945,11 @@ def test_pieces_of_the_reference_kept_inside_the_fill_are_told():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         r = remove_dynamic(iset.images, ref=2)
+    pieces = kept_pieces(r.selection, r.dynamic)
     islands = fill_holes(r.dynamic) & ~r.dynamic
-    n = int(islands.sum())
-    assert n >= 0.02 * r.dynamic.sum() and islands[600:880, 250:420].sum() >= 0.95 * n
+    n = int(pieces.sum())
+    assert not (pieces & ~islands).any() and n < islands.sum()
+    assert n >= 0.01 * r.dynamic.sum() and pieces[600:880, 250:420].sum() == n
     note = [w for w in r.warnings if "enclosed by the replaced region" in w]
     assert len(note) == 1 and note[0].startswith(f"{n} px enclosed by the replaced region ("
                                                  f"{100 * n / r.dynamic.sum():.0f} % of its area)")
@@ -952,6 +957,11 @@ def test_pieces_of_the_reference_kept_inside_the_fill_are_told():
     x0, x1, y0, y1 = (int(v) for v in re.search(
         r"at x (\d+)–(\d+), y (\d+)–(\d+)", note[0]).groups())
     assert 250 <= x0 <= x1 <= 420 and 600 <= y0 <= y1 <= 880
+    # each piece: the sources that vouch for it are none of those free around it
+    ev, why = r.selection.static_evidence, r.selection.reasons
+    vouch = [k for k in range(ev.shape[0]) if np.isin(ev[k][pieces], (1, 2)).mean() >= 0.5]
+    assert vouch and all(np.isin(why[k][r.dynamic & ~pieces], (1, 2)).mean() < 0.5
+                         for k in vouch)
 
 
 def _entry_p10_composite(tmp_path, davis_set, seed, *, static_set="entry-P10", n_views=3):
