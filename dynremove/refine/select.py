@@ -270,7 +270,8 @@ def kept_pieces(sel: "Selection", replaced: npt.NDArray[np.bool_]) -> npt.NDArra
         rim = dilate_disc(isl, 3) & ~isl & replaced
         if rim.sum() < 5:
             continue
-        vouch = [k for k in range(ev.shape[0]) if np.isin(ev[k][isl], (EV_FLOW, EV_LINE)).mean() >= 0.5]
+        vouch = [k for k in range(ev.shape[0])
+                 if np.isin(ev[k][isl], (EV_FLOW, EV_LINE)).mean() >= 0.5]
         if vouch and all(np.isin(why[k][rim], (1, 2, 6)).mean() < 0.5 for k in vouch):
             out |= isl
     return out
