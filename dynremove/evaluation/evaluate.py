@@ -73,8 +73,8 @@ from __future__ import annotations
 
 import dataclasses
 import fnmatch
-import os
 import math
+import os
 import sys
 import time
 import warnings

@@ -242,6 +242,7 @@ def unconfirmed_fill(sel: "Selection", replaced: npt.NDArray[np.bool_]
     against = np.isin(sel.reasons, (OWN_MOVER, FOLLOWED, DISAGREES)).any(0)
     return single & against
 
+
 def kept_pieces(sel: "Selection", replaced: npt.NDArray[np.bool_]) -> npt.NDArray[np.bool_]:
     """Pixels kept as the reference shows them, enclosed by ``replaced`` (H, W) bool,
     that only photos showing the mover count as static: pieces of a mover left over
