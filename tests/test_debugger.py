@@ -172,6 +172,52 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
         assert "winning cluster" in words or "fill" in words
 
 
+def test_neighbours_writes_do_not_enter_M(small_scene):
+    """What the legend's "Overwritten" says (``verdict.LEGEND``): a neighbouring
+    patch's write changes the working copy's pixels, not the f_c and f_g that M
+    compares (Sec. 3.2.2 updates them at the replaced pixel only). At every static
+    pixel that neighbouring patches overwrote before its turn, M recomputed from the
+    photo's own features and the recorded winning cluster is the recorded M. (The
+    README of session 45 had said the scans judged the sanitizer's cap on the wall
+    the patches wrote there; ``inspect`` said so too.)"""
+    from dynremove.method.scan.driver import run_scans
+    from dynremove.method.scan.reference import S_e
+    from dynremove.pipeline import prepare
+
+    params = preset("default").replace(max_scans=1)
+    st0, _ = prepare(small_scene.images, small_scene.ref_index, params)
+    st = st0.copy()
+    mem = MemorySink()
+    run_scans(st, params, sink=mem, sample_static=1.0)  # every decision recorded
+    d, r = mem.decisions, mem.replacements
+    half = params.patch_size // 2
+    u = st0.sift_unit
+    checked = changed = 0
+    for e in d[~d["dynamic"] & (d["win_cluster"] >= 0)]:
+        x, y = int(e["x"]), int(e["y"])
+        near = ((np.abs(r["x"] - x) <= half) & (np.abs(r["y"] - y) <= half)
+                & ((r["x"] != x) | (r["y"] != y)) & (r["step"] < e["step"]))
+        if not near.any():
+            continue
+        win = [(int(s), int(cx), int(cy), float(b)) for s, (cx, cy), b, c in
+               zip(e["cand_src"], e["cand_xy"], e["cand_B"], e["cand_cluster"])
+               if s >= 0 and c == e["win_cluster"]]
+        w = np.array([b for *_, b in win])
+        w = w / w.sum() if w.sum() > 0 else np.full(len(win), 1.0 / len(win))
+        fc = sum(wi * st0.fc_s[s, cy, cx].astype(np.float64) for wi, (s, cx, cy, _) in zip(w, win))
+        fg = sum(wi * st0.fg_s[s, cy, cx].astype(np.float64) * u
+                 for wi, (s, cx, cy, _) in zip(w, win))
+        dc = float(((st0.fc_r[y, x].astype(np.float64) - fc) ** 2).sum())
+        dg = float(((st0.fg_r[y, x].astype(np.float64) * u - fg) ** 2).sum())
+        M = params.lambda4 * S_e(dc, params.sigma_c) + params.lambda5 * S_e(dg, params.sigma_g)
+        assert M == pytest.approx(float(e["M"]), abs=1e-5), (x, y)
+        np.testing.assert_array_equal(st.fc_r[y, x], st0.fc_r[y, x])
+        checked += 1
+        changed += bool((st.img[y, x] != st0.img[y, x]).any())
+    assert checked >= 20 and changed >= 10, (checked, changed)
+    assert "do not enter its M" in vd.LEGEND
+
+
 def test_the_fill_is_told(method_run):
     sel = vi.read_selection(method_run["path"])
     if "source" not in sel:

@@ -300,9 +300,13 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
         if n:
             # ("in the scan's working copy": a trial read it as the clean photo's pixel
             # changing, at a pixel the clean photo keeps)
+            # (which M does not read: it compares the pixel's own f_c and f_g, changed
+            # only where the pixel itself is replaced; the README of session 45 and
+            # this line had said the scan judged the content the patches left there)
             head += (f"; its content in the scan's working copy had been overwritten by {n} "
                      f"neighbouring patch{'es' if n > 1 else ''} before its turn (first at "
-                     f"step {key['first_overwritten']})")
+                     f"step {key['first_overwritten']}), which M does not read (see "
+                     "'Overwritten' below)")
         elif n == 0:
             head += "; no neighbouring patch had overwritten it before its turn"
         lines.append(head)
@@ -527,8 +531,12 @@ _CASE_WORDS = {
 LEGEND = ("(M: how alike the pixel and the winning cluster A_m of its candidate matches "
           "are, Sec. 3.2.1; at or under t_r it is called dynamic. b_m: A_m's weight, the "
           "sum of its candidates' confidences B_l. Overwritten: each dynamic pixel's "
-          "chosen patch q* is written into the reference as the scan goes, with its f_c and "
-          "f_g (Sec. 3.2.2), so a pixel's M compares what its neighbours' writes left there. "
+          "chosen patch q* is written into the scan's working copy as the scan goes (what "
+          "the viewer shows), and f_c and f_g are updated at that pixel only (Sec. 3.2.2); "
+          "M compares a pixel's own f_c and f_g, so its neighbours' writes do not enter its "
+          "M: they reach its decision through the matches N and confidences C that their "
+          "updates changed (Sec. 3.2.3), which give its candidates, and, if it is called "
+          "dynamic, through the patch chosen to overlap them. "
           "step: the visiting order, the viewer's `step` timeline)")
 
 VOTES_LEGEND = ("(the border votes: the scan decides on whole patches, so its map overshoots "
