@@ -32,7 +32,7 @@ def content_mask(img: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray
     [3, 3, 3, 3, 3]
     """
     H, W = img.shape[:2]
-    empty = ~img.any(axis=2)
+    empty = _black(img)
     if alpha is not None:
         empty |= alpha == 0
     if not (empty[0].any() or empty[-1].any() or empty[:, 0].any() or empty[:, -1].any()):
@@ -46,6 +46,17 @@ def content_mask(img: np.ndarray, alpha: np.ndarray | None = None) -> np.ndarray
         border[:] = False
     invalid = border if alpha is None else border | (alpha == 0)
     return ~invalid if invalid.any() else None
+
+
+def _black(img: np.ndarray) -> np.ndarray:
+    """Where every channel of ``img`` (H, W, C) is 0: (H, W) bool. By ``cv2.inRange``
+    for 8- and 16-bit images of 1 to 4 channels: 8 against 130-150 ms for NumPy's
+    ``~img.any(axis=2)`` on a 12 MP photo, read twice per photo by ``dynremove run``
+    (session 62: 1.5 s of a 15-18 s run on five 12 MP JPEGs)."""
+    if img.ndim == 3 and 1 <= img.shape[2] <= 4 and img.dtype in (np.uint8, np.uint16):
+        zero = (0,) * img.shape[2]
+        return cv2.inRange(img, zero, zero) > 0
+    return ~img.any(axis=2)
 
 
 def read_valid_masks(spec: str | os.PathLike, paths: Sequence[Path],
