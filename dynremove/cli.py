@@ -545,8 +545,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "left the input with L in red, right the rewritten "
                                    "reference, a caption with scan, step and |L|.")
     x.add_argument("recording", help="a .rrd file")
-    x.add_argument("--gif", "--out", dest="out", required=True, metavar="OUT",
-                   help="output .gif or .mp4")
+    x.add_argument("--out", "--gif", dest="out", required=True, metavar="OUT",
+                   help="output .gif or .mp4 (--gif is the same flag)")
     x.add_argument("--fps", type=parse_fps, default=10.0,
                    help="frames per second, in (0, 100] (default 10); a GIF holds its "
                         "frame delay in whole hundredths of a second, 20 ms at least, so it "
@@ -670,9 +670,17 @@ def _main(argv: Sequence[str] | None) -> int:
     finally:
         clear_stop()
         sys.unraisablehook = old_hook
-        signal.signal(signal.SIGTERM, old)
-        if old_int is not None:
-            signal.signal(signal.SIGINT, old_int)
+        if argv is None:
+            # the program: its outcome is settled and its outputs written, so a
+            # Ctrl-C from here on (the interpreter's exit joins OpenCV's and numba's
+            # threads) is ignored; a fresh-user trial's late Ctrl-C turned a finished
+            # run, "wrote .../clean.png", into exit 130 with nothing said
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        else:
+            signal.signal(signal.SIGTERM, old)
+            if old_int is not None:
+                signal.signal(signal.SIGINT, old_int)
 
 
 if __name__ == "__main__":

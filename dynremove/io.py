@@ -210,9 +210,9 @@ def _conform_note(name: str, shape: tuple[int, int], target: tuple[int, int],
                   op: dict) -> str:
     (h, w), (H0, W0) = shape, target
     if op["kind"] == "resize":
-        return (f"{name}: is {w}x{h}, the set {W0}x{H0} (the same frame at another "
+        return (f"{name}: {w}x{h}, the set {W0}x{H0} (the same frame at another "
                 f"resolution): resized to {W0}x{H0}")
-    return (f"{name}: is {w}x{h}, the set {W0}x{H0} (a few pixels off: cropped?): "
+    return (f"{name}: {w}x{h}, the set {W0}x{H0} (a few pixels off: cropped?): "
             "centred on the set's frame" + (", the added border counted as no content"
                                             if h < H0 or w < W0 else "")
             + (", its own border cropped" if h > H0 or w > W0 else ""))

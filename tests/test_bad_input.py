@@ -436,7 +436,7 @@ def test_a_photo_a_few_pixels_off_is_centred_on_the_set(tmp_path, capsys, cut):
     iset = io.load_image_set([d])
     assert all(x.shape == (96, 128, 3) for x in iset.images)
     (note,) = [n for n in iset.notes if "view1.png" in n]
-    assert f"is {odd.shape[1]}x{odd.shape[0]}, the set 128x96" in note
+    assert f": {odd.shape[1]}x{odd.shape[0]}, the set 128x96" in note
     if dy > 0 or dx > 0:  # the border it lacks has no content
         assert iset.valid[1] is not None and not iset.valid[1].all()
         assert iset.valid[1][48, 64]
@@ -497,7 +497,7 @@ def test_a_photo_at_another_resolution_is_resized_to_the_set(tmp_path, capsys):
     assert cv2.imwrite(str(paths[1]), cv2.resize(sc.images[1], (256, 192),
                                                  interpolation=cv2.INTER_CUBIC))
     notes = [n for n in io.load_image_set([d]).notes if "resized to 128x96" in n]
-    assert notes == [f"{paths[1].name}, {paths[3].name}: is 256x192, the set 128x96 (the "
+    assert notes == [f"{paths[1].name}, {paths[3].name}: 256x192, the set 128x96 (the "
                      "same frame at another resolution): resized to 128x96"], notes
 
 

@@ -460,3 +460,23 @@ def test_a_ctrl_c_while_the_command_starts_is_one_line(tmp_path, module):
     assert p.returncode == 130, err
     assert "Traceback" not in err and "interrupted" in err, err
     assert not (tmp_path / "out" / "clean.png").exists()
+
+
+def test_a_ctrl_c_after_the_run_finished_keeps_its_exit_status(tmp_path):
+    """A Ctrl-C that arrives once the command has written its outputs (here: right
+    after ``main`` returns, where the interpreter's exit joins the native threads)
+    leaves exit 0: a fresh-user trial's late Ctrl-C turned a finished run, which had
+    printed "wrote .../clean.png", into exit 130 with nothing said."""
+    folder = _write_set(tmp_path / "set", (48, 64))
+    code = ("import os, signal, sys, time; from dynremove.entry import main\n"
+            "rc = main()\n"
+            "os.kill(os.getpid(), signal.SIGINT); os.kill(os.getpid(), signal.SIGTERM)\n"
+            "time.sleep(0.5)\n"
+            "sys.exit(rc)")
+    p = subprocess.run([sys.executable, "-c", code, "run", str(folder), "--out",
+                        str(tmp_path / "out"), "-q"], cwd=REPO, env=ENV,
+                       capture_output=True, text=True, timeout=300,
+                       preexec_fn=_sigint_default)
+    assert p.returncode == 0, p.stderr
+    assert "Traceback" not in p.stderr and "interrupted" not in p.stderr, p.stderr
+    assert (tmp_path / "out" / "clean.png").exists()
