@@ -925,15 +925,17 @@ def test_a_fill_that_rests_on_one_contradicted_photo_is_told():
             assert np.isin(r.selection.reasons[:, un], (3, 5, 8)).any(0).all()
 
 
-def test_pieces_of_the_reference_kept_inside_the_fill_are_told():
+def test_pieces_of_the_reference_kept_inside_the_fill_are_filled_or_told():
     """``bursts/tim6`` as tim2-tim5 (tim4 the reference; a fresh-user trial): the cup
     stands in place in tim3, tim4 and tim5 and elsewhere in tim2. The fill replaced
     most of it from tim2, while the static 3-D test kept its letters and lid pieces,
     which tim3 and tim5 show in place: a see-through ghost of the cup, and nothing
-    said. The run now names the kept islands that only such photos vouch for
-    (``kept_pieces``: 2.4 % of the replaced region here, all on the cup: x 250-420,
-    y 600-880); the islands the scene shows through a mover, vouched for by photos
-    that show the scene around them, are not named."""
+    said. With ``--no-select-fill-pieces`` the run names the kept islands that only
+    such photos vouch for (``kept_pieces``: 2.4 % of the replaced region here, all on
+    the cup: x 250-420, y 600-880); the islands the scene shows through a mover,
+    vouched for by photos that show the scene around them, are not named. By
+    default (``select.fill_kept_pieces``) those pieces are filled from the photo
+    that fills around them, and no note is left to give."""
     from dynremove import io
     from dynremove.refine.morphology import fill_holes
     from dynremove.refine.select import kept_pieces
@@ -944,7 +946,9 @@ def test_pieces_of_the_reference_kept_inside_the_fill_are_told():
     iset = io.load_image_set([root / f"tim{i}.jpg" for i in (2, 3, 4, 5)])
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        r = remove_dynamic(iset.images, ref=2)
+        r = remove_dynamic(iset.images, ref=2,
+                           params=preset("default").replace(select_fill_pieces=False))
+        filled = remove_dynamic(iset.images, ref=2)
     pieces = kept_pieces(r.selection, r.dynamic)
     islands = fill_holes(r.dynamic) & ~r.dynamic
     n = int(pieces.sum())
@@ -962,6 +966,20 @@ def test_pieces_of_the_reference_kept_inside_the_fill_are_told():
     vouch = [k for k in range(ev.shape[0]) if np.isin(ev[k][pieces], (1, 2)).mean() >= 0.5]
     assert vouch and all(np.isin(why[k][r.dynamic & ~pieces], (1, 2)).mean() < 0.5
                          for k in vouch)
+    # by default: the pieces are replaced, from a photo that fills around them and
+    # differs from the reference there, and nothing is left to name
+    sel = filled.selection
+    assert filled.dynamic[pieces].mean() > 0.95
+    assert kept_pieces(sel, filled.dynamic).sum() < 0.1 * n
+    assert not [w for w in filled.warnings if "enclosed by the replaced region" in w]
+    ref = iset.images[2].astype(np.int16)
+    moved = np.abs(filled.clean.astype(np.int16) - ref).max(-1) > 20
+    assert moved[pieces].mean() > 0.5
+    assert set(np.unique(sel.label[pieces])) <= {1, 2, 3}
+    # elsewhere the rule only adds pieces (the tube's, smaller than the note counts)
+    far = ~dilate_disc(pieces, 60)
+    assert not (r.dynamic & ~filled.dynamic)[far].any()
+    assert (filled.dynamic & ~r.dynamic)[far].sum() < 0.01 * r.dynamic.sum()
 
 
 def _entry_p10_composite(tmp_path, davis_set, seed, *, static_set="entry-P10", n_views=3):
@@ -2056,3 +2074,45 @@ def test_a_black_and_white_source_never_fills_a_colour_reference():
     assert len(notes) == 1 and f"v{srcs[k]}.png" in notes[0], notes
     gt = sc.masks[ref]
     assert jaccard(r.dynamic, gt) > jaccard(colour.dynamic, gt) - 0.1
+
+
+def test_fill_kept_pieces_fills_a_piece_only_the_movers_photos_vouch_for():
+    """``select.fill_kept_pieces`` on a built case: a 10×10 island kept inside a region
+    filled from source 1 (label 1); source 1 shows something else than the reference
+    on the island. Vouched for only by source 2, which shows the mover around it (not
+    free on the rim): a piece of the mover, filled from source 1. Vouched for by a
+    source seen free around it: the scene seen through the mover, kept. Kept too where
+    source 1 agrees with the reference there, or shows a mover of its own there."""
+    from dynremove.refine.select import EV_FLOW, EV_NOT_FOUND, fill_kept_pieces
+
+    h, w, S, tau = 40, 40, 2, 10.0
+    lab = np.zeros((h, w), np.intp)
+    lab[5:35, 5:35] = 1
+    isl = np.zeros((h, w), bool)
+    isl[15:25, 15:25] = True
+    lab[isl] = 0
+    labs = np.zeros((S + 1, h, w, 3), np.float32)
+    labs[0, isl] = (60.0, 20.0, 0.0)  # the reference's piece; sources show 0 there
+    free = np.ones((S, h, w), bool)
+    free[1, 5:35, 5:35] = ~isl[5:35, 5:35]  # source 2 shows the mover around the island
+    free[1][isl] = True
+    d_cons = np.zeros((S, h, w), np.float32)
+    d_cons[1] = 30.0  # source 2 disagrees with the fill's consensus on the rim
+    ev = np.full((S, h, w), EV_NOT_FOUND, np.uint8)
+    ev[1][isl] = EV_FLOW  # source 2 keeps the island: it shows it in place
+    allowed = np.ones((h, w), bool)
+    out = fill_kept_pieces(lab, allowed, free, labs, tau, ev, d_cons)
+    assert (out[isl] == 1).all() and (out[~isl] == lab[~isl]).all()
+    assert (lab[isl] == 0).all()  # (a copy)
+    # the vouching source is seen free around it (agrees with the consensus there)
+    d2 = d_cons.copy()
+    d2[1] = 0.0
+    assert (fill_kept_pieces(lab, allowed, free, labs, tau, ev, d2)[isl] == 0).all()
+    # source 1 shows the reference's content there
+    l2 = labs.copy()
+    l2[1][isl] = l2[0][isl]
+    assert (fill_kept_pieces(lab, allowed, free, l2, tau, ev, d_cons)[isl] == 0).all()
+    # source 1 shows a mover of its own on part of the island
+    f2 = free.copy()
+    f2[0, 16, 16] = False
+    assert (fill_kept_pieces(lab, allowed, f2, labs, tau, ev, d_cons)[isl] == 0).all()
