@@ -147,6 +147,18 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
         assert sc["overwritten_before"] == _naive_overwritten(mem, sc["scan"], x, y, half,
                                                               Hh, Ww)
     assert h["final_dynamic"] is bool(L[y, x]) and h["gt"] is bool(gt[y, x])
+    # the sentence for non-experts: no symbols, and the outcome the mask has
+    plain = vd.plain_words(h)
+    assert plain and not re.search(r"\bM\b|t_r|A_m|b_m|B_l|Sec\.", plain), plain
+    if L[y, x]:
+        assert re.search("moved|moving", plain) and "stays as the" not in plain, plain
+    else:
+        assert plain.endswith("stays as the photo shows it"), plain
+    sel = h.get("selection") or {}
+    if L[y, x] and sel.get("source", 0) > 0 and not sel.get("inpainted"):
+        assert f"{names[sel['source'] - 1]}'s view of the spot" in plain, plain
+    if any(sc["verdict"] == "dynamic" for sc in h["scans"]):
+        assert "something that moved" in plain, plain
     verdict = vd.verdict_lines(h)
     assert 1 <= len(verdict) <= 5
     words = " ".join(verdict)

@@ -276,7 +276,8 @@ def test_pixel_history_of_dynamic_pixel(run):
     assert f"step {int(dyn['step'])}" in text and "→ DYNAMIC" in text
     assert "the scan wrote the patch of" in text and "winner cluster" in text
     assert text.splitlines()[0] == f"pixel ({x}, {y}): removed (in the final mask)"
-    assert text.splitlines()[1].startswith("  the scans: dynamic in scan 0")
+    assert text.splitlines()[1].startswith("  in plain words: the matches in other photos")
+    assert text.splitlines()[2].startswith("  the scans: dynamic in scan 0")
     assert vd.LEGEND in text  # the symbols it uses, in words
 
 
@@ -293,7 +294,8 @@ def test_pixel_history_of_probe(run):
         "n_candidates", "n_clusters", "win_size", "win_sources", "b_m"))
     assert all(m["b_m"] is None for m in vi.read_scan_maps(run["path"]))
     assert text.splitlines()[0] == "pixel (0, 1): kept (not in the final mask)"
-    assert text.splitlines()[1].startswith("  the scans: static in every scan")
+    assert text.splitlines()[1].startswith("  in plain words: ")
+    assert text.splitlines()[2].startswith("  the scans: static in every scan")
 
 
 def test_failures_against_ground_truth(run):

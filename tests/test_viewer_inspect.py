@@ -91,8 +91,9 @@ def test_compare_recording_with_its_roots(compare_rrd, capsys, root, want):
     assert vi.resolve_root(compare_rrd, root) == want
     rc, out, err = _inspect(capsys, compare_rrd, "--pixel", "5,5", "--root", root)
     assert rc == 0 and err == [], err
-    first, second = out.splitlines()[:2]
+    first, plain, second = out.splitlines()[:3]
     assert first == "pixel (5, 5): kept (not in the final mask)", out
+    assert plain.startswith("  in plain words: ") and "M =" not in plain, out
     assert second.startswith("  the scans: static in ") and first.count("pixel (") == 1, out
     n_scans = 2 if want == "runs/main" else 1
     assert f"scan {n_scans - 1} step" in out  # the run of that root, not the other

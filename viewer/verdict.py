@@ -746,6 +746,51 @@ def static_test_line(h: dict[str, Any]) -> str | None:
             + ")" + (f"; {region}" if region else ""))
 
 
+def plain_words(h: dict[str, Any]) -> str | None:
+    """Why the pixel ended up as it did, in one sentence without the paper's symbols
+    (two fresh-user trials found the lines below it hard going for a non-expert),
+    or None where no scan reached it. Needs ``final_dynamic``."""
+    scans = h.get("scans") or [dict(verdict="dynamic" if d["dynamic"] else "static",
+                                    win_sources=None) for d in h["decisions"]]
+    fin = h.get("final_dynamic")
+    if not scans or fin is None:
+        return None
+    sel = h.get("selection") or {}
+    k = sel.get("source", 0)
+    moved = any(sc["verdict"] == "dynamic" for sc in scans)
+    if fin:
+        why = ("the matches in other photos that the scans trust most here do not look "
+               "like this photo's content, so it counts as part of something that moved"
+               if moved else
+               "a step after the scans added it to the region found moving (see 'after "
+               "the scans' below)")
+        if sel.get("inpainted"):
+            return (f"{why}; no other photo shows what it hides, so the clean photo paints "
+                    "the spot in from around it")
+        if sel.get("lingering") and k > 0:
+            return (f"{why}: it stayed in place in most photos, and {_src_name(h, k - 1)}, "
+                    "which saw the scene behind it, fills the spot")
+        if k > 0:
+            return f"{why}; the clean photo shows {_src_name(h, k - 1)}'s view of the spot"
+        return why
+    if sel.get("explained"):
+        return ("the other photos show this content where the geometry expects it, so it "
+                "counts as the scene (or as something that stayed in place in those photos) "
+                "and stays as the photo shows it")
+    if moved:
+        return ("the scans took it for part of something that moved, but a later step left "
+                "it out of the final mask (see 'after the scans' and 'fill' below), so it "
+                "stays as the photo shows it")
+    if all(sc["verdict"] == "undecided" for sc in scans):
+        return ("its matches in the other photos agree on nothing, so the scans could not "
+                "call it moving, and it stays as the photo shows it")
+    names = next((sc.get("win_sources") for sc in scans if sc.get("win_sources")), None)
+    return ("the matches in other photos that the scans trust most here "
+            + (f"({', '.join(names)}) " if names else "")
+            + "look like this photo's content, so it counts as part of the scene and stays "
+            "as the photo shows it")
+
+
 def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     """The verdict in words (≤ 5 lines), then the steps that changed the pixel.
 
@@ -757,8 +802,10 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     if fin is None or not (h.get("scans") or h["decisions"]):
         lines = [f"pixel ({h['x']}, {h['y']}): " + verdict[0]]
     else:  # the outcome first, then how the scans and the steps after them got there
-        lines = [f"pixel ({h['x']}, {h['y']}): " + outcome_line(h),
-                 "  the scans: " + verdict[0]]
+        plain = plain_words(h)
+        lines = [f"pixel ({h['x']}, {h['y']}): " + outcome_line(h)]
+        lines += [f"  in plain words: {plain}"] if plain else []
+        lines.append("  the scans: " + verdict[0])
     lines += ["  " + v for v in verdict[1:]]
     st = static_test_line(h)
     if st is not None:
