@@ -975,7 +975,7 @@ def test_pieces_of_the_reference_kept_inside_the_fill_are_filled_or_told():
     ref = iset.images[2].astype(np.int16)
     moved = np.abs(filled.clean.astype(np.int16) - ref).max(-1) > 20
     assert moved[pieces].mean() > 0.5
-    assert set(np.unique(sel.label[pieces])) <= {1, 2, 3}
+    assert (sel.label[pieces] > 0).mean() > 0.95  # each from a source (2 px of pinholes stay)
     # elsewhere the rule only adds pieces (the tube's, smaller than the note counts)
     far = ~dilate_disc(pieces, 60)
     assert not (r.dynamic & ~filled.dynamic)[far].any()
@@ -2082,7 +2082,8 @@ def test_fill_kept_pieces_fills_a_piece_only_the_movers_photos_vouch_for():
     on the island. Vouched for only by source 2, which shows the mover around it (not
     free on the rim): a piece of the mover, filled from source 1. Vouched for by a
     source seen free around it: the scene seen through the mover, kept. Kept too where
-    source 1 agrees with the reference there, or shows a mover of its own there."""
+    source 1 agrees with the reference there, or shows a mover of its own there, and
+    where the island is a pinhole under ``min_px``."""
     from dynremove.refine.select import EV_FLOW, EV_NOT_FOUND, fill_kept_pieces
 
     h, w, S, tau = 40, 40, 2, 10.0
@@ -2116,3 +2117,9 @@ def test_fill_kept_pieces_fills_a_piece_only_the_movers_photos_vouch_for():
     f2 = free.copy()
     f2[0, 16, 16] = False
     assert (fill_kept_pieces(lab, allowed, f2, labs, tau, ev, d_cons)[isl] == 0).all()
+    # a pinhole (3 × 3, under min_px) stays: it holds the blend's offset
+    pin = np.zeros((h, w), bool)
+    pin[19:22, 19:22] = True
+    lab3 = np.where(isl & ~pin, 1, lab)
+    assert (fill_kept_pieces(lab3, allowed, free, labs, tau, ev, d_cons)[pin] == 0).all()
+    assert (fill_kept_pieces(lab3, allowed, free, labs, tau, ev, d_cons, min_px=9)[pin] == 1).all()
