@@ -301,15 +301,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="a folder of images (in name order, numbers by value: f8 before "
                         "f10), image files, or one video")
     r.add_argument("--ref", default=None, type=parse_ref,
-                   help="reference: index (0-based, in input order; negative counts from "
-                        "the end, -1 = the last), file name or stem (one that no other "
-                        "input has; digits that name a file are that file: 0002 is "
-                        "0002.jpg; where they are also an index of another image, as "
-                        "1 with 1.jpg 2.jpg 3.jpg, the run stops and says how to give "
-                        "either), "
-                        "path (exactly that input) or 'auto' (the sharpest frame with "
-                        "the most keypoint matches); default: the middle image. The run "
-                        "names the one it takes")
+                   help="reference photo (default: the middle one; the run names it): "
+                        "an index (0-based, in input order; negative counts from the end, "
+                        "-1 = the last), a file name or "
+                        "stem, a path, or 'auto' (the sharpest with the most keypoint "
+                        "matches). Digits are the file they name (0002 is 0002.jpg); "
+                        "where they name one file and index another, the run stops and "
+                        "says how to give either")
     r.add_argument("--out", default=None,
                    help="output folder (default: out/<the input's name>: out/tim6 for "
                         "tim6/frames, so that runs on other scenes keep theirs)")
