@@ -817,8 +817,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         f"({_where(pieces)}): the photos that show them in place show the "
                         "mover around them too, so these are likely pieces of the mover left "
                         "over the fill (its lettering, parts of it that stayed in place in "
-                        "those photos): look at them ('dynremove inspect --pixel' on a "
-                        "recording says why each was kept)")
+                        "those photos): look at them (a run with --record, then 'dynremove "
+                        "inspect --pixel', says why each was kept)")
             warnings.warn(msgs[-1], stacklevel=2)
         # most of the fill resting on one photo that the others contradict: three
         # photos whose movers overlap (a fresh-user trial on tim6 as tim3, tim4, tim5

@@ -150,15 +150,23 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
     # the sentence for non-experts: no symbols, and the outcome the mask has
     plain = vd.plain_words(h)
     assert plain and not re.search(r"\bM\b|t_r|A_m|b_m|B_l|Sec\.", plain), plain
+    sel = h.get("selection") or {}
+    k = sel.get("source", 0)
     if L[y, x]:
         assert re.search("moved|moving", plain) and "stays as the" not in plain, plain
+    elif k > 0 and not sel.get("inpainted"):  # the fill's margin: written, not counted
+        assert f"blends in {names[k - 1]}'s view of the spot" in plain, plain
     else:
-        assert plain.endswith("stays as the photo shows it"), plain
-    sel = h.get("selection") or {}
-    if L[y, x] and sel.get("source", 0) > 0 and not sel.get("inpainted"):
-        assert f"{names[sel['source'] - 1]}'s view of the spot" in plain, plain
-    if any(sc["verdict"] == "dynamic" for sc in h["scans"]):
+        assert "stays as the photo shows it" in plain, plain
+    if L[y, x] and k > 0 and not sel.get("inpainted"):
+        assert f"{names[k - 1]}'s view of the spot" in plain, plain
+    if any(sc["verdict"] == "dynamic" for sc in h["scans"]) and not sel.get("lingering"):
         assert "something that moved" in plain, plain
+    win = next((sc["win_sources"] for sc in h["scans"] if sc.get("win_sources")), None)
+    if not L[y, x] and not any(sc["verdict"] == "dynamic" for sc in h["scans"]) and win \
+            and k == 0 and not sel.get("explained"):
+        # how many photos the trusted matches come from, not "the other photos"
+        assert f"{len(win)} of the {len(names)} other photos ({', '.join(win)})" in plain
     verdict = vd.verdict_lines(h)
     assert 1 <= len(verdict) <= 5
     words = " ".join(verdict)

@@ -276,7 +276,7 @@ def test_pixel_history_of_dynamic_pixel(run):
     assert f"step {int(dyn['step'])}" in text and "→ DYNAMIC" in text
     assert "the scan wrote the patch of" in text and "winner cluster" in text
     assert text.splitlines()[0] == f"pixel ({x}, {y}): removed (in the final mask)"
-    assert text.splitlines()[1].startswith("  in plain words: the matches in other photos")
+    assert text.splitlines()[1].startswith("  in plain words: the photos whose matches the scans")
     assert text.splitlines()[2].startswith("  the scans: dynamic in scan 0")
     assert vd.LEGEND in text  # the symbols it uses, in words
 

@@ -746,10 +746,20 @@ def static_test_line(h: dict[str, Any]) -> str | None:
             + ")" + (f"; {region}" if region else ""))
 
 
+# what each step after the scans does, for a non-expert (``plain_words``)
+_STAGE_PLAIN = {"clean": "the tidying of the region found moving",
+                "votes": "the check of the region's border against the other photos",
+                "snap": "the snapping of the region to the edges in the photo",
+                "select": "the fill, which takes or leaves whole parts of an object"}
+
+
 def plain_words(h: dict[str, Any]) -> str | None:
     """Why the pixel ended up as it did, in one sentence without the paper's symbols
     (two fresh-user trials found the lines below it hard going for a non-expert),
-    or None where no scan reached it. Needs ``final_dynamic``."""
+    or None where no scan reached it. Needs ``final_dynamic``. The counts are the
+    scans' (how many of the other photos the trusted group of matches comes from),
+    so that a group of two photos out of five is not read as "the other photos"
+    (a third trial)."""
     scans = h.get("scans") or [dict(verdict="dynamic" if d["dynamic"] else "static",
                                     win_sources=None) for d in h["decisions"]]
     fin = h.get("final_dynamic")
@@ -757,38 +767,54 @@ def plain_words(h: dict[str, Any]) -> str | None:
         return None
     sel = h.get("selection") or {}
     k = sel.get("source", 0)
+    n_src = len(h.get("source_names") or ())
     moved = any(sc["verdict"] == "dynamic" for sc in scans)
+    st = h.get("stages") or {}
+    names = list(st)
+    adders = [_STAGE_PLAIN.get(b, b) for a, b in zip(names, names[1:]) if st[b] and not st[a]]
+    droppers = [_STAGE_PLAIN.get(b, b) for a, b in zip(names, names[1:])
+                if st[a] and not st[b]]
     if fin:
-        why = ("the matches in other photos that the scans trust most here do not look "
-               "like this photo's content, so it counts as part of something that moved"
-               if moved else
-               "a step after the scans added it to the region found moving (see 'after "
-               "the scans' below)")
-        if sel.get("inpainted"):
-            return (f"{why}; no other photo shows what it hides, so the clean photo paints "
-                    "the spot in from around it")
         if sel.get("lingering") and k > 0:
-            return (f"{why}: it stayed in place in most photos, and {_src_name(h, k - 1)}, "
-                    "which saw the scene behind it, fills the spot")
+            return (f"something that moved but stayed in place in most of the photos; "
+                    f"{_src_name(h, k - 1)}, which saw the scene behind it, fills the spot")
+        why = ("the photos whose matches the scans trust most here do not show what this "
+               "photo shows, so it counts as part of something that moved" if moved else
+               "the scans did not flag it, but " + (adders[-1] if adders else "a later step")
+               + " added it to the region found moving (see 'after the scans' below)")
+        if sel.get("inpainted"):
+            return (f"{why}; no other photo shows this spot free of moving things, so the "
+                    "clean photo paints it in from around it")
         if k > 0:
             return f"{why}; the clean photo shows {_src_name(h, k - 1)}'s view of the spot"
         return why
+    if k > 0 and not sel.get("inpainted"):
+        return (f"it is not counted as moving, but it lies on the edge of a filled region, "
+                f"where the clean photo blends in {_src_name(h, k - 1)}'s view of the spot, "
+                "close to this photo's colour")
+    hedge = ("; an object that stayed in place in those photos would look the same")
     if sel.get("explained"):
-        return ("the other photos show this content where the geometry expects it, so it "
-                "counts as the scene (or as something that stayed in place in those photos) "
-                "and stays as the photo shows it")
+        return ("some of the other photos show this content where the cameras' positions "
+                "say they should (see the static 3-D test below), so it counts as the scene "
+                "and stays as the photo shows it" + hedge)
     if moved:
-        return ("the scans took it for part of something that moved, but a later step left "
-                "it out of the final mask (see 'after the scans' and 'fill' below), so it "
-                "stays as the photo shows it")
+        return ("the scans took it for part of something that moved, but "
+                + (droppers[-1] if droppers else "a later step")
+                + " left it out (see 'after the scans' and 'fill' below), so it stays as "
+                "the photo shows it")
     if all(sc["verdict"] == "undecided" for sc in scans):
         return ("its matches in the other photos agree on nothing, so the scans could not "
                 "call it moving, and it stays as the photo shows it")
-    names = next((sc.get("win_sources") for sc in scans if sc.get("win_sources")), None)
-    return ("the matches in other photos that the scans trust most here "
-            + (f"({', '.join(names)}) " if names else "")
-            + "look like this photo's content, so it counts as part of the scene and stays "
-            "as the photo shows it")
+    win = next((sc.get("win_sources") for sc in scans if sc.get("win_sources")), None)
+    if not win:
+        return ("the photos whose matches the scans trust most here show what this photo "
+                "shows, so it counts as part of the scene and stays as the photo shows it")
+    few = n_src and 2 * len(win) <= n_src
+    return (f"{len(win)} of the {n_src} other photos ({', '.join(win)}) "
+            + ("shows" if len(win) == 1 else "show") + " here what this "
+            "photo shows, and the scans trust their matches most, so it counts as part of "
+            "the scene and stays as the photo shows it"
+            + ("; the others show something else here" + hedge if few else ""))
 
 
 def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
