@@ -263,19 +263,41 @@ def kept_pieces(sel: "Selection", replaced: npt.NDArray[np.bool_]) -> npt.NDArra
     out = np.zeros(replaced.shape, bool)
     if sel.static_evidence is None or sel.reasons is None:
         return out
-    islands = fill_holes(replaced) & ~replaced
-    n, cc = cv2.connectedComponents(islands.view(np.uint8), connectivity=4)
-    ev, why = sel.static_evidence, sel.reasons
-    for j in range(1, n):
-        isl = cc == j
-        rim = dilate_disc(isl, 3) & ~isl & replaced
+    why = sel.reasons
+    for isl, rim in _enclosed_islands(replaced):
         if rim.sum() < 5:
             continue
-        vouch = [k for k in range(ev.shape[0])
-                 if np.isin(ev[k][isl], (EV_FLOW, EV_LINE)).mean() >= 0.5]
+        vouch = _vouching(sel.static_evidence, isl)
         if vouch and all(np.isin(why[k][rim], (1, 2, 6)).mean() < 0.5 for k in vouch):
             out |= isl
     return out
+
+
+def _enclosed_islands(replaced: npt.NDArray[np.bool_], *,
+                      within: npt.NDArray[np.bool_] | None = None, min_px: int = 1,
+                      rim_px: int = 3):
+    """The islands (4-connected) of pixels that ``replaced`` (H, W) bool encloses and
+    does not hold (within ``within``, of ``min_px`` or more), each with its rim: the
+    replaced pixels within ``rim_px`` of it. Yields ``(island, rim)``, (H, W) bool each
+    (``kept_pieces``, ``fill_kept_pieces``)."""
+    islands = fill_holes(replaced) & ~replaced
+    if within is not None:
+        islands &= within
+    if not islands.any():
+        return
+    n, cc = cv2.connectedComponents(islands.view(np.uint8), connectivity=4)
+    sizes = np.bincount(cc.ravel(), minlength=n)
+    for j in range(1, n):
+        if sizes[j] >= min_px:
+            isl = cc == j
+            yield isl, dilate_disc(isl, rim_px) & ~isl & replaced
+
+
+def _vouching(evidence: npt.NDArray[np.uint8], isl: npt.NDArray[np.bool_]) -> list[int]:
+    """The sources whose static evidence (EV_FLOW or EV_LINE) keeps half of ``isl`` or
+    more: they show its content in place."""
+    return [k for k in range(evidence.shape[0])
+            if np.isin(evidence[k][isl], (EV_FLOW, EV_LINE)).mean() >= 0.5]
 
 
 def fill_kept_pieces(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
@@ -331,18 +353,8 @@ def fill_kept_pieces(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
     lab : (h, w) int ndarray
         A copy with the pieces relabelled.
     """
-    rep = lab != 0
-    islands = fill_holes(rep) & ~rep & allowed
     out = lab.copy()
-    if not islands.any():
-        return out
-    n, cc = cv2.connectedComponents(islands.view(np.uint8), connectivity=4)
-    sizes = np.bincount(cc.ravel(), minlength=n)
-    for j in range(1, n):
-        if sizes[j] < min_px:
-            continue
-        isl = cc == j
-        rim = dilate_disc(isl, rim_px) & ~isl & rep
+    for isl, rim in _enclosed_islands(lab != 0, within=allowed, min_px=min_px, rim_px=rim_px):
         if not rim.any():
             continue
         k = int(np.bincount(lab[rim]).argmax())
@@ -350,10 +362,8 @@ def fill_kept_pieces(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
             continue
         if (delta_e(labs[k][isl], labs[0][isl]) > tau).mean() < share:
             continue  # the photo seen free around it shows it too: the scene
-        vouch = [i for i in range(evidence.shape[0])
-                 if np.isin(evidence[i][isl], (EV_FLOW, EV_LINE)).mean() >= 0.5]
         if any(((lab[rim] == i + 1) | (free[i][rim] & (d_cons[i][rim] < tau))).mean() >= 0.5
-               for i in vouch):
+               for i in _vouching(evidence, isl)):
             continue  # a photo seen free around it shows it in place: the scene
         out[isl] = k
     return out
