@@ -48,7 +48,7 @@ from dynremove import io
 from dynremove.errors import InputError, interruption
 from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
-from dynremove.refine.concurrency import one_thread_per_worker
+from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_restarts
 from dynremove.pipeline import full_resolution_output, remove_dynamic
 from dynremove.video import auto_reference, blurry_reference_note, parse_span
 
@@ -65,16 +65,17 @@ def at_output_size(res: Any, iset: Any, output_size: str = "full") -> Any:
     """``res`` with clean, dynamic and coverage at the input's full resolution.
 
     Only when ``output_size`` is ``"full"`` and the run worked on downscaled
-    photos (not video frames): the originals are read again and
-    ``pipeline.full_resolution_output`` recomputes the replaced pixels; the
-    others are the input's, byte for byte.
+    photos or video frames: the originals are read again (a clip's frames were
+    kept, ``ImageSet.originals``) and ``pipeline.full_resolution_output``
+    recomputes the replaced pixels; the others are the input's, byte for byte.
     """
-    if output_size != "full" or iset.scale >= 1.0 or getattr(iset, "video", None):
+    if output_size != "full" or iset.scale >= 1.0:
         return res
     # (timed from the reading of the originals, as the terminal's "full-size output"
     # line is: a trial read 7.0 s there against 5.5 s in report.json)
     t = time.perf_counter()
-    full = [io.read_image(p)[0] for p in iset.paths]
+    kept = getattr(iset, "originals", None)
+    full = list(kept) if kept is not None else [io.read_image(p)[0] for p in iset.paths]
     W0, H0 = iset.original_size
     for i, op in enumerate(getattr(iset, "conformed", None) or []):
         if op is not None:  # brought to the set's size when read: the same here
@@ -439,6 +440,7 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
             row.update(_row_from_report(done), status="ok", skipped=True,
                        seconds=_earlier_seconds(done))
             return row
+        _check_writable(out)  # before the analysis, as `run` checks --out
         params = Params(**options["params"])
         # --frames and --span are for the video sets (a folder of photos has its own)
         video = len(bs.inputs) == 1 and io.is_video_file(Path(bs.inputs[0]))
@@ -481,6 +483,21 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
     return row
 
 
+def _check_writable(out: Path) -> None:
+    """InputError if the set's output folder, or the nearest folder above it that
+    exists, cannot be written (a fresh-user trial's read-only set folder gave a
+    PermissionError naming a temporary file, after the whole analysis). Nothing is
+    created here: a set that fails leaves no folder behind."""
+    p = out
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    if not p.is_dir():
+        raise InputError(f"{out}: cannot be created: {p} is a file, not a folder")
+    if not os.access(p, os.W_OK | os.X_OK):
+        raise InputError(f"{out}: not writable" if p == out else
+                         f"{out}: cannot be created: {p} is not writable")
+
+
 def _row_from_report(report: dict) -> dict:
     return {"n_images": len(report.get("inputs", [])),
             "reference": report.get("reference", {}).get("name"),
@@ -521,6 +538,28 @@ def _earlier_row(out: Path, p: dict | None) -> dict | None:
     note = ("from the earlier run: this batch was cut short before the set (its inputs "
             "were not checked for changes)")
     return {**p, "skipped": True, "notes": [*(p.get("notes") or []), note]}
+
+
+def _finished_on_disk(bs: BatchSet, out_root: Path, options: dict, *, since: float
+                      ) -> dict | None:
+    """The row of a set whose folder holds whole outputs that this batch wrote (its
+    report.json written at or after ``since``, a wall-clock time, and the same batch
+    key), when the batch was cut short before the set's row came back; else None."""
+    out = out_root / bs.name
+    try:
+        if (out / "report.json").stat().st_mtime < since:
+            return None
+        key = batch_key(bs, options)
+    except (OSError, ValueError):
+        return None
+    report = _is_done(out, key)
+    if report is None:
+        return None
+    row: dict[str, Any] = dict.fromkeys(SUMMARY_FIELDS)
+    row.update({"set": bs.name, "skipped": False, "inputs": len(bs.inputs), "out": str(out),
+                "batch_key": key, **_row_from_report(report), "status": "ok",
+                "seconds": _earlier_seconds(report)})
+    return row
 
 
 def _keep_earlier(row: dict, prev: dict[str, dict]) -> dict:
@@ -585,6 +624,7 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     options = {"params": params.to_dict(), "preset": preset_name, "max_side": max_side,
                "ref": ref, "frames": frames, "span": span, "pick": pick}
     t0 = time.perf_counter()
+    t0_wall = time.time()
     results: dict[str, dict] = {}
 
     def summary_of(rows: list[dict], workers: int | None, **extra) -> dict:
@@ -612,6 +652,14 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
         # interrupted (Ctrl-C, SIGTERM) or failed: the summary still lists the sets
         # that finished (each set's own outputs are already whole on disk), and says
         # how many did not run; the same command again resumes
+        # a set whose outputs a worker wrote whole as the interruption landed, before
+        # its row came back, finished too (a fresh-user trial's --jobs 2 batch said
+        # "2 of 8 sets finished" beside a third set's complete outputs)
+        for bs in sets:
+            if bs.name not in results:
+                row = _finished_on_disk(bs, out, options, since=t0_wall)
+                if row is not None:
+                    results[bs.name] = row
         done = [results[bs.name] for bs in sets if bs.name in results]
         n_not_run = len(sets) - len(done)
         # a set this run did not reach keeps the earlier summary's row while its
@@ -619,7 +667,12 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
         # sets finished before: a fresh-user trial)
         rows = [results.get(bs.name) or _earlier_row(out / bs.name, prev.get(bs.name))
                 for bs in sets]
-        _write_summary(out, summary_of([r for r in rows if r is not None], None,
+        if scheduler:
+            workers = None  # (the cluster's, unknown once cut)
+        else:  # as a finished batch says it (a trial's cut --jobs 1 batch said null)
+            from joblib import effective_n_jobs
+            workers = 1 if jobs == 1 else effective_n_jobs(jobs)
+        _write_summary(out, summary_of([r for r in rows if r is not None], workers,
                                        interrupted=True, n_not_run=n_not_run))
         raise
     summary = summary_of(rows, workers)
@@ -664,6 +717,7 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
             _collect((one(k, bs) for k, bs in enumerate(sets, 1)), sets, on_done, results)
         else:
             n = min(effective_n_jobs(jobs), len(sets))
+            quiet_worker_restarts()
             if on_note is not None:
                 on_note(f"{len(sets)} set{'s' if len(sets) != 1 else ''}, {n} at a time: "
                         "a line as each one finishes")

@@ -550,7 +550,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "frame delay in whole hundredths of a second, 20 ms at least, so it "
                         "gets the nearest it can (30 -> 33.3 fps, 100 -> 50 fps), and says so")
     x.add_argument("--max-side", type=parse_side, default=480, metavar="PX",
-                   help="longest side of the frames in px, at least 16 (default 480)")
+                   help="longest side of the frames in px, their caption bar included "
+                        "(left out under 104 px), at least 16 (default 480)")
     x.add_argument("--root", default="",
                    help="which run of a --compare recording: runs/main or runs/compare (or "
                         "main / compare); a plain recording has none")

@@ -291,7 +291,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.disconnect()
     res.timings = {"load": t_load, **res.timings}  # first, as on the terminal
     bar = _bar(args, params)  # the steps after the pipeline's, on the same bar
-    if args.output_size == "full" and iset.scale < 1.0 and not iset.video:
+    if args.output_size == "full" and iset.scale < 1.0:
         bar("full-size output", 0.0)
         h, w = res.clean.shape[:2]
         res = at_output_size(res, iset, args.output_size)

@@ -54,6 +54,10 @@ class ImageSet:
     video: dict | None = None  # {"path", "frames": chosen frame numbers, ...} for a clip
     # per image: how it was brought to the set's size (``conform``), None = as read
     conformed: list[dict | None] = field(default_factory=list)
+    # a clip's frames at the clip's own size, kept where they were downscaled for the
+    # analysis: the full-size output cannot read a video's frame back by its name
+    # (``batch.at_output_size``); None for photos, which are read again
+    originals: list[np.ndarray] | None = None
 
     @property
     def valid_masks(self) -> list[np.ndarray] | None:
@@ -716,6 +720,7 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
                      f"well below the 854-{AUTO_MAX_SIDE} px the method is tuned at (its patches "
                      "are sized in analysis pixels): expect a coarse mask")
     scale = 1.0
+    originals = None
     if target and side > target:
         scale = target / side
         size = (max(8, round(W0 * scale)), max(8, round(H0 * scale)))
@@ -726,6 +731,8 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             raise InputError(f"{how}: makes the {W0}x{H0} photos "
                              f"{size[0]}x{size[1]}, under the 16x16 the method needs "
                              f"(give at least --max-side {need})")
+        if video is not None:
+            originals = images
         images = [cv2.resize(im, size, interpolation=cv2.INTER_AREA) for im in images]
         # a pixel has content when all it was averaged from had content
         valids = [None if v is None else
@@ -736,7 +743,8 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
             raise InputError(f"{paths[i]}: has content in only {100 * v.mean():.1f} % of "
                              "the frame (alpha 0, black border or --valid-mask)")
     return ImageSet(paths=paths, images=images, original_size=(W0, H0), scale=scale,
-                    notes=notes, valid=valids, video=video, conformed=conformed)
+                    notes=notes, valid=valids, video=video, conformed=conformed,
+                    originals=originals)
 
 
 def is_path_ref(ref: object) -> bool:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import time
 from pathlib import Path
 
 import cv2
@@ -720,3 +721,68 @@ def test_the_running_set_is_one_line_redrawn_on_a_terminal():
     bar.clear()
     assert out.getvalue().endswith("\r\033[K") and not bar.drawn
 
+
+
+def test_a_set_whose_output_folder_cannot_be_written_fails_before_its_analysis(
+        tmp_path, root, monkeypatch, capsys):
+    """A fresh-user trial's read-only set folder gave the row "PermissionError: [Errno
+    13] Permission denied: '.../.clean.png.fl_0ho4r.tmp'", after the whole analysis. The
+    set's folder (or the nearest one above it) is checked first, as `run` checks --out,
+    and the row says what is wrong in one line; the other sets run on. (os.access is
+    replaced: the tests may run as root, who may write anywhere.)"""
+    out = tmp_path / "out"
+    (out / "a").mkdir(parents=True)
+    (out / "bad").write_text("a file where the set's folder goes")
+    real_access = batch.os.access
+    monkeypatch.setattr(batch.os, "access",
+                        lambda p, mode: Path(p) != out / "a" and real_access(p, mode))
+    analysed = []
+    real_run = batch.remove_dynamic
+    monkeypatch.setattr(batch, "remove_dynamic",
+                        lambda images, **kw: analysed.append(len(images)) or real_run(images, **kw))
+    assert main(["batch", str(root), "--out", str(out), *FAST]) == 1
+    rows = summary_rows(out)
+    assert rows["a"]["status"] == "error" and rows["a"]["error"] == f"{out / 'a'}: not writable"
+    assert rows["bad"]["status"] == "error" and "is a file, not a folder" in rows["bad"]["error"]
+    assert rows["davis/b"]["status"] == "ok"
+    assert analysed == [4]  # davis/b only: neither failing set was analysed
+    capsys.readouterr()
+
+
+def test_a_set_written_whole_as_the_batch_is_cut_counts_as_finished(tmp_path, root, capsys,
+                                                                    monkeypatch):
+    """A fresh-user trial's --jobs 2 batch, cut by Ctrl-C, said "2 of 8 sets finished"
+    and listed two sets in summary.json, while a third set's folder held its complete
+    outputs, written by a worker as the interruption landed (a resume skipped it, as
+    it should). Such a set is listed as finished: outputs of this batch (its key),
+    written since it started."""
+    from dynremove.cli import main
+
+    real = batch.run_set
+
+    def cut_after_writing(bs, *a, **k):
+        row = real(bs, *a, **k)
+        if bs.name == "davis/b":  # its outputs are on disk, its row never comes back
+            raise KeyboardInterrupt
+        return row
+
+    monkeypatch.setattr(batch, "run_set", cut_after_writing)
+    out = tmp_path / "out"
+    rc = main(["batch", str(root), "--out", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 130
+    rows = summary_rows(out)
+    assert list(rows) == ["a", "bad", "davis/b"], rows
+    assert rows["davis/b"]["status"] == "ok" and rows["davis/b"]["skipped"] == "False"
+    assert float(rows["davis/b"]["jaccard_vs_gt"]) > 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["interrupted"] is True and s["n_not_run"] == 0 and s["n_failed"] == 1
+    assert s["workers"] == 1  # as a finished batch of --jobs 1 says (it said null)
+    assert "2 of 3 sets finished" in err, err
+    # outputs written before this batch started, or by a batch of other options, are
+    # not this batch's
+    b = {bs.name: bs for bs in batch.find_sets(root)}["davis/b"]
+    opts = s["options"]
+    assert batch._finished_on_disk(b, out, opts, since=0.0)["status"] == "ok"
+    assert batch._finished_on_disk(b, out, opts, since=time.time() + 60) is None
+    assert batch._finished_on_disk(b, out, {**opts, "max_side": 64}, since=0.0) is None

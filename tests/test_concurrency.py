@@ -88,3 +88,22 @@ def test_numba_s_workqueue_layer_runs_the_sources_in_turn_with_the_same_result(t
     assert said.stdout.split() == ["False", "workqueue"], said.stderr[-2000:]
     for a, b in zip(outs["default"], outs["workqueue"]):
         np.testing.assert_array_equal(a, b)
+
+
+def test_joblibs_worker_restart_warning_is_silenced_and_nothing_else():
+    """A fresh-user trial read loky's "A worker stopped while some jobs were given to
+    the executor ... memory leak" (printed by every `batch --jobs 2` run: the pool
+    restarts a worker that grew by 300 MB, which one set does) as a crash. The
+    restart is harmless; only that message goes, other warnings still show."""
+    import warnings
+
+    from dynremove.refine.concurrency import quiet_worker_restarts
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        quiet_worker_restarts()
+        warnings.warn("A worker stopped while some jobs were given to the executor. This "
+                      "can be caused by a too short worker timeout or by a memory leak.",
+                      UserWarning)
+        warnings.warn("a note of the run", UserWarning)
+    assert [str(w.message) for w in caught] == ["a note of the run"]

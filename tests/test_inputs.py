@@ -145,6 +145,33 @@ def test_video_frames_as_photos(tmp_path, capsys, clip_scene):
     assert abs(jv - jp) <= 0.05, (jv, jp)
 
 
+def test_a_clip_above_the_analysis_size_gives_a_full_size_clean_photo(tmp_path, capsys):
+    """A fresh-user trial: 7 frames of a 1920x1080 clip gave a 1280x720 clean.png, with
+    --output-size full too and no note (a clip's frames cannot be read back by name,
+    and the full-size output was skipped for video). The frames are kept: the clean
+    photo has the clip's size and is its reference frame outside the replaced region,
+    as it is for photos."""
+    sc = synth.make_scene(seed=0, n_views=5, size=(240, 320))
+    clip = tmp_path / "clip.avi"
+    write_clip(clip, sc.images)
+    rc, _, err = run_cli(capsys, "run", clip, "--frames", "5", "--pick", "even",
+                         "--max-side", "160", "--out", tmp_path / "v", "--quiet")
+    assert rc == 0, err
+    clean = cv2.imread(str(tmp_path / "v" / "clean.png"))
+    mask = cv2.imread(str(tmp_path / "v" / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 0
+    assert clean.shape == (240, 320, 3) and mask.shape == (240, 320) and mask.any()
+    rep = json.loads((tmp_path / "v" / "report.json").read_text())
+    frames, _, _ = video.read_video(clip, frames=5, pick="even")  # as the run read them
+    ref_frame = frames[rep["reference"]["index"]]
+    region = cv2.dilate(mask.astype(np.uint8), np.ones((15, 15), np.uint8)).astype(bool)
+    np.testing.assert_array_equal(clean[~region], ref_frame[~region])
+    # the mover is gone at full size: the fill is nearer the true background than the frame
+    gt = sc.masks[rep["video"]["frames"][rep["reference"]["index"]]]
+    err = np.abs(clean.astype(int) - sc.background).mean(-1)[gt].mean()
+    err_in = np.abs(ref_frame.astype(int) - sc.background).mean(-1)[gt].mean()
+    assert err < 0.5 * err_in, (err, err_in)
+
+
 def test_a_truncated_clip_gives_its_frames_from_what_it_has(tmp_path, scene):
     """A clip cut short (its header still counts every frame) was read over windows
     of the whole count: the windows past its end had no frame (a trial's clip gave 4

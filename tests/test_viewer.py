@@ -439,6 +439,12 @@ def test_export_gif_and_mp4(run, tmp_path):
     # 102 px frames: the MP4 writer padded them)
     odd = export.render_frames(run["path"], max_side=101)
     assert max(odd[0].shape[:2]) <= 101 and all(v % 2 == 0 for v in odd[0].shape[:2])
+    # the caption bar counts in the height (a trial's --max-side 16 gave 16x36 frames,
+    # 50 gave 50x58); from 104 px up the frames have it
+    for side in (16, 50, 104):
+        small = export.render_frames(run["path"], max_side=side)
+        assert max(small[0].shape[:2]) <= side, (side, small[0].shape)
+    assert (small[0][:export.CAPTION_ROWS] == 32).mean() > 0.5  # the bar's gray
     mp4 = export.export_gif(run["path"], tmp_path / "odd.mp4", fps=5, max_side=101)
     cap = cv2.VideoCapture(str(mp4))
     assert int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)) <= 101

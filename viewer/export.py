@@ -53,10 +53,13 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
     img_steps = np.array([s for s, _ in images])
     dyn_steps = np.array([s for s, _ in snaps["dynamic"]])
     W2 = 2 * W + 8
-    scale = min(1.0, max_side / max(W2, H))
+    # the caption bar counts in the frame's height (a fresh-user trial's --max-side 16
+    # gave 16x36 frames); under a quarter of the frame it is left out
+    cap_rows = CAPTION_ROWS if max_side >= 4 * CAPTION_ROWS else 0
+    scale = min(1.0, max_side / W2, (max_side - cap_rows) / H)
     # even sides, at most max_side: MP4's codecs need even ones (padding them made
     # --max-side 101 give 102 px frames: a fresh-user trial)
-    out_w, out_h = (max(2, int(round(v * scale)) // 2 * 2) for v in (W2, H))
+    out_w, out_h = (max(2, int(v * scale) // 2 * 2) for v in (W2, H))
     scan_of = {}
     t = vi._arrow(store, p(P.REFERENCE_IMAGE))
     if t is not None:
@@ -90,7 +93,8 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
         text = f"{where}   |L| = {int(L.sum())} px"
         if captions is not None:
             captions.append(text)
-        frames.append(np.concatenate([_caption(out_w, text), small], 0))
+        frames.append(np.concatenate([_caption(out_w, text), small], 0) if cap_rows
+                      else small)
     return frames
 
 

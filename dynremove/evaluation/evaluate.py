@@ -94,7 +94,7 @@ from dynremove.evaluation.whole_photo import (damage_percent, leftover_percent, 
                                               own_mover_fill_percent, psnr, ssim)
 from dynremove.params import Params, preset
 from dynremove.pipeline import Result, remove_dynamic
-from dynremove.refine.concurrency import one_thread_per_worker
+from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_restarts
 
 METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
@@ -492,6 +492,7 @@ def _run_parallel(sets: Sequence[EvalSet], variants: Sequence[tuple[str, dict | 
         gen: Iterable[dict] = (eval_set(es, variants, max_side=max_side, ref=ref)
                                for es in sets)
     else:
+        quiet_worker_restarts()
         gen = Parallel(n_jobs=jobs, return_as="generator_unordered")(tasks)
     for k, res in enumerate(gen, 1):
         results[res["set"]] = res

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import os
+import warnings
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
@@ -90,4 +91,20 @@ def one_thread_per_worker() -> None:
     numba.set_num_threads(1)
 
 
-__all__ = ["for_each_source", "numba_threads_safe", "one_thread_per_worker"]
+def quiet_worker_restarts() -> None:
+    """Silence joblib's "A worker stopped while some jobs were given to the executor
+    ... memory leak" warning in this (the parent) process.
+
+    Its process pool (loky) restarts a worker whose memory grew by more than 300 MB
+    over a task, as a guard against leaks; one set of photos takes more than that by
+    itself, so with ``--jobs 2`` every run printed the warning, and a fresh-user
+    trial read it as a crash. The restart is harmless (the task is done, the next one
+    runs in a fresh worker, and the outputs are those of ``--jobs 1``, byte for
+    byte); only its message goes. Call before ``joblib.Parallel`` with processes.
+    """
+    warnings.filterwarnings("ignore", message="A worker stopped while some jobs were given",
+                            category=UserWarning)
+
+
+__all__ = ["for_each_source", "numba_threads_safe", "one_thread_per_worker",
+           "quiet_worker_restarts"]
