@@ -313,7 +313,12 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
     found: list[BatchSet] = []
 
     def name_of(d: Path) -> str:
-        return d.relative_to(root).as_posix() if d != root else root.resolve().name
+        if d != root:
+            return d.relative_to(root).as_posix()
+        # ROOT itself a set: named as `run` names its folder (the parent's name for a
+        # generic one: a trial's `batch .` inside tim6/frames wrote X/frames)
+        r = root.resolve()
+        return (r.parent if r.name.lower() in io.GENERIC_FOLDERS else r).name
 
     def walk(d: Path) -> None:
         if d.resolve() in skip:

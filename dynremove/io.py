@@ -878,7 +878,7 @@ def _file_in_the_way(p: Path) -> Path | None:
     return None
 
 
-_GENERIC_FOLDERS = {"frames", "images", "imgs", "img", "photos", "pictures", "input", "inputs"}
+GENERIC_FOLDERS = {"frames", "images", "imgs", "img", "photos", "pictures", "input", "inputs"}
 
 
 def default_out_dir(inputs: Sequence[str | os.PathLike]) -> Path:
@@ -894,7 +894,7 @@ def default_out_dir(inputs: Sequence[str | os.PathLike]) -> Path:
     else:
         folders = {p.resolve() if p.is_dir() else p.resolve().parent for p in paths}
         folder = folders.pop() if len(folders) == 1 else None
-        if folder is not None and folder.name.lower() in _GENERIC_FOLDERS:
+        if folder is not None and folder.name.lower() in GENERIC_FOLDERS:
             folder = folder.parent
         name = folder.name if folder is not None else ""
     name = re.sub(r"[^\w.+-]+", "_", name).strip("._")

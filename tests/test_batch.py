@@ -56,6 +56,10 @@ def test_find_sets(root):
     b = sets[2]
     assert b.gt == root / "davis" / "b" / "masks" and len(b.inputs) == 4
     assert batch.find_sets(root / "a")[0].inputs == sets[0].inputs  # ROOT itself a set
+    # ROOT itself a set in a generic folder is named after its parent, as `run` names
+    # its output folder (a trial's `batch .` inside tim6/frames wrote X/frames)
+    only = batch.find_sets(root / "davis" / "b" / "frames")
+    assert [s.name for s in only] == ["b"] and len(only[0].inputs) == 4
 
 
 def test_batch_runs_resumes_and_reports_failures(tmp_path, root, capsys):
