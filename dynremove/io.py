@@ -344,6 +344,12 @@ def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
             notes.append(f"{names[0]} is given {times}"
                          + (f" (also as {', '.join(also)})" if also else "") + ": used once")
     paths = [names[0] for names in seen.values()]
+    if (len(paths) == 1 and len(args) == 1 and paths[0].suffix.lower() in IMAGE_EXTS
+            and paths[0].is_file() and is_video_file(paths[0])):
+        # (a fresh-user trial's MP4 renamed clip.jpg read "need at least 2 images")
+        raise InputError(f"{paths[0]}: named as an image ({paths[0].suffix}), but its content "
+                         f"is a video: give it a video's suffix (e.g. "
+                         f"{paths[0].with_suffix('.mp4').name}) to take frames from it")
     if len(paths) < at_least:
         # (a folder: the images found in it; files given one by one: those files, once)
         where = " in " if any(Path(a).is_dir() for a in args) else ": "

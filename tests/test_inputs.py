@@ -254,6 +254,20 @@ def test_a_file_named_as_a_video_that_is_none_says_so(tmp_path, capsys):
     one_error_line(err, "fake.mp4", "named as a video", "MP4/MOV")
 
 
+def test_a_video_named_as_an_image_says_so(tmp_path, capsys, scene):
+    """The other way round (a fresh-user trial): a clip renamed clip.jpg and given alone
+    got "need at least 2 images, found 1"; the error names what it is and what to do.
+    (By content alone it is not taken as a video: HEIC photos share MP4's container.)"""
+    clip = tmp_path / "clip.avi"
+    write_clip(clip, scene.images)
+    named = tmp_path / "clip.jpg"
+    clip.rename(named)
+    rc, _, err = run_cli(capsys, "run", named, "--out", tmp_path / "o", *FAST)
+    assert rc == 2
+    one_error_line(err, "clip.jpg", "named as an image (.jpg)", "content is a video",
+                   "clip.mp4")
+
+
 def test_a_damaged_mp4_gives_one_line_without_ffmpegs_own(tmp_path, scene):
     """FFmpeg printed "[mov,mp4,...] moov atom not found" straight to the terminal
     before the one-line error (a fresh-user trial): a whole process, whose stderr
