@@ -403,7 +403,9 @@ def reference_note(ref_arg: str | None, ref: int, info: dict, names: list[str]) 
     """One line naming the reference and how it was chosen (middle, given, auto)."""
     n = int(info.get("n_distinct", len(names)))  # a photo given twice counts once
     other = info.get("other_middle", ref - 1)
-    dup = f" of the {n} distinct ones" if n < len(names) else ""
+    # ("exact": a trial's clip of repeated frames read "25 distinct ones" beside the
+    # near-copy notes, which count the frames that are alike, not identical)
+    dup = f" of the {n} that are no exact copy of another" if n < len(names) else ""
     middle = (f"all {len(names)} files are the same photo" if n == 1 < len(names) else
               f"the middle image{dup}" if n % 2 else
               f"the later of the two middle images{dup}; --ref {other} for the other"

@@ -668,14 +668,15 @@ def test_a_photo_given_twice_does_not_move_the_middle_reference(tmp_path):
     from dynremove.commands import reference_note
 
     assert reference_note(None, i, info, iset.names).endswith(
-        "(index 2 of 0..5, the middle image of the 5 distinct ones)")
+        "(index 2 of 0..5, the middle image of the 5 that are no exact copy of another)")
     # 4 distinct photos and a copy: the later middle one, the other named by its index
     (tmp_path / "set" / paths[0].name).unlink()
     iset = io.load_image_set([tmp_path / "set"])
     i, info, _ = batch.choose_reference(None, iset)
     assert iset.names[i] == paths[3].name
     assert reference_note(None, i, info, iset.names).endswith(
-        "the later of the two middle images of the 4 distinct ones; --ref 1 for the other)")
+        "the later of the two middle images of the 4 that are no exact copy of another; "
+        "--ref 1 for the other)")
     # one photo under three names: said so (a trial read "the middle image of the 1
     # distinct ones")
     assert reference_note(None, 0, {"n_distinct": 1, "chosen_by": "middle"},
