@@ -69,8 +69,12 @@ def damage_note(path: str | Path) -> str | None:
         pos, _ = complete_messages(f, size)
     if pos >= end:
         return None
-    return (f"damaged or cut short after {pos} of {size} bytes: the viewer shows "
-            "what was recorded before the damage")
+    # ("what it can read": a trial's file cut at 100 kB held 65 complete messages of
+    # which `export` and `inspect` could read nothing, where this said the viewer
+    # shows what was recorded)
+    return (f"damaged or cut short after {pos} of {size} bytes: the viewer shows what it "
+            "can read of the part before the damage ('dynremove inspect' on the file says "
+            "whether any of it can be read)")
 
 
 def read_rrd_tolerant(path: str):
