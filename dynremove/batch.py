@@ -317,8 +317,7 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
             return d.relative_to(root).as_posix()
         # ROOT itself a set: named as `run` names its folder (the parent's name for a
         # generic one: a trial's `batch .` inside tim6/frames wrote X/frames)
-        r = root.resolve()
-        return (r.parent if r.name.lower() in io.GENERIC_FOLDERS else r).name
+        return io.scene_folder(root.resolve()).name
 
     def walk(d: Path) -> None:
         if d.resolve() in skip:
@@ -493,9 +492,7 @@ def _check_writable(out: Path) -> None:
     exists, cannot be written (a fresh-user trial's read-only set folder gave a
     PermissionError naming a temporary file, after the whole analysis). Nothing is
     created here: a set that fails leaves no folder behind."""
-    p = out
-    while not p.exists() and p != p.parent:
-        p = p.parent
+    p = io.nearest_existing(out)
     if not p.is_dir():
         raise InputError(f"{out}: cannot be created: {p} is a file, not a folder")
     if not os.access(p, os.W_OK | os.X_OK):
@@ -676,7 +673,7 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
             workers = None  # (the cluster's, unknown once cut)
         else:  # as a finished batch says it (a trial's cut --jobs 1 batch said null)
             from joblib import effective_n_jobs
-            workers = 1 if jobs == 1 else effective_n_jobs(jobs)
+            workers = effective_n_jobs(jobs)  # (what _run_all returns)
         _write_summary(out, summary_of([r for r in rows if r is not None], workers,
                                        interrupted=True, n_not_run=n_not_run))
         raise

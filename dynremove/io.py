@@ -875,16 +875,29 @@ def read_mask(path: str | os.PathLike, size: tuple[int, int] | None = None, *,
     return m > 127
 
 
+def nearest_existing(p: Path) -> Path:
+    """The nearest existing ancestor of ``p``, ``p`` itself included (the root of a
+    relative path's chain: ``Path(".")``)."""
+    for q in (p, *p.parents):
+        if q.exists():
+            return q
+    return Path(".")
+
+
 def _file_in_the_way(p: Path) -> Path | None:
     """The nearest existing ancestor of ``p`` (``p`` itself included) when it is not a
     folder: a folder cannot be created below it."""
-    for q in (p, *p.parents):
-        if q.exists():
-            return None if q.is_dir() else q
-    return None
+    q = nearest_existing(p)
+    return None if q.is_dir() else q
 
 
-GENERIC_FOLDERS = {"frames", "images", "imgs", "img", "photos", "pictures", "input", "inputs"}
+_GENERIC_FOLDERS = {"frames", "images", "imgs", "img", "photos", "pictures", "input", "inputs"}
+
+
+def scene_folder(folder: Path) -> Path:
+    """The folder that names a set of photos: ``folder`` itself, or its parent when
+    its name is generic (``tim6/frames`` is named ``tim6``)."""
+    return folder.parent if folder.name.lower() in _GENERIC_FOLDERS else folder
 
 
 def default_out_dir(inputs: Sequence[str | os.PathLike]) -> Path:
@@ -900,9 +913,7 @@ def default_out_dir(inputs: Sequence[str | os.PathLike]) -> Path:
     else:
         folders = {p.resolve() if p.is_dir() else p.resolve().parent for p in paths}
         folder = folders.pop() if len(folders) == 1 else None
-        if folder is not None and folder.name.lower() in GENERIC_FOLDERS:
-            folder = folder.parent
-        name = folder.name if folder is not None else ""
+        name = scene_folder(folder).name if folder is not None else ""
     name = re.sub(r"[^\w.+-]+", "_", name).strip("._")
     return Path("out") / (name or "run")
 
