@@ -131,15 +131,20 @@ def _throughput(res: Any, iset: Any) -> dict:
 
 def _scene_entry(res) -> dict:
     """report.json's ``scene``: whether the run treated the set as flat or 3-D (the
-    sources' median measured parallax against ``select_parallax_px``), which decides
+    sources' median measured parallax against ``select_parallax_px``, and their 95th
+    percentile against ``select_parallax_p95_px``: ``select.treated_as_3d``), which decides
     the clean-up of L, GrabCut's veto, the epipolar search and the fill's consensus;
     nothing without the fill by selection (the paper preset)."""
     sel = res.selection
     if sel is None:
         return {}
     limit = float(res.params.get("select_parallax_px", float("nan")))
+    far = float(res.params.get("select_parallax_p95_px", float("nan")))
+    p95 = float(sel.parallax_p95_px)
     return {"scene": {"median_parallax_px": round(float(sel.parallax_px), 2),
                       "parallax_threshold_px": limit,
+                      "median_parallax_p95_px": round(p95, 2) if np.isfinite(p95) else None,
+                      "parallax_p95_threshold_px": far,
                       "treated_as": "3-D" if sel.consensus_mode == "parallax" else "flat"}}
 
 

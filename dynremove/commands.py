@@ -848,7 +848,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
                 (x0, x1), (y0, y1) = ins.photo_span(info, x, y)
                 print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis "
                       f"image = photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos "
-                      f"(its centre; it covers x {x0}–{x1}, y {y0}–{y1})")
+                      f"(the one nearest its centre; it covers photo pixels x {x0}–{x1}, "
+                      f"y {y0}–{y1})")
         hist = ins.pixel_history(path, x, y, root=args.root)
         if size is not None and hist.get("final_dynamic") is False:
             # (before the verdict, whose "not in the final mask" is the analysis

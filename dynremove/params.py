@@ -119,6 +119,7 @@ class Params:
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (analysis px; 0 = off)
     select_grow_alone: bool = True  # L also grows where no source agrees with the reference (at least two see it, even if they disagree among themselves) and the reference shows the colours of L's movers
     select_parallax_px: float = 8.0  # the set's median measured parallax (analysis px) above which it is treated as 3-D: colour consensus may keep the reference in L, the epipolar search and --snap-veto run
+    select_parallax_p95_px: float = 150.0  # the set is 3-D too where the median over the sources of the 95th percentile of that parallax is over this (analysis px): 3-D structure that holds 5-10 % of the matches (a porch before a façade) leaves the 90th percentile on the plane, and the run refilled its columns; a mover's matches that fit the epipolar geometry rarely reach this far (0 = off)
     select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px, weighted: see --select-search-support-de) is under this (0 = off)
     select_search_support_de: float = 5.0  # the epipolar search's window weighs its cells by their colour's likeness to the centre's, exp(-dE / this) in CIE76 dE (adaptive support weights, Yoon & Kweon 2006), so that a thin structure is compared, not the background around it (0 = a plain box)
     select_search_unique: float = 1.5  # with three photos or two, where one source's epipolar match would keep a pixel of L as static while the other source found nothing, that match must be unique: the best match farther than 10 px along the line must cost more than this × its ΔE + 2 (a ratio test: a plain dark shirt matches all along a dark screen; 0 = off)
@@ -186,7 +187,8 @@ class Params:
         if self.select_minority != 0 and not self.select_minority >= 1:
             raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
-                     "select_parallax_px", "select_margin_px", "select_search_de",
+                     "select_parallax_px", "select_parallax_p95_px", "select_margin_px",
+                     "select_search_de",
                      "select_search_support_de", "select_search_unique",
                      "select_search_against_de", "select_complete_px",
                      "select_halo_px",

@@ -15,7 +15,7 @@ import time
 import warnings
 from importlib.metadata import PackageNotFoundError, version
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Mapping, Sequence
 
 import cv2
 import numba
@@ -36,7 +36,7 @@ from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
 from dynremove.refine.morphology import clean_mask
 from dynremove.refine.select import (FOLLOWED, OUTSIDE, OWN_MOVER, PARTIAL_KEPT, STILL_LINGERING,
                                      Selection, kept_pieces, median_parallax_px, select_fill,
-                                     unconfirmed_fill)
+                                     treated_as_3d, unconfirmed_fill)
 from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
@@ -82,8 +82,8 @@ class Result:
 def api_params(params: Params | str | dict | None) -> Params:
     """``remove_dynamic``'s ``params``: a Params, a preset name (``"default"``,
     ``"paper"``), a dict of Params fields over the default preset, or None (the
-    default preset). Raises InputError for an unknown name, field or bad value,
-    TypeError for another type."""
+    default preset). Raises InputError for an unknown name, field or bad value, or
+    another type."""
     if params is None:
         return DEFAULT
     if isinstance(params, Params):
@@ -107,8 +107,8 @@ def api_params(params: Params | str | dict | None) -> Params:
             return DEFAULT.replace(**params)
         except (TypeError, ValueError) as e:
             raise InputError(f"params: {e}") from None
-    raise TypeError("params must be a dynremove.Params, a preset name, a dict of Params "
-                    f"fields or None, got {type(params).__name__}")
+    raise InputError("params must be a dynremove.Params, a preset name, a dict of Params "
+                     f"fields or None, got {type(params).__name__}")
 
 
 def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
@@ -182,9 +182,10 @@ def _api_valid_masks(valid_masks: object, n: int, W: int, H: int) -> list[np.nda
     return out
 
 
-def _array_hint(i: int, im: object) -> str:
+def _array_hint(i: int, im: object, *, bits: int = 16) -> str:
     """What is wrong with ``im`` (image ``i`` of the API's input) as an (H, W, 3)
-    uint8 BGR array, and the line of code that fixes it: one sentence."""
+    uint8 BGR array, and the line of code that fixes it: one sentence. ``bits``:
+    the bit depth of the set's 16-bit images (``_uint16_depth``)."""
     if im is None:
         return (f"image {i} is None (cv2.imread returns None for a file it could not "
                 "read: check that path)")
@@ -212,8 +213,13 @@ def _array_hint(i: int, im: object) -> str:
     if im.ndim != 3 or im.shape[2] != 3:
         return f"image {i}: expected (H, W, 3) uint8, {got}"
     if im.dtype == np.uint16:
-        return (f"image {i}: expected (H, W, 3) uint8, {got}: 16-bit; pass "
-                "(img >> 8).astype(np.uint8)")
+        # (a trial's 12-bit data: ">> 8", as this said, left it at 0-15, and the run
+        # then blamed near-copies and too few matches)
+        what = ("16-bit" if bits == 16 else
+                f"16-bit holding {bits}-bit values (none above {2 ** bits - 1})")
+        return (f"image {i}: expected (H, W, 3) uint8, {got}: {what}; pass "
+                f"(img >> {bits - 8}).astype(np.uint8), the same shift for every photo, "
+                "as the command line reads them")
     if np.issubdtype(im.dtype, np.floating):
         top = float(np.nanmax(im)) if im.size else 0.0
         fix = ("(img * 255).round().astype(np.uint8)" if top <= 1.0 else
@@ -223,6 +229,16 @@ def _array_hint(i: int, im: object) -> str:
     return f"image {i}: expected (H, W, 3) uint8, {got}; pass img.astype(np.uint8) if its values are 0-255"
 
 
+def _uint16_depth(images: Sequence[object]) -> int:
+    """The bit depth of the 16-bit arrays among ``images``: the smallest of 10, 12, 14
+    and 16 bits that holds their largest value (one depth for the set, as
+    ``io.load_image_set`` reads 16-bit files)."""
+    tops = [int(im.max()) for im in images
+            if isinstance(im, np.ndarray) and im.dtype == np.uint16 and im.size]
+    top = max(tops, default=2 ** 16 - 1)
+    return next(b for b in (10, 12, 14, 16) if top < 2 ** b)
+
+
 def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
     """Raise InputError unless images are ≥ 2 same-size (H, W, 3) uint8 arrays; the
     message names the first bad image and the line of code that converts it."""
@@ -230,7 +246,7 @@ def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
         raise InputError(f"need at least 2 images, got {len(images)}")
     for i, im in enumerate(images):
         if not isinstance(im, np.ndarray) or im.dtype != np.uint8 or im.ndim != 3 or im.shape[2] != 3:
-            raise InputError(_array_hint(i, im))
+            raise InputError(_array_hint(i, im, bits=_uint16_depth(images)))
     shape = images[0].shape
     for i, im in enumerate(images):
         if im.shape != shape:
@@ -479,6 +495,13 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     if isinstance(params, str) and preset_name == "custom":
         preset_name = params.strip().lower()
     params = api_params(params)
+    if isinstance(images, np.ndarray) and images.ndim in (2, 3):
+        # (a trial's single photo read as 180 "images" of one row each)
+        raise InputError(f"images is one array of shape {images.shape}: pass a list of "
+                         "photos, [img0, img1, ...], or a stacked (N, H, W, 3) array")
+    if isinstance(images, Mapping):
+        raise InputError("images is a mapping: pass a list of photos, e.g. "
+                         "list(images.values()) (a mapping iterates over its keys)")
     if isinstance(images, np.ndarray) or not isinstance(images, Sequence):
         # a stacked (N, H, W, 3) array, a generator, a map: read once, as a list
         try:
@@ -700,7 +723,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     # a flat set (the fill's "scan" consensus mode): the clean-up keeps a slow mover's
     # holed map (majority filter); with parallax a mesh is more often 3-D structure,
     # and GrabCut's growth may be vetoed
-    flat = median_parallax_px(views) <= params.select_parallax_px
+    flat = not treated_as_3d(views, params)
     majority = params.clean_majority and flat
     if params.clean_mask:
         dyn = stages["clean"] = clean_mask(L, params, majority=majority)
@@ -782,8 +805,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             msgs.append(
                 f"{n_lg} px show a mover that lingered: {shown}; {said}"
                 # (shorter than it was: a trial found the 600-character note hard to act on)
-                + (f" (a 3-D set, its keypoint matches {selection.parallax_px:.0f} px off one "
-                   "plane: what was taken for a mover may be static structure standing off "
+                + (f" (a 3-D set, {_off_plane(views, params)}: what was taken for a mover "
+                   "may be static structure standing off "
                    "the rest, and an edge a mover hides may come out misplaced: look at it)"
                    if selection.consensus_mode == "parallax" else "")
                 + ("; --no-select-minority-one turns off its three-photo rule (one photo "
@@ -844,8 +867,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "photo there; more photos, or photos taken further apart in time, "
                         "let the fill be cross-checked)")
             warnings.warn(msgs[-1], stacklevel=2)
-    if selection is not None and selection.consensus_mode == "scan" and dyn.any():
-        note = _knee_note(views, params.select_parallax_px)
+    if selection is not None and dyn.any():
+        note = _knee_note(views, params)
         if note:
             msgs.append(note)
             warnings.warn(msgs[-1], stacklevel=2)
@@ -877,16 +900,9 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         # almost nothing left of much that was flagged: said, as where nothing is (a
         # fresh-user trial on tim4, tim5, tim6: 23 468 px flagged, 42 removed, no note)
         flagged = int(summaries[0]["n_dynamic"]) if summaries else 0
-        n_dyn, n_pre = int(dyn.sum()), int(pre_fill.sum())
+        n_dyn = int(dyn.sum())
         if flagged >= 2e-3 * dyn.size and n_dyn < LITTLE_REMOVED * flagged:
-            n_ex = int((pre_fill & selection.explained).sum())
-            msgs.append(
-                f"little was removed: {n_dyn} px ({_where(dyn)}), of the {flagged} px the "
-                f"scans flagged: the clean-up of L and the border steps after it left {n_pre} px, "
-                f"and the fill kept {n_pre - n_dyn} of those as the reference shows them"
-                + (f" ({n_ex} px as static 3-D structure that other photos show in place)"
-                   if n_ex else "")
-                + ": 'dynremove inspect' on a recording says why at each pixel")
+            msgs.append(_little_removed_note(flagged, pre_fill, dyn, selection.explained))
             warnings.warn(msgs[-1], stacklevel=2)
     last = int(summaries[-1]["n_dynamic"]) if summaries else 0
     if params.max_scans > 1 and len(summaries) == params.max_scans and last > 0:
@@ -924,6 +940,25 @@ LITTLE_REMOVED = 0.1
 # least this share of its area (and 0.02 % of the photo) are said: 1.2-6.0 % on the
 # 3- and 4-photo tim6 sets that show them, at most 0.2 % on the composites and DAVIS
 KEPT_PIECES = 0.01
+
+
+def _little_removed_note(flagged: int, pre_fill: np.ndarray, dyn: np.ndarray,
+                         explained: np.ndarray) -> str:
+    """The note of a run that removed little of what its scans flagged: ``flagged``
+    px flagged, ``pre_fill`` (H, W) bool the L the fill took, ``dyn`` the final
+    mask, ``explained`` the pixels of L kept as static 3-D structure. The fill both
+    keeps pixels of L and adds some beside them, counted apart (a trial read "the
+    fill kept -1536 of those" where it had added 1536)."""
+    n_dyn, n_pre = int(dyn.sum()), int(pre_fill.sum())
+    n_kept, n_added = int((pre_fill & ~dyn).sum()), int((dyn & ~pre_fill).sum())
+    n_ex = int((pre_fill & explained).sum())
+    return (f"little was removed: {n_dyn} px ({_where(dyn)}), of the {flagged} px the "
+            f"scans flagged: the clean-up of L and the border steps after it left {n_pre} px, "
+            f"and the fill kept {n_kept} of those as the reference shows them"
+            + (f" and added {n_added} px beside them" if n_added else "")
+            + (f" ({n_ex} px as static 3-D structure that other photos show in place)"
+               if n_ex else "")
+            + ": 'dynremove inspect' on a recording says why at each pixel")
 
 
 def _where(mask: np.ndarray, n: int = 3) -> str:
@@ -1128,20 +1163,40 @@ def _undecided_note(summaries: list, n_px: int, n_sources: int, *,
             "dynamic, so a mover there may stay")
 
 
-def _knee_note(views: list[geometry.TwoView], limit: float) -> str:
-    """The note of a set treated as flat whose 3-D structure is small: the median over
-    the sources of the 90th percentile of the parallax is at most ``limit``, of the
+def _off_plane(views: list[geometry.TwoView], params: Params) -> str:
+    """How far the set's keypoint matches lie off one plane, as ``treated_as_3d``
+    read it (for a note)."""
+    p90 = median_parallax_px(views)
+    if p90 > params.select_parallax_px or params.select_parallax_p95_px <= 0:
+        return f"its keypoint matches {p90:.0f} px off one plane"
+    return (f"5 % of its keypoint matches "
+            f"{median_parallax_px(views, 'parallax_p95_px'):.0f} px or more off one plane")
+
+
+def _knee_note(views: list[geometry.TwoView], params: Params) -> str:
+    """The note of a set whose 3-D structure is small: the median over the sources of
+    the 90th percentile of the parallax is at most ``select_parallax_px``, of the
     95th over it ('' otherwise). Columns in front of a façade hold 8-16 % of
-    entry-P10's matches; treated as flat, a 4-view composite of it refilled one
+    entry-P10's matches: treated as flat, a 4-view composite of it refilled one
     (damage 2.8 % of the photo, 1.0 % as 3-D), and DAVIS drift-straight_s3 kept part
     of its car (J 0.54, 0.83 as 3-D). The far matches may also lie on a mover that
-    fits the epipolar geometry, so the 95th does not decide by itself: it made 3-D a
-    car the camera pans with (car-roundabout, --ref 5) and synthetic scenes whose
-    lingering mover the 3-D consensus then kept (README, session 41)."""
+    fits the epipolar geometry, so the 95th decides only far out, over
+    ``select_parallax_p95_px`` (``treated_as_3d``): near, it made 3-D a car the
+    camera pans with (car-roundabout, --ref 5, 27 px) and synthetic scenes whose
+    lingering mover the 3-D consensus then kept (README, session 41). The note
+    says which way the set went and the flag that turns it the other way."""
+    limit, far = params.select_parallax_px, params.select_parallax_p95_px
     p90 = median_parallax_px(views)
     p95 = median_parallax_px(views, "parallax_p95_px")
     if not p90 <= limit < p95:
         return ""
+    if treated_as_3d(views, params):
+        return (f"the set was treated as 3-D: 5 % of the matches depart from one plane by "
+                f"{p95:.0f} px or more (over the {far:g} px of --select-parallax-p95-px), "
+                f"though the median parallax is {p90:.1f} px (3-D structure standing off "
+                "the scene, such as columns before a façade, or matches on a mover): if the "
+                "clean photo kept part of the mover, --select-parallax-p95-px 0 treats the "
+                "set as flat")
     return (f"the set was treated as flat (median parallax {p90:.1f} px, not over the "
             f"{limit:g} px of --select-parallax-px), though 5 % of the matches depart from "
             f"one plane by {p95:.0f} px or more (3-D structure in front of the scene, or "

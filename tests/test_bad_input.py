@@ -521,7 +521,14 @@ def _bad_images(scene):
         "float 0-255": ([im.astype(np.float64)] * 3, "img.clip(0, 255).round().astype(np.uint8)"),
         "gray": ([im[..., 1]] * 3, "cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)"),
         "BGRA": ([np.dstack([im, im[..., :1]])] * 3, "img[..., :3]"),
-        "16-bit": ([im.astype(np.uint16) << 8] * 3, "(img >> 8).astype(np.uint8)"),
+        "16-bit": ([im.astype(np.uint16) << 8] * 3, "16-bit; pass (img >> 8).astype(np.uint8)"),
+        # 12-bit data in 16 bits (a trial's: ">> 8" left it at 0-15): the set's depth
+        "12-bit in 16": ([im.astype(np.uint16) << 4, im.astype(np.uint16) << 3] * 2,
+                         "16-bit holding 12-bit values (none above 4095); pass "
+                         "(img >> 4).astype(np.uint8), the same shift for every photo"),
+        "one image": (im, f"images is one array of shape {im.shape}: pass a list of photos"),
+        "a dict": ({"a": im, "b": im}, "images is a mapping: pass a list of photos, e.g. "
+                                       "list(images.values())"),
         "paths": (["a.jpg", "b.jpg", "c.jpg"],
                   "image 0 is a path ('a.jpg'), not an image: read the photos with "
                   "dynremove.io.load_image_set(paths, max_side=1280).images"),
@@ -531,8 +538,8 @@ def _bad_images(scene):
 
 
 @pytest.mark.parametrize("case", ["failed imread", "not arrays", "PIL", "float 0-1",
-                                  "float 0-255", "gray", "BGRA", "16-bit", "paths",
-                                  "channels first"])
+                                  "float 0-255", "gray", "BGRA", "16-bit", "12-bit in 16",
+                                  "one image", "a dict", "paths", "channels first"])
 def test_an_api_image_of_the_wrong_kind_is_told_how_to_convert_it(scene, case):
     images, words = _bad_images(scene)[case]
     with pytest.raises(InputError) as e:

@@ -568,7 +568,9 @@ def test_the_report_says_whether_the_set_was_treated_as_flat_or_3d(tmp_path, cap
     assert rc == 0, err
     sc = json.loads((out / "report.json").read_text())["scene"]
     assert sc["parallax_threshold_px"] == Params().select_parallax_px
-    flat = sc["median_parallax_px"] <= sc["parallax_threshold_px"]
+    assert sc["parallax_p95_threshold_px"] == Params().select_parallax_p95_px
+    flat = (sc["median_parallax_px"] <= sc["parallax_threshold_px"]
+            and sc["median_parallax_p95_px"] <= sc["parallax_p95_threshold_px"])
     assert sc["treated_as"] == ("flat" if flat else "3-D")
     rc, _, err = run_cli(capsys, folder, "--out", tmp_path / "p", *FAST,
                          "--select-parallax-px", "0")

@@ -14,6 +14,7 @@ from dynremove import MemorySink, NullSink, preset, remove_dynamic
 from dynremove.evaluation import synth
 from dynremove.cli import main
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
+from dynremove.params import DEFAULT
 from dynremove.progress import ProgressBar
 
 
@@ -190,25 +191,63 @@ def test_few_matches_note_forms():
         "the reference; ")
 
 
+def test_the_little_removed_note_counts_what_the_fill_kept_and_added_apart():
+    """The fill keeps pixels of L and adds others beside them: a trial read "the fill
+    kept -1536 of those" (the difference of the two counts) where it had added 1536
+    and kept none. Each count is now its own, and both add up to the final mask."""
+    from dynremove.pipeline import _little_removed_note
+
+    pre = np.zeros((100, 100), bool)
+    pre[10:20, 10:20] = True  # L before the fill: 100 px
+    dyn = np.zeros_like(pre)
+    dyn[10:20, 10:15] = True  # 50 of them replaced, 50 kept
+    dyn[30:40, 30:50] = True  # 200 px added
+    note = _little_removed_note(5000, pre, dyn, np.zeros_like(pre))
+    assert "little was removed: 250 px (" in note
+    assert ("left 100 px, and the fill kept 50 of those as the reference shows them and "
+            "added 200 px beside them: 'dynremove inspect'") in note, note
+    assert "-" not in note.split("left")[1].split(":")[0]
+    note = _little_removed_note(5000, pre, dyn & pre, pre & ~dyn)
+    assert ("the fill kept 50 of those as the reference shows them (50 px as static 3-D "
+            "structure") in note and "added" not in note, note
+
+
 def test_small_3d_structure_in_a_flat_set_is_told():
-    """Treated as flat by the 90th percentile of the parallax while the 95th is over
-    the limit (entry-P10's columns, 8-16 % of its matches): the run names the switch
-    that treats the set as 3-D. Nothing is said where both agree."""
+    """The 90th percentile of the parallax on the plane, the 95th over the limit
+    (entry-P10's columns, 8-16 % of its matches): far out (over
+    --select-parallax-p95-px) the set is treated as 3-D, and the run names the switch
+    that treats it as flat; nearer, it stays flat, and the run names the switch that
+    treats it as 3-D. Nothing is said where both percentiles agree."""
     from dynremove.method.geometry import TwoView
     from dynremove.pipeline import _knee_note
+    from dynremove.refine.select import treated_as_3d
 
     def tv(p90, p95):
         return TwoView(F=np.eye(3), H=np.eye(3), n_matches=800, n_inliers_F=700,
                        n_inliers_H=500, parallax_px=p90, parallax_p95_px=p95)
 
-    note = _knee_note([tv(192.0, 325.6), tv(2.6, 226.0), tv(3.5, 143.6)], 8.0)
-    assert note.startswith("the set was treated as flat (median parallax 3.5 px, not over "
-                           "the 8 px of --select-parallax-px), though 5 % of the matches "
-                           "depart from one plane by 226 px or more")
-    assert note.endswith("--select-parallax-px 0 treats the set as 3-D")
-    assert _knee_note([tv(1.0, 2.0), tv(1.5, 3.0)], 8.0) == ""  # flat by both
-    assert _knee_note([tv(12.0, 30.0), tv(9.0, 20.0)], 8.0) == ""  # 3-D by both
-    assert _knee_note([], 8.0) == ""
+    P = DEFAULT
+    far = [tv(192.0, 325.6), tv(2.6, 226.0), tv(3.5, 143.6)]  # median 95th 226 px
+    assert treated_as_3d(far, P)
+    note = _knee_note(far, P)
+    assert note.startswith("the set was treated as 3-D: 5 % of the matches depart from one "
+                           "plane by 226 px or more (over the 150 px of "
+                           "--select-parallax-p95-px), though the median parallax is 3.5 px")
+    assert note.endswith("--select-parallax-p95-px 0 treats the set as flat")
+    # the same set with the far test off, or a mover's matches only 40 px out: flat
+    for views, p in ((far, P.replace(select_parallax_p95_px=0.0)),
+                     ([tv(192.0, 325.6), tv(2.6, 40.0), tv(3.5, 30.0)], P)):
+        assert not treated_as_3d(views, p)
+        note = _knee_note(views, p)
+        assert note.startswith("the set was treated as flat (median parallax 3.5 px, not over "
+                               "the 8 px of --select-parallax-px), though 5 % of the matches "
+                               "depart from one plane by")
+        assert note.endswith("--select-parallax-px 0 treats the set as 3-D")
+    assert _knee_note([tv(1.0, 2.0), tv(1.5, 3.0)], P) == ""  # flat by both
+    assert not treated_as_3d([tv(1.0, 2.0), tv(1.5, 3.0)], P)
+    assert _knee_note([tv(12.0, 30.0), tv(9.0, 20.0)], P) == ""  # 3-D by both
+    assert treated_as_3d([tv(12.0, 30.0), tv(9.0, 20.0)], P)
+    assert _knee_note([], P) == ""
 
 
 def test_a_weak_reference_is_named_as_the_cause():
@@ -390,7 +429,8 @@ def test_share_of_the_reference_seen_by_fewer_than_two_sources():
 def test_the_api_takes_ref_and_params_as_the_cli_does():
     """A trial called remove_dynamic(ref=-1), ref="auto", params=None and a dict and
     got bare tracebacks (AttributeError, ValueError): the API now takes what the
-    CLI takes, and refuses the rest with InputError / TypeError."""
+    CLI takes, and refuses the rest with InputError (a params of another type too: the
+    README says bad input raises InputError)."""
     import warnings
 
     from dynremove import InputError, Params, remove_dynamic
@@ -402,7 +442,7 @@ def test_the_api_takes_ref_and_params_as_the_cli_does():
     for bad in ({"bogus": 1}, {"t_r": -1}, "nope"):
         with pytest.raises(InputError, match="params"):
             api_params(bad)
-    with pytest.raises(TypeError):
+    with pytest.raises(InputError, match=r"^params must be a dynremove.Params, .* got int$"):
         api_params(3)
     names = ["a.jpg", "b.jpg", "c.jpg", "d.jpg"]
     assert [api_ref(r, [], names) for r in (-1, -4, 0, None, "b.jpg", "c")] == [3, 0, 0, 2, 1, 2]

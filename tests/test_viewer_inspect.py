@@ -350,7 +350,8 @@ def test_photo_pixel_explains_the_analysis_pixel_it_falls_in(downscaled, capsys)
                                    "(50, 37) of the 64x48 analysis image")
     first = out2.splitlines()[0]
     assert first == ("pixel (50, 37) of the 64x48 analysis image = photo pixel (202, 150) "
-                     "of the 256x192 photos (its centre; it covers x 200–203, y 148–151)"), first
+                     "of the 256x192 photos (the one nearest its centre; it covers photo "
+                     "pixels x 200–203, y 148–151)"), first
     rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "256,10")
     assert (rc, out) == (2, "") and err == [
         "dynremove: error: --photo-pixel 256,10: outside the 256x192 photos (x in 0..255, "
@@ -965,3 +966,24 @@ def test_a_fill_the_blend_took_back_to_the_mover_is_said_so():
     h = {"final_dynamic": True, "source_names": ["a", "b"],
          "selection": {"source": 2, "inpainted": 0, "offset": [-49, -72, -18]}}
     assert vd.outcome_line(h) == "removed (in the final mask), filled from b"
+
+
+def test_a_pixel_no_other_photo_sees_is_not_said_to_disagree():
+    """At the frame's edge a pixel's matches fall outside the other photos: the scans
+    leave it undecided with no candidate, or one. A trial read "its matches in the
+    other photos agree on nothing" there, where nothing was compared; the plain
+    words now say that no other photo (or only one match) sees the spot, and keep
+    the old words for matches that do disagree."""
+    def history(n):
+        return {"final_dynamic": False, "source_names": ["a.png", "b.png", "c.png"],
+                "replacements": [], "gt": None, "x": 0, "y": 0, "t_r": 0.3,
+                "decisions": [], "selection": {"source": 0},
+                "scans": [dict(verdict="undecided", win_sources=None, n_candidates=n,
+                               n_clusters=0, win_size=0, b_m=0.0)]}
+
+    none = vd.plain_words(history(0))
+    assert none.startswith("no other photo sees this spot") and "agree" not in none, none
+    one = vd.plain_words(history(1))
+    assert one.startswith("only one of its matches falls inside another photo"), one
+    assert vd.plain_words(history(5)).startswith(
+        "its matches in the other photos agree on nothing")

@@ -803,6 +803,18 @@ def plain_words(h: dict[str, Any]) -> str | None:
                 + " left it out (see 'after the scans' and 'fill' below), so it stays as "
                 "the photo shows it")
     if all(sc["verdict"] == "undecided" for sc in scans):
+        # (a trial: at the frame's corner, with no candidate or one, "agree on
+        # nothing" read as a disagreement where there was nothing to compare)
+        ns = [sc.get("n_candidates") for sc in scans]
+        most = max(ns) if ns and None not in ns else None
+        if most == 0:
+            return ("no other photo sees this spot (its matches fall outside them, as at "
+                    "the frame's edge), so there is nothing to compare it with, and it "
+                    "stays as the photo shows it")
+        if most == 1:
+            return ("only one of its matches falls inside another photo, too few to agree "
+                    "on anything (as at the frame's edge), so the scans could not call it "
+                    "moving, and it stays as the photo shows it")
         return ("its matches in the other photos agree on nothing, so the scans could not "
                 "call it moving, and it stays as the photo shows it")
     win = next((sc.get("win_sources") for sc in scans if sc.get("win_sources")), None)

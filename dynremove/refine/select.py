@@ -148,6 +148,9 @@ class Selection:
     seams: npt.NDArray[np.bool_]  # boundaries between labels inside the region
     parallax_px: float  # median measured parallax of the set (px)
     consensus_mode: str  # "scan" (trust L) or "parallax" (colour consensus inside L)
+    # the median over the sources of the 95th percentile of the parallax (px): with
+    # parallax_px, what ``treated_as_3d`` read
+    parallax_p95_px: float = float("nan")
     # for the full-resolution output (refine.upsample): each source's field, and per
     # replaced pixel which sources' samples were combined (S, H, W)
     fields: list = field(default_factory=list)
@@ -1431,6 +1434,29 @@ def median_parallax_px(views: list[TwoView], field: str = "parallax_px") -> floa
     return float(np.median([x if np.isfinite(x) else 0.0 for x in vals])) if views else 0.0
 
 
+def treated_as_3d(views: list[TwoView], params: Params) -> bool:
+    """Whether the default preset treats the set as 3-D (``Selection.consensus_mode``
+    "parallax": the epipolar search, the colour consensus inside L, GrabCut's veto;
+    no majority clean-up of L, no tracking of the movers by the flow).
+
+    3-D where the median over the sources of the 90th percentile of the F inliers'
+    distance from the homography (``median_parallax_px``) is over
+    ``select_parallax_px``, or the median of their 95th percentile is over
+    ``select_parallax_p95_px`` (0 = that test off). Columns and a balcony before
+    a façade hold 5-16 % of entry-P10's matches: the 90th percentile falls on the
+    façade (2-4 px) and the 95th on the columns (190-400 px), and treated as flat
+    such a set refilled its columns (damage 2.9 % of the photo, 0.23 % as 3-D).
+    The 95th is not read at the 8 px of the 90th: a mover's matches that fit the
+    epipolar geometry reach there (DAVIS car-roundabout with ``--ref 5``, 27 px;
+    synthetic scenes, up to 73 px), and the 3-D consensus then keeps a slow mover
+    (README, "Session 64").
+    """
+    if median_parallax_px(views) > params.select_parallax_px:
+        return True
+    return (params.select_parallax_p95_px > 0
+            and median_parallax_px(views, "parallax_p95_px") > params.select_parallax_p95_px)
+
+
 def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
                 views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params, *,
                 valid: npt.NDArray[np.bool_] | None = None,
@@ -1471,11 +1497,13 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     S = len(sources)
     P = params
     par = median_parallax_px(views)
-    mode = "parallax" if par > P.select_parallax_px else "scan"
+    par95 = median_parallax_px(views, "parallax_p95_px")
+    mode = "parallax" if treated_as_3d(views, P) else "scan"
     empty = Selection(clean=reference.copy(), replaced=np.zeros((H, W), bool),
                       label=np.full((H, W), -1, np.int16), explained=np.zeros((H, W), bool),
                       movers=np.zeros((S, H, W), bool), no_source=np.zeros((H, W), bool),
-                      seams=np.zeros((H, W), bool), parallax_px=par, consensus_mode=mode)
+                      seams=np.zeros((H, W), bool), parallax_px=par, consensus_mode=mode,
+                      parallax_p95_px=par95)
     # a mover cut by the frame's edge: the scans' patches leave the last few pixels
     # before the edge unflagged, the mask is taken to the edge
     mask = mask | to_the_border(mask, P.patch_size)
@@ -2007,6 +2035,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     nos[roi] = no_src
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
+                     parallax_p95_px=par95,
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons,
                      lingering=lingering, completed=completed, region_share=region_share,
                      data_cost=data_cost, support=sup,
@@ -2024,7 +2053,7 @@ __all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "OUTSIDE", "
            "Selection", "attach_shadow", "capped_growth", "complete_regions", "darker",
            "fill_kept_pieces", "kept_pieces",
            "grow_into_rim",
-           "median_parallax_px", "member_median", "min_witnesses", "smooth_gain",
+           "median_parallax_px", "treated_as_3d", "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
            "misfit_regions", "mixture_detail", "partial_movers", "reference_cost",
            "region_shares",
