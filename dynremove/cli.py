@@ -529,7 +529,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "--probe and --gt count); the same as --pixel when the run analysed "
                         "the photos at their own size")
     i.add_argument("--failures", action="store_true", help="list the worst FP/FN regions")
-    i.add_argument("--top", type=parse_positive, default=10, help="how many failures (default 10)")
+    i.add_argument("--top", type=parse_positive, default=None,
+                   help="how many failures --failures lists (default 10)")
     i.add_argument("--root", default="",
                    help="which run of a --compare recording: runs/main or runs/compare (or "
                         "main / compare); a plain recording has none")

@@ -215,6 +215,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             nonlocal iset
             iset = s  # (named in the recording of an interruption)
             _check_memory(args, s)
+            _check_probes(args, s)  # (a trial's was refused after the reference's note)
             where.stage = "while choosing the reference"
 
         iset, ref, ref_info, ref_notes = load_for_reference(
@@ -245,7 +246,8 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                 rec = args.viewer("sink").open_compare_stream(
                     args.record, [n for i, n in enumerate(iset.names) if i != ref],
                     roots=["runs/main", "runs/compare"])
-        sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "")
+        sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "",
+                          output_dir=out)
         _note_compile(args)
         where.stage = "during features"
         with warnings.catch_warnings():
@@ -340,16 +342,48 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
 _BASE_BYTES, _BYTES_PER_PX = 0.3e9, 350.0
 
 
+def _written_mask_at(info: dict, path: Path, x: int, y: int) -> bool | None:
+    """Whether the run's written ``dynamic_mask.png`` holds photo pixel (x, y): read
+    from the output folder the recording names (``run/info``'s ``output_dir``) when
+    it still holds this run's outputs (its report.json names a recording of this
+    file's name, the same photos and reference) and the mask has the photos' size;
+    None otherwise."""
+    out = info.get("output_dir")
+    if not out:
+        return None
+    try:
+        report = json.loads((Path(out) / "report.json").read_text(encoding="utf-8"))
+        rec = report.get("recording")
+        same = (rec is not None and Path(rec).name == Path(path).name
+                and [Path(p).name for p in report.get("inputs", [])] == list(info["names"])
+                and int(report["reference"]["index"]) == int(info.get("ref_index", -1)))
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if not same:
+        return None
+    m = cv2.imread(str(Path(out) / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE)
+    if m is None or m.shape != (int(info["photo_height"]), int(info["photo_width"])):
+        return None
+    return bool(m[y, x] > 127)
+
+
+def _check_probes(args: argparse.Namespace, iset: io.ImageSet) -> None:
+    """InputError for a ``--probe`` pixel outside the photos (as soon as they are read)."""
+    W0, H0 = iset.original_size
+    for x, y in args.probe or ():
+        if not (0 <= x < W0 and 0 <= y < H0):
+            raise InputError(f"--probe {x},{y}: outside the {W0}x{H0} photo (x in "
+                             f"0..{W0 - 1}, y in 0..{H0 - 1})")
+
+
 def _probes_at_analysis_size(args: argparse.Namespace, iset: io.ImageSet
                              ) -> list[tuple[int, int]]:
     """``--probe`` pixels are the photo's (as ``--gt``); the scan runs on the analysis
     image, so they are scaled to it, with a note. InputError when outside the photo."""
     W0, H0 = iset.original_size
+    _check_probes(args, iset)
     out = []
     for x, y in args.probe or ():
-        if not (0 <= x < W0 and 0 <= y < H0):
-            raise InputError(f"--probe {x},{y}: outside the {W0}x{H0} photo (x in "
-                             f"0..{W0 - 1}, y in 0..{H0 - 1})")
         if iset.scale == 1.0:
             out.append((x, y))
             continue
@@ -426,8 +460,9 @@ def read_gt(path: str, iset: io.ImageSet, ref: int) -> tuple[np.ndarray, str | N
     Returns ``(mask, note)``: mask is (H0, W0) bool, ``iset.original_size`` being
     (W0, H0). A mask of the transposed size, for a reference whose EXIF
     orientation turns it by 90°, was drawn on the stored pixels: it is turned
-    the same way, with a note. Any other size is an InputError: scoring it
-    would compare different framings.
+    the same way, with a note; one of the analysis size (``--output-size working``
+    writes it) is scaled up, with a note. Any other size is an InputError: scoring
+    it would compare different framings.
     """
     try:
         m = io.read_mask(path)
@@ -443,6 +478,13 @@ def read_gt(path: str, iset: io.ImageSet, ref: int) -> tuple[np.ndarray, str | N
     if (w, h) == (W0, H0):
         return m, odd
     name = iset.names[ref]
+    Ha, Wa = iset.images[ref].shape[:2]
+    if (w, h) == (Wa, Ha):
+        # (a trial's mask at the size --output-size working writes was refused)
+        up = cv2.resize(m.astype(np.uint8), (W0, H0), interpolation=cv2.INTER_NEAREST) > 0
+        return up, "; ".join(x for x in (odd, (
+            f"--gt {path}: {w}x{h}, the analysis size: scaled to the reference's "
+            f"{W0}x{H0} (nearest pixel)")) if x)
     if (w, h) == (H0, W0):
         orientation = None if iset.video else _exif_orientation(iset.paths[ref])
         if orientation in _EXIF_TURNS:
@@ -644,7 +686,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
         report = run_eval(args.data_dir, sets=args.sets, params=params,
                           preset_name=args.preset, methods=methods, jobs=args.jobs,
                           max_side=args.max_side, ref=args.ref, progress=progress)
-        print(format_table(report))
+        if not _nothing_scored(report):  # (else a table of dashes before the error)
+            print(format_table(report))
     n_sets = len({r["set"] for r in report["sets"]})
     print(f"{n_sets} set{'' if n_sets == 1 else 's'}, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
           + (f" -> {args.json}" if args.json else ""))
@@ -652,12 +695,14 @@ def cmd_eval(args: argparse.Namespace) -> int:
         io.write_json(args.json, report)
     info = report.get("set_info", [])
     errors = {i["set"]: i["error"] for i in info if "error" in i}
-    unscored = [i["set"] for i in info if "error" not in i
-                and not (i.get("has_mask", True) or i.get("has_background", True))]
-    if info and not errors and len(unscored) == len(info):
-        # (a trial's frames without masks/ gave a table of dashes and exit 0)
-        print(f"dynremove: error: nothing was scored: no set has masks/<reference>.png or "
-              f"background.png ({', '.join(sorted(unscored))})", file=sys.stderr)
+    if _nothing_scored(report):
+        # (a trial's frames without masks/ gave a table of dashes and exit 0; a later
+        # one's set had a mask, of another photo than the reference: named now)
+        wanted = ", ".join(f"{i['set']}: masks/{Path(str(i['ref'])).stem}.png for its "
+                           f"reference {i['ref']}" if i.get("ref") else i["set"]
+                           for i in sorted(info, key=lambda i: i["set"]))
+        print(f"dynremove: error: nothing was scored: no set has its reference's mask or "
+              f"a background.png ({wanted}; --ref picks another reference)", file=sys.stderr)
         return 1
     if errors:  # the others are in the table; the exit code says not all ran
         # (each named with its error here: under --quiet no line above says it)
@@ -822,6 +867,8 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     if args.pixel is not None and photo is not None:
         raise InputError("inspect: give --pixel X,Y (the analysed image's) or --photo-pixel "
                          "X,Y (the photos'), not both")
+    if args.top is not None and not args.failures:  # (a trial's --top went unnoticed)
+        _note(args, "--top counts the failures of --failures: without it, not used")
     if args.pixel is not None or photo is not None:
         info = ins.read_run_info(path, root=ins.resolve_root(path, args.root))
         size = ins.photo_size(info)
@@ -851,7 +898,22 @@ def cmd_inspect(args: argparse.Namespace) -> int:
                       f"(the one nearest its centre; it covers photo pixels x {x0}–{x1}, "
                       f"y {y0}–{y1})")
         hist = ins.pixel_history(path, x, y, root=args.root)
-        if size is not None and hist.get("final_dynamic") is False:
+        written = (None if photo is None or size is None else
+                   _written_mask_at(info, path, photo[0], photo[1]))
+        if written is not None:
+            # (a trial: "kept" for a photo pixel that dynamic_mask.png holds; the run's
+            # own output folder, when the recording names it and it still holds this
+            # run's outputs, settles it)
+            fin = bool(hist.get("final_dynamic"))
+            out_dir = info["output_dir"]
+            if written != fin:
+                print(for_terminal(
+                    f"NOTE: {out_dir}/dynamic_mask.png {'holds' if written else 'leaves out'} "
+                    f"this photo pixel: at full size it is {'' if written else 'not '}"
+                    "replaced in clean.png (the mask is refined on the photo's edges), where "
+                    f"the verdict below, the analysis image's, has it "
+                    f"{'in' if fin else 'out of'} the final mask"))
+        elif size is not None and hist.get("final_dynamic") is False:
             # (before the verdict, whose "not in the final mask" is the analysis
             # image's: a fresh-user trial read it as the photo's, at a border pixel
             # that dynamic_mask.png holds)
@@ -867,9 +929,18 @@ def cmd_inspect(args: argparse.Namespace) -> int:
                     "(it is there if it changed by ΔE 10 or more)"))
         print(for_terminal(vd.format_pixel_history(hist)))
     if args.failures:
-        print(for_terminal(vd.format_failures(ins.failures(path, top=args.top,
+        print(for_terminal(vd.format_failures(ins.failures(path, top=args.top or 10,
                                                             root=args.root))))
     return EXIT_OK
+
+
+def _nothing_scored(report: dict) -> bool:
+    """Whether an eval report scored no set: every set ran, and none has its
+    reference's mask or a background (ablation reports too)."""
+    info = report.get("set_info", [])
+    return bool(info) and all("error" not in i and not (i.get("has_mask", True)
+                                                        or i.get("has_background", True))
+                              for i in info)
 
 
 def for_terminal(text: str, width: int | None = None) -> str:
@@ -955,7 +1026,8 @@ def parse_compare(spec: str, base: Params) -> Params:
 
 
 def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
-               gt_background: np.ndarray | None = None, rec: Any = None, root: str = ""):
+               gt_background: np.ndarray | None = None, rec: Any = None, root: str = "",
+               output_dir: Path | None = None):
     if not getattr(args, "record", None):
         return None
     Path(args.record).parent.mkdir(parents=True, exist_ok=True)
@@ -963,7 +1035,8 @@ def _make_sink(args: argparse.Namespace, iset: Any, gt: np.ndarray | None, *,
                      record_every_rows=getattr(args, "record_every_rows", None),
                      detail=getattr(args, "record_detail", "default"),
                      gt_mask=gt, gt_background=gt_background, rec=rec, root=root,
-                     photo_size=None if iset is None else tuple(iset.original_size))
+                     photo_size=None if iset is None else tuple(iset.original_size),
+                     output_dir=output_dir)
     if rec is None:  # the sink creates the file when the run begins (inside the pipeline)
         begin, path = sink.begin, args.record
 

@@ -291,7 +291,8 @@ def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
     (``IMAGE_EXTS``; it must then decode) or when OpenCV or Pillow recognise its
     content; other files are skipped with a note that names them. An earlier
     run's outputs (``RUN_OUTPUTS`` in a folder that holds a ``report.json``) are
-    skipped with a note. Files given one by one are always read as images.
+    skipped with a note, and so is a folder among several arguments that holds
+    nothing else. Files given one by one are always read as images.
     """
     paths: list[Path] = []
     notes: list[str] = []
@@ -323,6 +324,8 @@ def list_inputs(args: Sequence[str | os.PathLike], *, at_least: int = 2
                 notes.append(f"{p}: skipped {len(videos)} video(s): {_listing(videos)} "
                              "(give a video alone to take frames from it)")
             if not imgs and len(args) > 1:
+                if ours:  # (a trial's `run inp/*` took in an earlier run's --out inp/res)
+                    continue  # (its note, above, says what was skipped and why)
                 raise InputError(f"{p}: is a folder with no images in it "
                                  "(pass image files, or one folder of images)")
             paths.extend(imgs)

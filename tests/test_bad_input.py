@@ -269,6 +269,30 @@ def test_an_earlier_runs_outputs_are_not_read_as_photos(tmp_path, capsys, scene)
     assert "clean.png" in note and "coverage.png" in note and "dynamic_mask.png" in note
 
 
+def test_an_earlier_runs_output_folder_among_the_photos_is_skipped(tmp_path, capsys, scene):
+    """`run inp/*` where an earlier run wrote --out inp/res: a trial's run stopped at
+    "inp/res: is a folder with no images in it", though it held that run's outputs,
+    skipped on purpose. Such a folder is now skipped with the note; a folder with
+    nothing in it still stops the run."""
+    d = tmp_path / "inp"
+    write_set(d, scene.images[:3])
+    photos = sorted(d.iterdir())
+    res = d / "res"
+    rc, _, err = run_cli(capsys, d, "--out", res, *FAST)
+    assert_ok_run(rc, err, res)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(capsys, *photos, res, "--out", out, *FAST)
+    report = assert_ok_run(rc, err, out)
+    assert report["inputs"] == [str(p) for p in photos]
+    (note,) = [n for n in notes_of(err) if "earlier dynremove run" in n]
+    assert f"{res}: skipped clean.png, coverage.png, dynamic_mask.png: the outputs" in note, note
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    rc, _, err = run_cli(capsys, *photos, empty, "--out", tmp_path / "o2", *FAST)
+    assert_input_error(rc, err, f"{empty}: is a folder with no images in it",
+                       out=tmp_path / "o2")
+
+
 def test_too_few_images_left_after_skipping(tmp_path, capsys, scene):
     d = tmp_path / "mixed"
     write_set(d, scene.images[:1])

@@ -68,6 +68,34 @@ def test_gt_score_on_the_summary_line(tmp_path, capsys, scene, folder):
     assert f"J {J:.3f} against the given mask" in lines[0], stdout
 
 
+def test_gt_at_the_analysis_size_is_scaled_to_the_photos(tmp_path, capsys):
+    """A trial scored a run written with --output-size working and gave --gt at the
+    size of the files written: refused, as of another size. A mask of the analysis
+    size is now scaled up to the reference's (nearest pixel), with a note, and scores
+    as the full-size mask does."""
+    sc = synth.make_scene(seed=1, n_views=4, size=(96, 128))
+    folder = tmp_path / "s"
+    folder.mkdir()
+    for i, im in enumerate(sc.images):
+        assert cv2.imwrite(str(folder / f"view{i}.png"), im)
+    mask = sc.masks[sc.ref_index].astype(np.uint8) * 255
+    full = tmp_path / "gt_full.png"
+    assert cv2.imwrite(str(full), mask)
+    small = tmp_path / "gt_small.png"
+    assert cv2.imwrite(str(small), cv2.resize(mask, (64, 48), interpolation=cv2.INTER_NEAREST))
+    J = {}
+    for gt in (full, small):
+        out = tmp_path / gt.stem
+        rc, _, err = run_cli(capsys, folder, "--gt", gt, "--max-side", 64, "--max-scans", 1,
+                             "--output-size", "working", "--out", out)
+        assert rc == 0, err
+        assert cv2.imread(str(out / "dynamic_mask.png")).shape[:2] == (48, 64)
+        J[gt] = json.loads((out / "report.json").read_text())["jaccard_vs_gt"]
+        said = f"--gt {gt}: 64x48, the analysis size: scaled to the reference's 128x96"
+        assert (said in err) == (gt == small), err
+    assert J[full] > 0.3 and abs(J[small] - J[full]) < 0.03, J
+
+
 def test_no_score_without_gt(tmp_path, capsys, folder):
     rc, stdout, err = run_cli(capsys, folder, "--out", tmp_path / "out", *FAST)
     assert rc == 0, err
@@ -251,6 +279,8 @@ def test_probe_is_a_photo_pixel_scaled_to_the_analysis_image(tmp_path, capsys, f
     rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "64,10", "--record", rec,
                          *FAST)
     assert rc == 2 and "--probe 64,10: outside the 64x48 photo" in err
+    # refused as soon as the photos are read: before the reference's note (a trial)
+    assert "reference:" not in err, err
     # without a recording a probe does nothing: refused, as --compare is
     rc, _, err = run_cli(capsys, folder, "--out", out, "--probe", "40,30", *FAST)
     assert rc == 2 and "--probe needs --record" in err

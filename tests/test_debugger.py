@@ -628,7 +628,8 @@ def test_export_captions_name_the_post_scan_steps(method_run):
     captions: list[str] = []
     frames = export.render_frames(path, max_side=200, captions=captions)
     assert len(captions) == len(frames)
-    assert captions[-1] == f"final: the written clean image   |L| = {int(res.dynamic.sum())} px"
+    assert captions[-1] == (f"final: the written clean image   |L| = {int(res.dynamic.sum())} "
+                            "analysis px")
     stage_caps = [c for c in captions if c.startswith("after the scans: ")]
     assert [c.split(": ")[1].split()[0] for c in stage_caps] == list(res.stages)
     assert captions[0].startswith("scan 0   step ")

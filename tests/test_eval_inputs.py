@@ -94,8 +94,30 @@ def test_eval_that_scores_nothing_exits_1(tmp_path, capsys):
         p = d / extra
         shutil.rmtree(p) if p.is_dir() else p.unlink(missing_ok=True)
     assert main(["eval", str(tmp_path / "data"), "--methods", "median", "--quiet"]) == 1
-    err = capsys.readouterr().err
+    out, err = capsys.readouterr()
     assert "nothing was scored" in err and err.count("\n") == 1, err
+    assert "mean J" not in out, out  # no table of dashes before the error
+
+
+def test_eval_names_the_reference_mask_it_wanted(tmp_path, capsys):
+    """A trial's set held the mask of one photo, not of the reference (the middle
+    one): the error named no file. It now names the mask it wanted, for which
+    reference, and the flag that picks another."""
+    scene = synth.make_scene(seed=1, n_views=3, size=(72, 96), n_objects=1)
+    synth.write_scene(scene, tmp_path / "data" / "s")
+    d = tmp_path / "data" / "s"
+    for extra in ("background.png", "free.png"):
+        (d / extra).unlink(missing_ok=True)
+    frames = sorted((d / "frames").iterdir())
+    ref = frames[len(frames) // 2]
+    (d / "masks" / f"{ref.stem}.png").unlink()
+    assert (d / "masks" / f"{frames[0].stem}.png").exists()
+    assert main(["eval", str(tmp_path / "data"), "--methods", "median", "--quiet"]) == 1
+    out, err = capsys.readouterr()
+    assert (f"nothing was scored: no set has its reference's mask or a background.png (s: "
+            f"masks/{ref.stem}.png for its reference {ref.name}; --ref picks another "
+            "reference)") in err and err.count("\n") == 1, err
+    assert "mean J" not in out, out
 
 
 def test_an_index_out_of_range_in_every_set_is_one_error(tmp_path, capsys):

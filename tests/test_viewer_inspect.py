@@ -13,6 +13,8 @@
 
 from __future__ import annotations
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -495,6 +497,10 @@ def test_failures_of_a_downscaled_run_name_the_analysis_image_and_the_photo_pixe
                              photo_size=(4 * W, 4 * H))], H=H, W=W, S=S, n_scans=1)
     rc, out, err = _inspect(capsys, path, "--failures", "--top", "3")
     assert rc == 0 and err == [], err
+    # --top without --failures is said to be unused (a trial's went unnoticed)
+    rc, _, err2 = _inspect(capsys, path, "--pixel", "1,1", "--top", "3")
+    assert rc == 0 and err2 == [
+        "dynremove: note: --top counts the failures of --failures: without it, not used"], err2
     items = vi.failures(path, top=3)
     lines = out.splitlines()
     assert len(items) >= 2 and len(lines) == len(items) + 3, out
@@ -987,3 +993,45 @@ def test_a_pixel_no_other_photo_sees_is_not_said_to_disagree():
     assert one.startswith("only one of its matches falls inside another photo"), one
     assert vd.plain_words(history(5)).startswith(
         "its matches in the other photos agree on nothing")
+
+
+def test_photo_pixel_reads_the_written_mask_of_the_runs_output_folder(tmp_path, capsys):
+    """A trial's `inspect --photo-pixel` said "kept" for a photo pixel that the
+    written dynamic_mask.png holds (the mask is refined on the full-size photo's
+    edges). The recording names the run's output folder; where its mask and the
+    analysis verdict differ, inspect says what the written mask holds. Once the
+    folder holds another run's outputs, it is not read (the hedged note stays)."""
+    sc = synth.make_scene(seed=0, n_views=4, size=(192, 256), n_objects=1)
+    d = tmp_path / "s"
+    d.mkdir()
+    for i, im in enumerate(sc.images):
+        assert cv2.imwrite(str(d / f"v{i}.png"), im)
+    out, rec = tmp_path / "out", tmp_path / "run.rrd"
+    assert main(["run", str(d), "--max-side", "128", "--max-scans", "1", "--out", str(out),
+                 "--record", str(rec), "-q"]) == 0
+    capsys.readouterr()
+    info = vi.read_run_info(rec)
+    assert info["output_dir"] == str(out.resolve())
+    written = cv2.imread(str(out / "dynamic_mask.png"), cv2.IMREAD_GRAYSCALE) > 127
+    L = vi.read_final_dynamic(rec)
+    ys, xs = np.mgrid[:written.shape[0], :written.shape[1]]
+    ax = [vi.photo_to_analysis(info, int(x), int(y)) for x, y in zip(xs.ravel(), ys.ravel())]
+    analysis = np.array([L[a[1], a[0]] for a in ax]).reshape(written.shape)
+    diff = np.argwhere(written & ~analysis)
+    assert len(diff), "the full-size mask adds no pixel here: pick another scene"
+    y, x = map(int, diff[0])
+    rc, text, err = _inspect(capsys, rec, "--photo-pixel", f"{x},{y}")
+    assert rc == 0, err
+    assert (f"NOTE: {out.resolve()}/dynamic_mask.png holds this photo pixel: at full size it "
+            "is replaced in clean.png") in text and "kept (not in the final mask)" in text, text
+    same = np.argwhere(written & analysis)
+    y2, x2 = map(int, same[len(same) // 2])
+    rc, text, _ = _inspect(capsys, rec, "--photo-pixel", f"{x2},{y2}")
+    assert rc == 0 and "NOTE:" not in text, text
+    # another run's outputs in the folder: not read (the analysis image's hedge instead)
+    rep = out / "report.json"
+    report = json.loads(rep.read_text())
+    report["recording"] = str(tmp_path / "other.rrd")
+    rep.write_text(json.dumps(report))
+    rc, text, _ = _inspect(capsys, rec, "--photo-pixel", f"{x},{y}")
+    assert rc == 0 and "dynamic_mask.png holds" not in text, text

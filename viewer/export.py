@@ -90,7 +90,7 @@ def render_frames(path_rrd: str | Path, *, max_side: int = 480,
             where = "final: the written clean image"
         elif final_step is not None and final_step - len(stage_names) <= step < final_step:
             where = f"after the scans: {stage_names[step - final_step + len(stage_names)]}"
-        text = f"{where}   |L| = {int(L.sum())} px"
+        text = f"{where}   |L| = {int(L.sum())} analysis px"
         if captions is not None:
             captions.append(text)
         frames.append(np.concatenate([_caption(out_w, text), small], 0) if cap_rows

@@ -166,6 +166,10 @@ class RerunSink(StepColumns):
         (``--max-side``): logged in ``run/info`` as ``photo_width`` and
         ``photo_height``, so that ``inspect --pixel`` can turn a photo pixel it is
         given by mistake into the analysis pixel it means.
+    output_dir : path, optional
+        Where ``dynremove run`` writes the clean photo and the mask: logged in
+        ``run/info`` as ``output_dir`` (absolute), so that ``inspect
+        --photo-pixel`` can read the written ``dynamic_mask.png`` at full size.
     """
 
     enabled = True
@@ -180,14 +184,18 @@ class RerunSink(StepColumns):
                  gt_background: np.ndarray | None = None, root: str = "",
                  rec: rr.RecordingStream | None = None, jpeg_quality: int = 90,
                  skip_unchanged_images: bool = True, detail: str = "default",
-                 photo_size: tuple[int, int] | None = None) -> None:
+                 photo_size: tuple[int, int] | None = None,
+                 output_dir: str | Path | None = None) -> None:
         if rec is None and path is None:
             raise ValueError("path is required unless rec is given")
         if detail not in DETAIL_LEVELS:
             raise ValueError(f"detail must be one of {DETAIL_LEVELS}, got {detail!r}")
         self.detail = detail
-        self.photo = ({} if photo_size is None else
-                      {"photo_width": int(photo_size[0]), "photo_height": int(photo_size[1])})
+        self.info_extra = ({} if photo_size is None else
+                           {"photo_width": int(photo_size[0]),
+                            "photo_height": int(photo_size[1])})
+        if output_dir is not None:
+            self.info_extra["output_dir"] = str(Path(output_dir).resolve())
         self.step_grid = STEP_GRID if detail == "default" else 1
         if record_every_rows is not None and record_every_rows < 1:
             raise ValueError(f"record_every_rows must be >= 1, got {record_every_rows}")
@@ -234,7 +242,7 @@ class RerunSink(StepColumns):
         if self.rec is None:
             return
         p = self.p
-        extra = dict(self.photo, **({} if ref is None else {"ref_index": int(ref)}))
+        extra = dict(self.info_extra, **({} if ref is None else {"ref_index": int(ref)}))
         self.rec.log(p(P.RUN_INFO), rr.AnyValues(height=H, width=W, names=list(names), **extra),
                      static=True)
         if images is not None and ref is not None:
@@ -667,7 +675,7 @@ class RerunSink(StepColumns):
                              versions=json.dumps(info.versions),
                              params=json.dumps(params, default=str),
                              probes=json.dumps([list(map(int, q)) for q in info.probes]),
-                             **self.photo),
+                             **self.info_extra),
                 static=True)
         rec.log(p(P.RUN_PARAMS), rr.AnyValues(**{
             k: (v if isinstance(v, (bool, int, float, str)) else str(v))
