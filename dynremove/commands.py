@@ -633,6 +633,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"  Jaccard (dynamic mask vs truth):   {J:.3f}")
     print(f"  PSNR inside the true mask:         {psnr:.2f} dB (input reference: {psnr_in:.2f} dB)")
     print(f"  time: {res.timings['total']:.1f} s  -> {out}/" + (f" and {record}" if record else ""))
+    if not getattr(args, "quiet", False):  # (a trial: the demo said nothing of what next)
+        steps = ([(f"dynremove view {record}", "scrub the removal, step by step"),
+                  (f"dynremove inspect {record} --failures",
+                   "the worst misses against the truth, and why")] if record else [])
+        steps.append(("dynremove run YOUR_PHOTOS/ --out out/mine",
+                      "your own photos (README, Usage)"))
+        width = max(len(c) for c, _ in steps)
+        print("next:\n" + "\n".join(f"  {c.ljust(width)}   # {w}" for c, w in steps))
     return EXIT_OK
 
 

@@ -9,6 +9,7 @@ import dataclasses
 import io as _pyio
 import json
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -771,3 +772,20 @@ def test_jobs_is_a_count_or_all_cores(tmp_path, capsys, cmd, jobs):
     assert e.value.code == 2 and "Traceback" not in err
     assert f"--jobs must be a count of at least 1, or -1 for all cores, got {jobs}" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_demo_scores_itself_and_says_what_to_try_next(tmp_path, capsys):
+    """`make demo` runs this: the synthetic scene's truth scores the run, the outputs
+    and the recording are written, and the last lines name the commands to try next
+    on that recording (a trial found the demo said nothing of what to do after it)."""
+    out, rec = tmp_path / "demo", tmp_path / "demo.rrd"
+    assert main(["demo", "--out", str(out), "--record", str(rec)]) == 0
+    text = capsys.readouterr().out
+    J = float(re.search(r"Jaccard \(dynamic mask vs truth\): +([0-9.]+)", text).group(1))
+    assert J > 0.8, text
+    assert all((out / n).is_file() for n in ("clean.png", "gt_mask.png")) and rec.is_file()
+    tail = text.splitlines()[-4:]
+    assert tail[0] == "next:" and tail[1].startswith(f"  dynremove view {rec} ") \
+        and tail[2].startswith(f"  dynremove inspect {rec} --failures ") \
+        and tail[3].startswith("  dynremove run YOUR_PHOTOS/"), text
+    assert main(["inspect", str(rec), "--failures"]) == 0  # the line it offers works
