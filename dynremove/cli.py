@@ -536,16 +536,20 @@ def build_parser() -> argparse.ArgumentParser:
                         "main / compare); a plain recording has none")
     i.set_defaults(fn=cmd_inspect)
 
-    x = sub.add_parser("export", help="render the progressive removal to a GIF or MP4",
+    x = sub.add_parser("export", help="render the progressive removal to a GIF, an MP4 or "
+                                      "PNG frames",
                        description="Render a recording's snapshots, without a viewer, to "
-                                   "an animated GIF (Pillow, one palette) or an MP4 "
+                                   "an animated GIF (Pillow, one palette), an MP4 "
                                    "(OpenCV's MPEG-4 Part 2, 'mp4v': VLC and ffmpeg play "
-                                   "it, some browsers do not; the GIF plays everywhere): "
+                                   "it, some browsers do not; the GIF plays everywhere) or "
+                                   "numbered PNG frames in a folder (slides): "
                                    "left the input with L in red, right the rewritten "
                                    "reference, a caption with scan, step and |L|.")
     x.add_argument("recording", help="a .rrd file")
     x.add_argument("--out", "--gif", dest="out", required=True, metavar="OUT",
-                   help="output .gif or .mp4 (--gif is the same flag)")
+                   help="output .gif or .mp4, or a folder (no suffix) for PNG frames "
+                        "frame_0000.png, ... (a new folder, or one of an earlier export's "
+                        "frames, replaced whole); --gif is the same flag")
     x.add_argument("--fps", type=parse_fps, default=10.0,
                    help="frames per second, in (0, 100] (default 10); a GIF holds its "
                         "frame delay in whole hundredths of a second, 20 ms at least, so it "

@@ -974,18 +974,36 @@ def for_terminal(text: str, width: int | None = None) -> str:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    export_gif = args.viewer("export").export_gif
-    if Path(args.out).suffix.lower() not in (".gif", ".mp4"):
-        raise InputError(f"export: {args.out} must end in .gif or .mp4")
+    ex = args.viewer("export")
+    export_gif = ex.export_gif
+    suffix = Path(args.out).suffix.lower()
+    # a folder (no suffix, or one that exists) takes PNG frames (a trial asked for them)
+    frames_dir = Path(args.out).is_dir() or (suffix == "" and not Path(args.out).is_file())
+    if not frames_dir and suffix not in (".gif", ".mp4"):
+        raise InputError(f"export: {args.out} must end in .gif or .mp4, or be a folder "
+                         "(for PNG frames)")
     rec = _recording(args.recording)
     # before the drawing (a trial's --out /proc/x.gif failed after it, as an internal
     # error naming the temporary file)
-    io.check_out_file(args.out, "--out")
+    if frames_dir:
+        try:
+            ex.check_frames_dir(Path(args.out))
+        except ValueError as e:
+            raise InputError(f"--out {e}") from None
+        io.check_out_file(Path(args.out) / ex.FRAME_NAME.format(0), "--out")
+    else:
+        io.check_out_file(args.out, "--out")
     # (and which run, in a --compare recording: a trial's missing --root failed after
     # the note that the drawing had begun)
     args.viewer("inspect").resolve_root(rec, args.root or "")
     _note(args, f"drawing a frame per snapshot of {rec} (a minute for a long run)")
     t0 = time.perf_counter()
+    if frames_dir:
+        written = ex.export_frames(rec, args.out, max_side=args.max_side, root=args.root)
+        print(f"wrote {len(written)} frames to {args.out} ({ex.FRAME_NAME.format(0)} ... "
+              f"{written[-1].name if written else '-'}; drawn in "
+              f"{time.perf_counter() - t0:.0f} s; --fps is not used)")
+        return EXIT_OK
     out = export_gif(rec, args.out, fps=args.fps, max_side=args.max_side, root=args.root)
     rate = ""
     if str(out).lower().endswith(".gif"):

@@ -471,6 +471,40 @@ def test_failed_export_keeps_the_file_that_was_there(run, tmp_path, monkeypatch)
     assert out.read_bytes() == b"an earlier export"
 
 
+def test_export_png_frames_into_a_folder(run, tmp_path, capsys, monkeypatch):
+    """A folder for --out takes the frames as numbered PNGs (a trial asked for frames
+    for slides): the same frames as the GIF's, byte for byte as drawn. A folder of an
+    earlier export's frames is replaced whole (none of its extra frames stay); one
+    with other files is refused before drawing; a failed export leaves what was
+    there and no temporary folder."""
+    import cv2
+
+    from dynremove.cli import main
+
+    frames = export.render_frames(run["path"], max_side=200)
+    out = tmp_path / "frames"
+    assert main(["export", str(run["path"]), "--out", str(out), "--max-side", "200"]) == 0
+    said = capsys.readouterr().out
+    assert said.startswith(f"wrote {len(frames)} frames to {out} (frame_0000.png ... "), said
+    names = sorted(q.name for q in out.iterdir())
+    assert names == [f"frame_{i:04d}.png" for i in range(len(frames))]
+    for i, f in enumerate(frames):
+        assert np.array_equal(cv2.imread(str(out / names[i])), f)
+    (out / "frame_9999.png").write_bytes(b"x")  # an earlier, longer export's
+    written = export.export_frames(run["path"], out, max_side=120)
+    assert sorted(q.name for q in out.iterdir()) == [q.name for q in written] == names
+    (out / "notes.txt").write_text("mine")
+    assert main(["export", str(run["path"]), "--out", str(out)]) == 2
+    assert "holds other files than frames (notes.txt)" in capsys.readouterr().err
+    (out / "notes.txt").unlink()
+    before = {q.name: q.read_bytes() for q in out.iterdir()}
+    monkeypatch.setattr(export.cv2, "imwrite", lambda *a, **k: False)
+    with pytest.raises(OSError, match="could not write"):
+        export.export_frames(run["path"], out, max_side=200)
+    assert {q.name: q.read_bytes() for q in out.iterdir()} == before
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["frames"]
+
+
 def gif_frames(path) -> list[np.ndarray]:
     """Every frame of a GIF as (H, W, 3) uint8 BGR, decoded by Pillow (a declared
     dependency; not every OpenCV build reads GIF animations)."""

@@ -1,4 +1,5 @@
-"""Render a recording's progressive removal to a GIF or MP4, without a viewer.
+"""Render a recording's progressive removal to a GIF, an MP4 or PNG frames, without a
+viewer.
 
 Frames are built from the recorded snapshots (``reference/image`` JPEGs and
 ``reference/dynamic`` label maps, latest-at by ``step``): left, the input
@@ -12,6 +13,8 @@ MP4: ``cv2.VideoWriter`` ('mp4v').
 from __future__ import annotations
 
 import math
+import shutil
+import tempfile
 from pathlib import Path
 
 import cv2
@@ -135,6 +138,58 @@ def export_gif(path_rrd: str | Path, out_path: str | Path, *, fps: float = 10,
         else:
             write_gif(frames, tmp, fps=fps)
     return out_path
+
+
+FRAME_NAME = "frame_{:04d}.png"
+
+
+def export_frames(path_rrd: str | Path, out_dir: str | Path, *, max_side: int = 480,
+                  root: str = "") -> list[Path]:
+    """Write the progressive removal as numbered PNG frames (``frame_0000.png``, ...;
+    slides, or a video tool of one's own) into ``out_dir``.
+
+    The frames are drawn into a temporary folder beside ``out_dir``, which then
+    takes its place: a failed or cut export leaves what was there. ``out_dir``
+    must not exist, or hold only frames of an earlier export (``frame_*.png``):
+    ValueError otherwise, before any drawing. Returns the frames' paths in order.
+    """
+    out_dir = Path(out_dir)
+    check_frames_dir(out_dir)
+    frames = render_frames(path_rrd, max_side=max_side, root=root)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    old = None
+    try:
+        for i, f in enumerate(frames):
+            if not cv2.imwrite(str(tmp / FRAME_NAME.format(i)), f):
+                raise OSError(f"could not write {tmp / FRAME_NAME.format(i)}")
+        if out_dir.exists():
+            old = out_dir.parent / f"{tmp.name}.old"
+            out_dir.rename(old)
+        tmp.rename(out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None and not out_dir.exists():
+            old.rename(out_dir)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+    return [out_dir / FRAME_NAME.format(i) for i in range(len(frames))]
+
+
+def check_frames_dir(out_dir: Path) -> None:
+    """ValueError unless ``out_dir`` is absent, or a folder of an earlier export's
+    frames only (``export_frames`` replaces it whole)."""
+    if not out_dir.exists():
+        return
+    if not out_dir.is_dir():
+        raise ValueError(f"{out_dir}: is a file, not a folder for the frames")
+    other = [q.name for q in out_dir.iterdir()
+             if not (q.is_file() and q.name.startswith("frame_") and q.suffix == ".png")]
+    if other:
+        raise ValueError(f"{out_dir}: holds other files than frames ({', '.join(sorted(other)[:3])}"
+                         f"{', ...' if len(other) > 3 else ''}): give a new folder, or one "
+                         "of an earlier export's frames, which are replaced")
 
 
 def _check_fps(fps: float) -> None:
