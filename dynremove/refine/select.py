@@ -84,6 +84,7 @@ that the scan flagged with doubled content.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import cv2
@@ -171,6 +172,9 @@ class Selection:
     # the share of each pixel's region of L that the graph cut replaced, before that
     # rule (``region_shares``), float32 in [0, 1]; NaN outside the regions
     region_share: npt.NDArray[np.float32] | None = None
+    # (S,) float32: the Gaussian σ (working px) each source's fill was blurred by, to
+    # match a reference softer than it (``reference_blur``); 0 where it is not
+    blur_sigma: npt.NDArray[np.float32] | None = None
     # what the graph cut weighed at each pixel of the region, float32 (NaN outside it):
     # data_cost (2, H, W), the reference's and the cheapest source's (CIE76 ΔE, with
     # κ and γ·P(mover); NaN where no source may fill); support (2, H, W), the fill's
@@ -1017,6 +1021,48 @@ def mixture_detail(chosen: npt.NDArray[np.uint8], mixture: npt.NDArray[np.uint8]
     v = mixture.astype(np.float32) - local
     v += 0.5
     return np.clip(v, 0, 255, out=v).astype(np.uint8)
+
+
+# σ (working px) tried by ``reference_blur``, and the gradient energy ratio under
+# which the reference counts as softer than a source
+_BLUR_SIGMAS = (0.7, 1.0, 1.4, 2.0, 2.8, 4.0)
+_SOFTER = 0.6
+_BLUR_MIN_PX = 400
+
+
+def _gradient_energy(gray: np.ndarray, where: np.ndarray) -> float:
+    """Mean squared Sobel gradient of ``gray`` (float32) over ``where``."""
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3)
+    return float((gx * gx + gy * gy)[where].mean())
+
+
+def reference_blur(reference: np.ndarray, source: np.ndarray, static: np.ndarray) -> float:
+    """The Gaussian σ (px) that brings a source's sharpness down to the reference's.
+
+    A reference shot with camera shake or out of focus is softer than the other
+    photos, and a fill taken from them shows as a sharp patch (a visual trial: the
+    bottle's outline in crisp wood grain inside a soft photo). Over ``static``
+    pixels (the scene, where the aligned source agrees with the reference), the
+    mean squared gradient of the reference is compared with the source's: under
+    ``_SOFTER`` of it, σ is the one of ``_BLUR_SIGMAS`` whose blur of the source
+    comes nearest the reference's energy (in log ratio); else 0. Gradient energy,
+    not a pixel difference, so that a match a pixel off does not read as blur.
+
+    reference, source : (h, w, 3) uint8 BGR, aligned; static : (h, w) bool.
+    Returns σ in px (0.0: no blur; also with fewer than ``_BLUR_MIN_PX`` pixels).
+    """
+    if static.sum() < _BLUR_MIN_PX:
+        return 0.0
+    g_ref = cv2.cvtColor(reference, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    g_src = cv2.cvtColor(source, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    e_ref, e_src = _gradient_energy(g_ref, static), _gradient_energy(g_src, static)
+    if e_src <= 0 or e_ref >= _SOFTER * e_src:
+        return 0.0
+    target = math.log(max(e_ref, 1e-6))
+    best = min(_BLUR_SIGMAS, key=lambda sg: abs(math.log(max(_gradient_energy(
+        cv2.GaussianBlur(g_src, (0, 0), sg), static), 1e-6)) - target))
+    return float(best)
 
 
 def _cluster_median(cand_img, labs, lab, rep, free, tau):
@@ -1954,7 +2000,17 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     clean = reference.copy()
     members = np.zeros((S, H, W), bool)
     offset = np.full((H, W, 3), np.nan, np.float32)
+    blur_sigma = np.zeros(S, np.float32)
     if rep_b.any():
+        # a reference softer than the sources (camera shake, focus): their fill is
+        # blurred to match it, where the scene around the region says so
+        scene = ~dilate_disc(in_mask, 6)
+        for k in np.unique(lab_b[rep_b]):
+            if k >= 1:
+                blur_sigma[k - 1] = reference_blur(
+                    cand_img[0], cand_img[k], scene & usable[k] & (dist[0, k] < tau))
+        for k in np.flatnonzero(blur_sigma):
+            cand_img[k + 1] = cv2.GaussianBlur(cand_img[k + 1], (0, 0), float(blur_sigma[k]))
         if P.select_cluster_median:
             # where the scan is trusted, every free source is a witness of the
             # hidden background, not only those agreeing with the chosen one
@@ -2038,6 +2094,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      parallax_p95_px=par95,
                      consensus_mode=mode, fields=fields, members=members, reasons=reasons,
                      lingering=lingering, completed=completed, region_share=region_share,
+                     blur_sigma=blur_sigma,
                      data_cost=data_cost, support=sup,
                      static_evidence=evidence,
                      line_de=line_de, line_xy=line_xy,

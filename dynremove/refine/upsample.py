@@ -221,7 +221,12 @@ def _sample_sources(reference: np.ndarray, sources: list[np.ndarray], selection:
         mx = (mx + 0.5) * sx - 0.5  # full-size coordinates
         my = (my + 0.5) * sy - 0.5
         Hs, Ws = sources[k].shape[:2]
-        cand[k + 1] = remap_points(sources[k], mx, my, cv2.INTER_LINEAR,
+        src = sources[k]
+        if selection.blur_sigma is not None and selection.blur_sigma[k] > 0:
+            # a reference softer than this source: its fill blurred to match, as at
+            # the working size (``select.reference_blur``), σ scaled to full size
+            src = cv2.GaussianBlur(src, (0, 0), float(selection.blur_sigma[k]) * max(sx, sy))
+        cand[k + 1] = remap_points(src, mx, my, cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REPLICATE)
         usable[k + 1] = (mx >= 0) & (mx <= Ws - 1) & (my >= 0) & (my <= Hs - 1)
         if selection.members is not None:
