@@ -814,6 +814,15 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    if len(srcs) == 2 and params.select_minority_one else
                    "; --select-minority 0 turns this step off"))
             warnings.warn(msgs[-1], stacklevel=2)
+    if selection is not None and selection.blur_sigma is not None and selection.blur_sigma.any():
+        # (the fill blurred to the reference's sharpness: said, so that a soft fill
+        # is not taken for a fault of the sources)
+        soft = [int(k) for k in np.flatnonzero(selection.blur_sigma)]
+        msgs.append(f"the reference is softer than {_names([names[srcs[k]] for k in soft])} "
+                    "(camera shake or focus?): their fill was blurred to match it (σ "
+                    + ", ".join(f"{selection.blur_sigma[k]:.1f}" for k in soft)
+                    + " working px)")
+        warnings.warn(msgs[-1], stacklevel=2)
     if selection is not None and selection.completed is not None:
         n_pk = int((selection.completed == PARTIAL_KEPT).sum())
         if n_pk >= 5e-4 * selection.completed.size:

@@ -386,6 +386,8 @@ def test_a_soft_reference_gets_a_fill_as_soft_as_it():
     soft_truth = cv2.GaussianBlur(sc.background, (0, 0), 2.0)
     r = remove_dynamic(ims, ref=ref)
     used = np.unique(r.selection.label[r.selection.label >= 1]) - 1
+    assert any(w.startswith("the reference is softer than image") and "blurred to match it"
+               in w for w in r.warnings), r.warnings
     assert (r.selection.blur_sigma[used] >= 1.4).all(), r.selection.blur_sigma
     inner = r.dynamic & ~dilate_disc(~r.dynamic, 4)
     assert inner.sum() > 500
