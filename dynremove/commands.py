@@ -198,6 +198,17 @@ def cmd_run(args: argparse.Namespace) -> int:
             _note(args, f"nothing was written to {args.out}"
                   + (" (its earlier outputs are as they were)"
                      if (Path(args.out) / "report.json").is_file() else ""))
+        elif interruption(e) is not None:
+            # (a trial's Ctrl-C during "writing" got "interrupted" alone, with all four
+            # outputs written)
+            # (report.json is written last: this run's, all four are)
+            rep = Path(args.out) / "report.json"
+            done = rep.is_file() and rep.stat().st_mtime >= getattr(args, "_t_write", 0.0)
+            _note(args, f"the outputs in {args.out} were all written before the "
+                  "interruption" if done else
+                  f"interrupted while writing to {args.out}: each file there is whole "
+                  "(written atomically), but this run may not have replaced them all "
+                  "(its report.json is written last)")
         raise
 
 
@@ -272,10 +283,13 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                        sample_static=args.sample_static, names=iset.names,
                                        preset_name="compare", progress=where,
                                        valid_masks=iset.valid_masks)
+                # (a trial found the compare run's J only in the recording's log)
+                j_b = (f", J {jaccard(res_b.dynamic, gt):.3f} against the given mask"
+                       if gt is not None else "")
+                j_a = f", J {jaccard(res.dynamic, gt):.3f}" if gt is not None else ""
                 _line(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic at the "
-                      "analysis size "
-                      f"(main: {100 * res.dynamic.mean():.1f} %), both in {args.record}",
-                      where.bar)
+                      f"analysis size{j_b} (main: {100 * res.dynamic.mean():.1f} %{j_a}), "
+                      f"both in {args.record}", where.bar)
     except BaseException as e:
         stop = interruption(e)
         if stop is None:
@@ -292,6 +306,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.flush()
             rec.disconnect()
     res.timings = {"load": t_load, **res.timings}  # first, as on the terminal
+    res_a_dyn = res.dynamic  # at the analysis size (the compare run's figures)
     bar = _bar(args, params)  # the steps after the pipeline's, on the same bar
     if args.output_size == "full" and iset.scale < 1.0:
         bar("full-size output", 0.0)
@@ -310,8 +325,23 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     check_stop()  # a Ctrl-C lost in the last stage: nothing is written
     bar("writing", 0.0)
     args._wrote = True  # (an interruption from here on may have written some outputs)
+    args._t_write = time.time() - 0.01  # (the clock of file times, as report.json's)
+    extra = None
+    if compare is not None:
+        # the compare run's figures at the analysis size, beside the main run's there
+        # (the main run's own jaccard_vs_gt is at the output's size)
+        gt_a = (None if gt_full is None
+                else _resized_mask(gt_full, res_b.dynamic.shape))
+        extra = {"compare": {
+            "spec": args.compare, "params": compare.to_dict(),
+            "analysis_size": {"width": int(res_b.dynamic.shape[1]),
+                              "height": int(res_b.dynamic.shape[0])},
+            "dynamic_fraction": float(res_b.dynamic.mean()),
+            "main_dynamic_fraction": float(res_a_dyn.mean()),
+            **({"jaccard_vs_gt": jaccard(res_b.dynamic, gt_a),
+                "main_jaccard_vs_gt": jaccard(res_a_dyn, gt_a)} if gt_a is not None else {})}}
     report = write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
-                           record=args.record, reference=ref_info)
+                           record=args.record, reference=ref_info, extra=extra)
     bar("writing", 1.0)
     bar.close()
     score = (f"J {report['jaccard_vs_gt']:.3f} against the given mask, "

@@ -30,6 +30,7 @@ from dynremove import MemorySink, preset, remove_dynamic  # noqa: E402
 from dynremove.cli import main  # noqa: E402
 from dynremove.errors import InputError  # noqa: E402
 from dynremove.evaluation import synth  # noqa: E402
+from dynremove.evaluation.metrics import jaccard  # noqa: E402
 from viewer import RerunSink  # noqa: E402
 from viewer import inspect as vi  # noqa: E402
 from viewer import verdict as vd  # noqa: E402
@@ -92,6 +93,29 @@ def method_run(request, tmp_path_factory):
     res = remove_dynamic(imgs, ref=ref, params=params, sink=Tee(mem, rsink))
     return dict(path=path, mem=mem, res=res, gt=np.asarray(gt, bool), params=params,
                 kind=request.param)
+
+
+def test_m_splits_into_its_colour_and_sift_terms(method_run):
+    """A fresh-user trial: the history gave only the SIFT distance, where a teacher
+    needed to say the colour term was about 0. M = λ4 S_e(colour) + λ5 S_e(SIFT):
+    from the recorded squared SIFT distance the SIFT term is exact, and the rest,
+    the colour term, lies in [0, λ4] for every decision of the run."""
+    p = method_run["params"]
+    lam4, lam5 = p.lambda4, p.lambda5
+    d = method_run["mem"].decisions
+    d = d[np.isfinite(d["M"]) & np.isfinite(d["consensus_dist"])]
+    assert len(d) > 10
+    sift = lam5 * np.exp(-d["consensus_dist"].astype(np.float64) / (2 * p.sigma_g ** 2))
+    colour = d["M"].astype(np.float64) - sift
+    assert colour.min() >= -1e-5 and colour.max() <= lam4 + 1e-5
+    # ... and the history says so, term by term
+    i = int(np.argmax(d["dynamic"]))
+    h = vi.pixel_history(method_run["path"], int(d[i]["x"]), int(d[i]["y"]))
+    terms = [e["m_terms"] for e in h["decisions"] if e["step"] == int(d[i]["step"])][0]
+    assert terms[0] == pytest.approx(max(colour[i], 0.0), abs=1e-5)
+    assert terms[1] == pytest.approx(sift[i], abs=1e-5)
+    assert terms[2:] == pytest.approx((lam4, lam5))
+    assert "colour term" in vd.format_pixel_history(h, max_lines=200)
 
 
 def _naive_overwritten(mem, scan, x, y, half, H, W):
@@ -444,6 +468,16 @@ def test_stages_follow_the_last_scan_step(method_run):
     last = len(res.scans) * res.dynamic.size - 1
     for i, name in enumerate(res.stages):
         assert f"stage {i} '{name}' at step {last + 1 + i}" in text
+    # the plots follow the stages too: |L| and J of each stage's map at its step (a
+    # trial saw J jump at the end, and no plot said which stage bought it)
+    gt = method_run["gt"]
+    for stat, value in (("dynamic_px", lambda m: float(m.sum())),
+                        ("jaccard", lambda m: jaccard(m, gt))):
+        t = _table(path, f"/stats/{stat}")
+        got = dict(zip(t.column("step").to_pylist(),
+                       (v[0] for v in t.column(f"/stats/{stat}:Scalars:scalars").to_pylist())))
+        for i, (name, m) in enumerate(res.stages.items()):
+            assert got[last + 1 + i] == pytest.approx(value(np.asarray(m, bool))), (stat, name)
 
 
 # -- 4. words and legends --------------------------------------------------------------
@@ -578,6 +612,26 @@ def test_export_checks_its_output_and_input_before_drawing(fabricated, tmp_path,
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a Rerun recording" in err[0] and "drawing" not in err[0]
     assert not (tmp_path / "x.gif").exists()
+
+
+def test_another_tools_recording_is_named_as_such(tmp_path, capsys):
+    """A fresh-user trial: a recording made by another Rerun application was "the
+    run recorded no scan (cut before the first one)" to inspect, and "cut short" to
+    export. Both say it is not a dynremove recording, naming its application."""
+    import rerun as rr
+
+    path = tmp_path / "other.rrd"
+    rec = rr.RecordingStream("other_tool", recording_id="other-1")
+    rec.save(str(path))
+    rec.log("points", rr.Points2D([[1.0, 2.0]]))
+    rec.flush()
+    rec.disconnect()
+    for cmd in (["inspect", str(path), "--pixel", "1,1"],
+                ["export", str(path), "--gif", str(tmp_path / "x.gif")]):
+        assert main(cmd) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "not a dynremove recording" in err[0], err
+        assert "other_tool" in err[0] and "cut" not in err[0], err
 
 
 def test_failures_print_steps_to_jump_to(fabricated):

@@ -326,6 +326,38 @@ def test_interrupted_before_the_sink_exists(tmp_path, monkeypatch, capsys, where
     assert signal.getsignal(signal.SIGINT) is before  # restored
 
 
+@pytest.mark.parametrize("after", [True, False])
+def test_interrupted_while_writing_says_what_was_written(tmp_path, monkeypatch, capsys,
+                                                         after):
+    """A fresh-user trial's Ctrl-C during "writing" got "interrupted" alone, while all
+    four outputs were written. After them: the note says they were all written;
+    during them: that some files may be an earlier run's."""
+    from dynremove import commands
+    from dynremove.cli import main
+
+    images = _write_set(tmp_path / "set", (48, 64))
+    real = commands.write_outputs
+
+    def cut(out, *a, **k):
+        if after:
+            real(out, *a, **k)
+        else:
+            (out / "clean.png").write_bytes(b"")  # (as if one file were in place)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(commands, "write_outputs", cut)
+    out = tmp_path / "out"
+    rc = main(["run", str(images), "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 130, err
+    if after:
+        assert "were all written before the interruption" in err, err
+        assert (out / "report.json").is_file()
+    else:
+        assert "interrupted while writing" in err and "report.json" in err, err
+    assert "nothing was written" not in err
+
+
 def test_ctrl_c_inside_a_compiled_call_is_an_interruption(tmp_path, monkeypatch, capsys):
     """numba reports a Ctrl-C that lands inside a compiled call as a SystemError
     ("returned a result with an exception set") whose context is the

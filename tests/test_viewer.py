@@ -10,6 +10,7 @@ import time
 import urllib.request
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -307,6 +308,22 @@ def test_failures_against_ground_truth(run):
         x, y = e["pixel"]
         assert L[y, x] == (e["kind"] == "FP") and gt[y, x] == (e["kind"] == "FN")
     assert "FP" in vd.format_failures(items)
+    # the region's most wrongly confident M is read from every scan's M map, which
+    # holds every pixel, not from the recorded decisions (mostly the dynamic ones:
+    # a trial's missed region read "highest M 0.29" where its pixels had up to 0.95)
+    maps = vi.read_scan_maps(run["path"])
+    assert maps
+    for e in items:
+        wrong = (L & ~gt) if e["kind"] == "FP" else (~L & gt)
+        lab = cv2.connectedComponents(wrong.astype(np.uint8), connectivity=8)[1]
+        region = lab == lab[e["pixel"][1], e["pixel"][0]]
+        vals = np.concatenate([m["M"][region] for m in maps])
+        vals = vals[np.isfinite(vals)]
+        if e["worst"] is None:
+            assert len(vals) == 0
+            continue
+        want = vals.min() if e["kind"] == "FP" else vals.max()
+        assert e["worst"]["M"] == pytest.approx(float(want), abs=1e-6)
 
 
 # -- robustness ----------------------------------------------------------------------

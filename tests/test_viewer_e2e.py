@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 
 import cv2
@@ -14,6 +15,7 @@ from test_viewer import cli_env, counts_of  # noqa: E402
 
 from dynremove import MemorySink, NullSink, preset, remove_dynamic  # noqa: E402
 from dynremove.evaluation import synth  # noqa: E402
+from dynremove.evaluation.metrics import jaccard  # noqa: E402
 from dynremove.cli import main  # noqa: E402
 from dynremove.events import replay_replacements  # noqa: E402
 from viewer import RerunSink, serve  # noqa: E402
@@ -99,7 +101,7 @@ def test_cli_recordings_verify_and_inspect(scene, tmp_path, capsys):
     assert main(["inspect", str(tmp_path / "missing.rrd"), "--pixel", "1,1"]) == 2
 
 
-def test_compare_logs_two_runs_side_by_side(scene, tmp_path):
+def test_compare_logs_two_runs_side_by_side(scene, tmp_path, capsys):
     synth.write_scene(scene, tmp_path / "set")
     rec = tmp_path / "cmp.rrd"
     code = main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o"),
@@ -109,6 +111,22 @@ def test_compare_logs_two_runs_side_by_side(scene, tmp_path):
     cmp_counts = vi.read_counts(rec, root="runs/compare")
     assert main_counts and cmp_counts and main_counts != cmp_counts
     assert vi.read_run_info(rec, root="runs/compare")["params"]["t_r"] == preset("paper").t_r
+    # the compare run's figures are in report.json and on the terminal too, its J
+    # with --gt (a trial found it only in the recording's log)
+    gt = tmp_path / "gt.png"
+    cv2.imwrite(str(gt), scene.masks[scene.ref_index].astype(np.uint8) * 255)
+    capsys.readouterr()
+    assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o3"),
+                 "--record", str(tmp_path / "cmp3.rrd"), "--compare", "paper",
+                 "--gt", str(gt)]) == 0
+    out = capsys.readouterr()
+    rep = json.loads((tmp_path / "o3" / "report.json").read_text())["compare"]
+    cmp_mask = vi.read_final_dynamic(tmp_path / "cmp3.rrd", root="runs/compare")
+    assert rep["dynamic_fraction"] == pytest.approx(float(cmp_mask.mean()))
+    assert rep["jaccard_vs_gt"] == pytest.approx(
+        jaccard(cmp_mask, scene.masks[scene.ref_index].astype(bool)))
+    assert rep["params"]["t_r"] == preset("paper").t_r
+    assert f"J {rep['jaccard_vs_gt']:.3f}" in out.out + out.err
     assert main(["run", str(tmp_path / "set" / "frames"), "--out", str(tmp_path / "o2"),
                  "--compare", "no_such_field=1", "--record", str(tmp_path / "x.rrd")]) == 2
 

@@ -91,6 +91,23 @@ def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
             rrb.Spatial2DView(name="sources needed", origin=p("result"),
                               contents=[p(P.RESULT_CLEAN), p(P.RESULT_STATIC_NEED)]),
             grid_columns=3, name="static 3-D test"),
+        # each source's own movers (it never fills there) and why it did or did not
+        # fill each pixel (hover for the words): issue 10's per-view mover maps (a
+        # trial found them recorded but in no view)
+        rrb.Grid(*[rrb.Spatial2DView(
+            name=f"{n}: movers, why", origin=p("result"),
+            contents=[p(P.RESULT_CLEAN), p(f"{P.RESULT_REASONS}/{n}"),
+                      p(f"{P.RESULT_MOVERS}/{n}")]) for n in names],
+            grid_columns=3, name="per source"),
+        # the fill's own decisions over the clean photo: kept as static 3-D structure,
+        # a mover that lingered, inpainted (no source free), decided with its region
+        rrb.Grid(*[rrb.Spatial2DView(name=name, origin=p("result"),
+                                     contents=[p(P.RESULT_CLEAN), p(ent)])
+                   for name, ent in (("kept as static 3-D", P.RESULT_EXPLAINED),
+                                     ("lingering mover", P.RESULT_LINGERING),
+                                     ("inpainted", P.RESULT_INPAINTED),
+                                     ("decided with its region", P.RESULT_COMPLETED))],
+                 grid_columns=2, name="fill decisions"),
         name="more maps",
     )
 

@@ -97,6 +97,7 @@ def read_rrd_tolerant(path: str):
         print(f"dynremove: note: {path}: {msg}", file=sys.stderr)
 
     def has_scan(store) -> None:
+        _not_foreign(store, path)
         if not any(scans_recorded(store, r) for r in runs_in(store) or [""]):
             raise InputError(f"{path}: recording cut before the first scan recorded "
                              "anything: nothing to inspect")
@@ -112,6 +113,7 @@ def read_rrd_tolerant(path: str):
         except Exception:  # noqa: BLE001 - damaged: read the complete messages below
             store = None
         if store is not None:  # (the checks below raise InputError: not "damaged")
+            _not_foreign(store, path)
             footer = any("footer" in str(w.message) for w in caught)
             if _interrupted_note(store, path, note):
                 return store
@@ -139,6 +141,24 @@ def read_rrd_tolerant(path: str):
     note(f"damaged or cut short after {pos} of {len(data)} bytes: read the "
          f"{n} complete messages before the damage")
     return store
+
+
+def _not_foreign(store, path) -> None:
+    """InputError where ``store`` holds no dynremove run (no ``run/info`` nor
+    ``run/interrupted`` under any root) and its application id is not dynremove's:
+    another tool's recording (a trial's was called "cut before the first scan")."""
+    from dynremove.errors import InputError
+
+    if runs_in(store):
+        return
+    try:
+        apps = sorted({r.application_id for r in RrdReader(str(path)).recordings()})
+    except Exception:  # noqa: BLE001 - no footer or manifest: the content decides alone
+        apps = []
+    if apps and "dynremove" not in apps:
+        raise InputError(f"{path}: not a dynremove recording (a Rerun recording of "
+                         f"application {', '.join(apps)}): 'dynremove inspect' and "
+                         "'export' read recordings of 'dynremove run --record'")
 
 
 def runs_in(store) -> list[str]:
@@ -634,7 +654,25 @@ def _why_names(why: int) -> list[str]:
                              (WHY_SAMPLE, "sample")) if why & bit]
 
 
-def _decision_dict(d: np.void, t_r: float, names: list[str]) -> dict[str, Any]:
+def m_terms(M: float, dg: float, params: dict[str, Any]
+            ) -> tuple[float, float, float, float] | None:
+    """M's two terms (Sec. 3.2.1) and their weights: (λ4 S_e(‖f_c − f̂_c‖², σ_c),
+    λ5 S_e(‖f_g − f̂_g‖², σ_g), λ4, λ5), the SIFT term from the recorded squared
+    SIFT distance ``dg``, the colour term as M minus it; λ4 = λ1 / (λ1 + λ2), λ5 =
+    λ2 / (λ1 + λ2). None without the parameters or a finite M and dg."""
+    try:
+        l1, l2, sg = (float(params[k]) for k in ("lambda1", "lambda2", "sigma_g"))
+    except (KeyError, TypeError, ValueError):
+        return None
+    if not (M == M and dg == dg) or l1 + l2 <= 0 or sg <= 0:
+        return None
+    lam4, lam5 = l1 / (l1 + l2), l2 / (l1 + l2)
+    sift = lam5 * float(np.exp(-dg / (2.0 * sg * sg)))
+    return max(M - sift, 0.0), sift, lam4, lam5
+
+
+def _decision_dict(d: np.void, t_r: float, names: list[str],
+                   params: dict[str, Any] | None = None) -> dict[str, Any]:
     cands = []
     for k in range(len(d["cand_src"])):
         s = int(d["cand_src"][k])
@@ -653,6 +691,7 @@ def _decision_dict(d: np.void, t_r: float, names: list[str]) -> dict[str, Any]:
                 n_cand=int(d["n_cand"]), n_clusters=int(d["n_clusters"]),
                 win_cluster=int(d["win_cluster"]), win_weight=float(d["win_weight"]),
                 consensus_dist=float(d["consensus_dist"]),
+                m_terms=m_terms(float(d["M"]), float(d["consensus_dist"]), params or {}),
                 chosen_src=int(d["chosen_src"]), candidates=cands,
                 clusters=dict(sorted(clusters.items())))
 
@@ -774,7 +813,7 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
     return dict(
         x=int(x), y=int(y), source_names=names, t_r=t_r, size=(H, W), scans=scans,
         selection=sel, patch_size=p,
-        decisions=[_decision_dict(d, t_r, names) for d in dec[at]],
+        decisions=[_decision_dict(d, t_r, names, params) for d in dec[at]],
         replacements=[rep_dict(r) for r in rep[here]],
         covered_by=[rep_dict(r) for r in rep[cover]],
         updates=[dict(scan=int(u["scan"]), step=int(u["step"]), src=int(u["src"]),
@@ -945,7 +984,9 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     pixels, largest first. Each entry: ``kind`` ("FP"/"FN"), ``area``, ``bbox``
     (x, y, w, h), ``centroid``, ``pixel`` (the most interior pixel, a good
     ``--probe``), ``n_decisions`` (recorded decisions inside) and ``worst``
-    (the recorded decision inside whose M was most confidently wrong, or None),
+    (the pixel inside whose M was most confidently wrong, over every scan's M map,
+    which holds every pixel; from the recorded decisions in recordings without
+    those maps; None where no pixel inside was decided),
     ``why`` and ``why_share`` (``failure_cause``: the cause of the largest share of
     it; ``pixel`` is then the most interior pixel of that share), ``why_more`` (the
     other causes holding 5 % of it or more, as ``[(cause, share), ...]``);
@@ -972,7 +1013,8 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
     stages = read_stages(path, root=root)
     sel = read_selection(path, root=root)
     H, W = L.shape
-    scan_dirs = [(m["scan"], m["direction"]) for m in read_scan_maps(path, root=root)] or \
+    maps = read_scan_maps(path, root=root)
+    scan_dirs = [(m["scan"], m["direction"]) for m in maps] or \
         [(int(s), 1 if s % 2 == 0 else -1) for s in np.unique(dec["scan"]).tolist()] or [(0, 1)]
     found = []  # (kind, area, bbox, labels, label, centroid): cheap, for the sort
     for kind, mask in (("FP", L & ~gt), ("FN", ~L & gt)):
@@ -992,7 +1034,25 @@ def failures(path: str | Path, top: int = 10, *, root: str = "") -> list[dict[st
         d_in = d_in[lab[d_in["y"], d_in["x"]] == i]
         worst = None
         finite = d_in[np.isfinite(d_in["M"])]
-        if len(finite):
+        if maps:
+            # from every scan's M map, which holds every pixel (the recorded decisions
+            # are mostly the dynamic ones: a missed region's "highest M" read from them
+            # was a dynamic pixel's, 0.29, where most of the region had M 0.84)
+            best = None
+            for m in maps:
+                Mr = np.where(region, m["M"], np.nan)
+                if not np.isfinite(Mr).any():
+                    continue
+                j = int(np.nanargmin(Mr) if kind == "FP" else np.nanargmax(Mr))
+                y, x = divmod(j, W)
+                v = float(Mr[y, x])
+                if best is None or (v < best[0] if kind == "FP" else v > best[0]):
+                    best = (v, x, y, m["scan"], m["direction"])
+            if best is not None:
+                v, x, y, sc, dr = best
+                worst = dict(x=x, y=y, M=v, scan=int(sc),
+                             step=int(visit_step(sc, x, y, H, W, direction=dr)))
+        elif len(finite):
             j = int(np.argmin(finite["M"]) if kind == "FP" else np.argmax(finite["M"]))
             worst = dict(x=int(finite[j]["x"]), y=int(finite[j]["y"]),
                          M=float(finite[j]["M"]), scan=int(finite[j]["scan"]),

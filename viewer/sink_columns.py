@@ -58,10 +58,14 @@ class StepColumns:
             texts = []
             for i in np.nonzero(m)[0].tolist():
                 t = (f"({x},{y}) scan {scan} step {int(pr['step'][i])}: "
-                     f"{attrs['verdict'][i]}; winning cluster "
-                     f"{int(attrs['winning_cluster_size'][i])} of "
-                     f"{int(attrs['n_candidates'][i])} candidates from "
-                     f"{attrs['winning_cluster_sources'][i]}; b_m {attrs['b_m'][i]:.2f}")
+                     f"{attrs['verdict'][i]}; ")
+                if np.isfinite(pr["M"][i]):
+                    t += (f"winning cluster {int(attrs['winning_cluster_size'][i])} of "
+                          f"{int(attrs['n_candidates'][i])} candidates from "
+                          f"{attrs['winning_cluster_sources'][i]}; b_m {attrs['b_m'][i]:.2f}")
+                else:  # (a trial read "winning cluster 0 of 0 candidates from -")
+                    t += (f"no cluster formed among its {int(attrs['n_candidates'][i])} "
+                          "candidates")
                 if pr["dynamic"][i]:
                     t += f"; patch from {attrs['chosen_source'][i]}"
                 texts.append(t)

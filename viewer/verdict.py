@@ -747,7 +747,8 @@ def static_test_line(h: dict[str, Any]) -> str | None:
 
 
 # what each step after the scans does, for a non-expert (``plain_words``)
-_STAGE_PLAIN = {"clean": "the tidying of the region found moving",
+_STAGE_PLAIN = {"clean": "the clean-up of the scans' map (it fills small gaps and drops "
+                         "specks)",
                 "votes": "the check of the region's border against the other photos",
                 "snap": "the snapping of the region to the edges in the photo",
                 "select": "the fill, which takes or leaves whole parts of an object"}
@@ -781,7 +782,7 @@ def plain_words(h: dict[str, Any]) -> str | None:
         why = ("the photos whose matches the scans trust most here do not show what this "
                "photo shows, so it counts as part of something that moved" if moved else
                "the scans did not flag it, but " + (adders[-1] if adders else "a later step")
-               + " added it to the region found moving (see 'after the scans' below)")
+               + " added it to what was found moving (see 'after the scans' below)")
         if sel.get("inpainted"):
             return (f"{why}; no other photo shows this spot free of moving things, so the "
                     "clean photo paints it in from around it")
@@ -873,7 +874,13 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
         txt = (f"  scan {d['scan']} step {d['step']}: {verdict} [{'+'.join(d['why'])}]; "
                + candidate_counts(d)
                + (f"; squared SIFT distance to A_m's weighted mean f̂_g {cd:.3f}" if cd == cd
-                  else ""))
+                  else "")
+               # M term by term (a trial: "the colour term is about 0" was what a
+               # teacher needed to say, and nothing said it)
+               + (f"; M = colour term {d['m_terms'][0]:.2f} + SIFT term "
+                  f"{d['m_terms'][1]:.2f} (λ4 {d['m_terms'][2]:.2f} × S_e of the Lab "
+                  f"distance to f̂_c, λ5 {d['m_terms'][3]:.2f} × S_e of that SIFT "
+                  "distance; each S_e is 1 where the two agree)" if d.get("m_terms") else ""))
         ev.append((d["step"], txt))
     for r in h["replacements"]:
         # (the scan's own fill, which the fill by selection redoes: "fill:" above)
@@ -979,10 +986,11 @@ def format_failures(items: list[dict[str, Any]]) -> str:
     """One line per failure region."""
     lines = ["region (kind, area, box: top-left x,y and width x height), a pixel in it "
              "(of the share named first below), the steps at which each scan visited that "
-             "pixel (one per scan; jump to them on the `step` timeline), the recorded "
-             "decision in it that looked most as the region wrongly is (a missed region's "
-             "highest M, a false alarm's lowest: at or under t_r a scan calls a pixel "
-             "dynamic), and what made the region so, its largest shares first:"]
+             "pixel (one per scan; jump to them on the `step` timeline), the pixel in it "
+             "whose M looked most as the region wrongly is, over every scan's M map (a "
+             "missed region's highest M, a false alarm's lowest: at or under t_r a scan "
+             "calls a pixel dynamic), and what made the region so, its largest shares "
+             "first:"]
     for e in items:
         x0, y0, w, h = e["bbox"]
         steps = ", ".join(str(s) for s in e.get("steps", []))
