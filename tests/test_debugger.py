@@ -649,6 +649,10 @@ def test_web_prints_one_url_and_binds_loopback(fabricated, tmp_path, capsys):
 
     port, web_port = _free_port(), _free_port()
     assert serve.view_command("x.rrd", port=port)[1:3] == ["--bind", "127.0.0.1"]
+    # without a display it serves the page and opens no browser (a trial's headless
+    # host got a chromium left as a zombie); with one, rerun opens the browser too
+    assert serve.view_command("x.rrd", web=True)[1] == "--serve-web"
+    assert serve.view_command("x.rrd", web=True, open_browser=True)[1] == "--web-viewer"
     proc = serve.view(fabricated["path"], web=True, port=port, web_port=web_port,
                       wait=False, env=cli_env(tmp_path))
     try:

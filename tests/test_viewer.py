@@ -561,7 +561,7 @@ def test_web_url_and_command():
     assert url == ("http://127.0.0.1:9090/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A9876"
                    "%2Fproxy")
     cmd = serve.view_command("x.rrd", web=True, port=9999, web_port=9998)
-    assert cmd[1:5] == ["--web-viewer", "--bind", "127.0.0.1", "--port"]
+    assert cmd[1:5] == ["--serve-web", "--bind", "127.0.0.1", "--port"]
     assert not cmd[0].endswith(os.path.join("bin", "rerun"))  # the real binary
 
 

@@ -55,12 +55,15 @@ def has_display(env: dict[str, str] | None = None) -> bool:
 
 
 def view_command(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRPC_PORT,
-                 web_port: int = DEFAULT_WEB_PORT) -> list[str]:
-    """The command line :func:`view` runs."""
+                 web_port: int = DEFAULT_WEB_PORT, open_browser: bool = False) -> list[str]:
+    """The command line :func:`view` runs. ``web``: rerun's ``--serve-web`` (it serves
+    the page and prints nothing for us), or ``--web-viewer`` with ``open_browser``
+    (the same, and it opens the system's browser)."""
     exe = rerun_binary()
     if web:
-        return [exe, "--web-viewer", "--bind", "127.0.0.1", "--port", str(port),
-                "--web-viewer-port", str(web_port), str(path)]
+        return [exe, "--web-viewer" if open_browser else "--serve-web", "--bind",
+                "127.0.0.1", "--port", str(port), "--web-viewer-port", str(web_port),
+                str(path)]
     return [exe, "--bind", "127.0.0.1", "--port", str(port), str(path)]
 
 
@@ -84,7 +87,10 @@ def view(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRPC_PORT,
     if not web and not has_display(env):
         raise InputError(f"no display here (DISPLAY and WAYLAND_DISPLAY are unset): run "
                          f"`dynremove view {path} --web` and open the printed URL in a browser")
-    cmd = view_command(path, web=web, port=port, web_port=web_port)
+    # (on a machine without a display rerun's --web-viewer started a browser anyway,
+    # left as a zombie: a trial; there the URL is all it prints)
+    cmd = view_command(path, web=web, port=port, web_port=web_port,
+                       open_browser=has_display(env))
     if web:  # rerun's own banner and URLs would confuse: print one URL, ours
         popen_kwargs.setdefault("stdout", subprocess.DEVNULL)
         popen_kwargs.setdefault("stderr", subprocess.DEVNULL)
