@@ -200,8 +200,8 @@ def cmd_run(args: argparse.Namespace) -> int:
                      if (Path(args.out) / "report.json").is_file() else ""))
         elif interruption(e) is not None:
             # (a trial's Ctrl-C during "writing" got "interrupted" alone, with all four
-            # outputs written)
-            # (report.json is written last: this run's, all four are)
+            # outputs written; report.json is written last: where it is this run's,
+            # all four are)
             rep = Path(args.out) / "report.json"
             done = rep.is_file() and rep.stat().st_mtime >= getattr(args, "_t_write", 0.0)
             _note(args, f"the outputs in {args.out} were all written before the "
