@@ -159,6 +159,13 @@ def test_verdict_of_a_failure_pixel_matches_the_core(method_run, kind):
         for c, name in enumerate(("n_candidates", "n_clusters", "win_size", "win_sources")):
             np.testing.assert_array_equal(m[name], K[..., c])
         np.testing.assert_array_equal(m["b_m"], B)
+    # the undecided pixels, drawn over the lossless M (whose 65535 the colour map put
+    # at the top, as M = 1): exactly those without M
+    und = vi._image_rows(vi.load_store(method_run["path"]), "/scan_maps/undecided",
+                         "SegmentationImage")
+    assert len(und) == len(maps)
+    for (_, u), m in zip(und, maps):
+        np.testing.assert_array_equal(u.astype(bool), np.isnan(m["M"]))
     half = method_run["params"].patch_size // 2 if method_run["params"].write == "patch" else 0
     for sc, M in zip(h["scans"], mem.M_maps):
         want = float(M[y, x])
@@ -481,6 +488,25 @@ def test_stages_follow_the_last_scan_step(method_run):
 
 
 # -- 4. words and legends --------------------------------------------------------------
+def test_the_fills_maps_name_their_classes_and_let_the_photo_show(method_run):
+    """Seen in a headless viewer (session 65): over the clean photo, the region rule's
+    map tinted the whole photo (its class 0 had no entry), and the static-structure
+    map showed nothing to tell it by (its 1 fell to the root's classes). Each map of
+    the fill has its own classes: 0 see-through, the others named and visible."""
+    res = method_run["res"]
+    if res.selection is None:
+        pytest.skip("no fill by selection in this run")
+    names = [res.geometry[k]["source"] for k in range(len(res.geometry))]
+    ents = [P.RESULT_EXPLAINED, P.RESULT_INPAINTED, P.RESULT_COMPLETED, P.scan_map("undecided"),
+            *[f"{P.RESULT_MOVERS}/{n}" for n in P.entity_names(names)]]
+    for ent in ents:
+        t = _table(method_run["path"], "/" + ent, index=None)
+        ctx = t.column(f"/{ent}:AnnotationContext:context")[0].as_py()[0]
+        classes = {c["class_id"]: c["class_description"]["info"] for c in ctx}
+        assert classes[0]["color"] & 0xFF == 0, ent  # alpha 0: see-through
+        assert classes[1]["label"] and classes[1]["color"] & 0xFF > 0, ent
+
+
 def test_annotation_context_names_and_text_attributes(fabricated):
     t = _table(fabricated["path"], "/**", index=None)
     ctx = t.column("/:AnnotationContext:context")[0].as_py()[0]

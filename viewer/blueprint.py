@@ -59,7 +59,8 @@ def _maps(p: P.Paths) -> rrb.Tabs:
 
 def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
     per_scan = rrb.Grid(
-        rrb.Spatial2DView(name="M (lossless)", origin=p(P.scan_map("M"))),
+        rrb.Spatial2DView(name="M (lossless)", origin=p(P.SCAN_MAPS),
+                          contents=[p(P.scan_map("M")), p(P.scan_map("undecided"))]),
         rrb.Spatial2DView(name="verdict", origin=p(P.scan_map("verdict"))),
         rrb.Spatial2DView(name="patch source", origin=p(P.scan_map("chosen_source"))),
         rrb.Spatial2DView(name="overwritten before",

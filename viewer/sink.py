@@ -463,14 +463,23 @@ class RerunSink(StepColumns):
                 np.clip(np.asarray(sel.label, np.int32), 0, 255).astype(np.uint8)), static=True)
             self.rec.log(self.p(P.RESULT_SEAMS), rr.SegmentationImage(
                 np.asarray(sel.seams, np.uint8)), static=True)
-            self.rec.log(self.p(P.RESULT_EXPLAINED), rr.SegmentationImage(
-                np.asarray(sel.explained, np.uint8)), static=True)
+            # each with its own classes, 0 see-through (under the root's classes their
+            # 1 read as "dynamic", and a view of them over the clean photo showed nothing
+            # to tell them by: seen in a headless viewer, session 65)
+            self.rec.log(self.p(P.RESULT_EXPLAINED), rr.AnnotationContext(
+                [(0, "", (0, 0, 0, 0)),
+                 (1, "in L, kept as static 3-D structure", (0, 220, 120, 150))]),
+                rr.SegmentationImage(np.asarray(sel.explained, np.uint8)), static=True)
             if getattr(sel, "lingering", None) is not None:
-                self.rec.log(self.p(P.RESULT_LINGERING), rr.SegmentationImage(
-                    np.asarray(sel.lingering, np.uint8)), static=True)
+                self.rec.log(self.p(P.RESULT_LINGERING), rr.AnnotationContext(
+                    [(0, "", (0, 0, 0, 0)),
+                     (1, "a mover that lingered, seen free by two sources or more",
+                      (255, 200, 0, 150))]),
+                    rr.SegmentationImage(np.asarray(sel.lingering, np.uint8)), static=True)
             if getattr(sel, "completed", None) is not None:
                 self.rec.log(self.p(P.RESULT_COMPLETED), rr.AnnotationContext(
-                    [(1, "replaced with its region of L", (255, 140, 0, 160)),
+                    [(0, "", (0, 0, 0, 0)),
+                     (1, "replaced with its region of L", (255, 140, 0, 160)),
                      (2, "kept with its region of L", (0, 160, 255, 160)),
                      (3, "kept: its fill did not fit the photo around it",
                       (160, 0, 255, 160)),
@@ -497,7 +506,10 @@ class RerunSink(StepColumns):
                     self.rec.log(self.p(f"{rel}/{name}"), rr.DepthImage(
                         _quantised(a, P.DE_SCALE), meter=float(P.DE_SCALE),
                         colormap="viridis"), static=True)
-            self.rec.log(self.p(P.RESULT_INPAINTED), rr.SegmentationImage(
+            self.rec.log(self.p(P.RESULT_INPAINTED), rr.AnnotationContext(
+                [(0, "", (0, 0, 0, 0)),
+                 (1, "no source free: inpainted (OpenCV Telea)", (255, 0, 255, 170))]),
+                rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
                  ).astype(np.uint8)), static=True)
             if getattr(sel, "offset", None) is not None:
@@ -519,8 +531,10 @@ class RerunSink(StepColumns):
                                                        "here by the flow", (250, 110, 40, 110))]),
                                  rr.SegmentationImage(sel.followed[k].astype(np.uint8)),
                                  static=True)
-                self.rec.log(self.p(f"{P.RESULT_MOVERS}/{name}"),
-                             rr.SegmentationImage(mv.astype(np.uint8)), static=True)
+                self.rec.log(self.p(f"{P.RESULT_MOVERS}/{name}"), rr.AnnotationContext(
+                    [(0, "", (0, 0, 0, 0)),
+                     (1, f"{name} shows a mover here: it may not fill", (255, 40, 40, 150))]),
+                    rr.SegmentationImage(mv.astype(np.uint8)), static=True)
                 if getattr(sel, "reasons", None) is not None:
                     self.rec.log(self.p(f"{P.RESULT_REASONS}/{name}"), rr.AnnotationContext(
                         [(c, w, _REASON_COLOURS[c]) for c, w in REASONS.items()]),
@@ -632,6 +646,9 @@ class RerunSink(StepColumns):
             static=True)
         rec.log(p(P.scan_map("verdict")), rr.AnnotationContext(
             [(i, VERDICT_NAMES[i], VERDICT_COLORS[i]) for i in VERDICT_NAMES]), static=True)
+        rec.log(p(P.scan_map("undecided")), rr.AnnotationContext(
+            [(0, "", (0, 0, 0, 0)),
+             (1, "undecided: no cluster formed, so no M", (90, 90, 90, 255))]), static=True)
         rec.log(p(P.scan_map("chosen_source")), rr.AnnotationContext(
             [(0, "not replaced", (0, 0, 0, 0))]
             + [(k + 1, f"patch from {n}", tuple(int(v) for v in cluster_colors(
@@ -794,6 +811,10 @@ class RerunSink(StepColumns):
                 rr.AnyValues(scan=scan, direction=self._direction, t_r=round(self.t_r, 3),
                              scale=P.M_SCALE, undecided=P.M_UNDECIDED))
         rec.log(p(P.scan_map("verdict")), rr.SegmentationImage(verdict))
+        # over M's view: the undecided pixels, whose 65535 the colour map draws at
+        # the top, as M = 1 would be (seen in a headless viewer, session 65)
+        rec.log(p(P.scan_map("undecided")), rr.SegmentationImage(
+            (verdict == 3).astype(np.uint8), opacity=1.0, draw_order=1.0))
         rec.log(p(P.scan_map("chosen_source")), rr.SegmentationImage(chosen))
         rec.log(p(P.scan_map("overwritten_before")), rr.DepthImage(
             before, meter=1.0, colormap="magma",
