@@ -218,7 +218,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     where = _Where(_bar(args, params))
     iset: io.ImageSet | None = None
     ref: int | None = None
-    rec = sink = sink_b = None
+    rec = sink = sink_b = extra = None
     try:
         where.bar("load", 0.0)
 
@@ -283,13 +283,24 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
                                        sample_static=args.sample_static, names=iset.names,
                                        preset_name="compare", progress=where,
                                        valid_masks=iset.valid_masks)
-                # (a trial found the compare run's J only in the recording's log)
-                j_b = (f", J {jaccard(res_b.dynamic, gt):.3f} against the given mask"
+                # both runs' figures at the analysis size, on the terminal and in
+                # report.json (a trial found the compare run's J only in the recording's
+                # log; the main run's own jaccard_vs_gt is at the output's size)
+                fig = {"spec": args.compare, "params": compare.to_dict(),
+                       "analysis_size": {"width": int(res_b.dynamic.shape[1]),
+                                         "height": int(res_b.dynamic.shape[0])},
+                       "dynamic_fraction": float(res_b.dynamic.mean()),
+                       "main_dynamic_fraction": float(res.dynamic.mean())}
+                if gt is not None:
+                    fig["jaccard_vs_gt"] = jaccard(res_b.dynamic, gt)
+                    fig["main_jaccard_vs_gt"] = jaccard(res.dynamic, gt)
+                j_b = (f", J {fig['jaccard_vs_gt']:.3f} against the given mask"
                        if gt is not None else "")
-                j_a = f", J {jaccard(res.dynamic, gt):.3f}" if gt is not None else ""
-                _line(args, f"compare run: {100 * res_b.dynamic.mean():.1f} % dynamic at the "
-                      f"analysis size{j_b} (main: {100 * res.dynamic.mean():.1f} %{j_a}), "
-                      f"both in {args.record}", where.bar)
+                j_a = f", J {fig['main_jaccard_vs_gt']:.3f}" if gt is not None else ""
+                _line(args, f"compare run: {100 * fig['dynamic_fraction']:.1f} % dynamic at "
+                      f"the analysis size{j_b} (main: {100 * fig['main_dynamic_fraction']:.1f}"
+                      f" %{j_a}), both in {args.record}", where.bar)
+                extra = {"compare": fig}
     except BaseException as e:
         stop = interruption(e)
         if stop is None:
@@ -306,7 +317,6 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.flush()
             rec.disconnect()
     res.timings = {"load": t_load, **res.timings}  # first, as on the terminal
-    res_a_dyn = res.dynamic  # at the analysis size (the compare run's figures)
     bar = _bar(args, params)  # the steps after the pipeline's, on the same bar
     if args.output_size == "full" and iset.scale < 1.0:
         bar("full-size output", 0.0)
@@ -326,20 +336,6 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     bar("writing", 0.0)
     args._wrote = True  # (an interruption from here on may have written some outputs)
     args._t_write = time.time() - 0.01  # (the clock of file times, as report.json's)
-    extra = None
-    if compare is not None:
-        # the compare run's figures at the analysis size, beside the main run's there
-        # (the main run's own jaccard_vs_gt is at the output's size)
-        gt_a = (None if gt_full is None
-                else _resized_mask(gt_full, res_b.dynamic.shape))
-        extra = {"compare": {
-            "spec": args.compare, "params": compare.to_dict(),
-            "analysis_size": {"width": int(res_b.dynamic.shape[1]),
-                              "height": int(res_b.dynamic.shape[0])},
-            "dynamic_fraction": float(res_b.dynamic.mean()),
-            "main_dynamic_fraction": float(res_a_dyn.mean()),
-            **({"jaccard_vs_gt": jaccard(res_b.dynamic, gt_a),
-                "main_jaccard_vs_gt": jaccard(res_a_dyn, gt_a)} if gt_a is not None else {})}}
     report = write_outputs(out, res, iset=iset, ref=ref, preset_name=args.preset, gt=gt,
                            record=args.record, reference=ref_info, extra=extra)
     bar("writing", 1.0)
