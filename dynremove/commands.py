@@ -256,7 +256,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             with record_errors(args.record):
                 rec = args.viewer("sink").open_compare_stream(
                     args.record, [n for i, n in enumerate(iset.names) if i != ref],
-                    roots=["runs/main", "runs/compare"])
+                    roots=["runs/main", "runs/compare"], jaccard=gt is not None)
         sink = _make_sink(args, iset, gt, rec=rec, root="runs/main" if rec else "",
                           output_dir=out)
         _note_compile(args)

@@ -599,3 +599,47 @@ def test_m_prints_the_same_from_a_decision_and_from_the_map():
     for M in (0.24503, 0.24496, 0.2449, 0.30001, 0.12345678):
         q = float(np.uint16(round(M * P.M_SCALE))) / P.M_SCALE
         assert vd.m_text(np.float32(M)) == vd.m_text(q) == f"{q:.2f}"
+
+
+def _view_names(container) -> list[str]:
+    """The names of a blueprint's containers and views, depth first."""
+    out = [getattr(container, "name", None)]
+    for c in getattr(container, "contents", None) or []:
+        if hasattr(c, "name"):
+            out += _view_names(c)
+    return out
+
+
+def test_without_ground_truth_the_layout_has_no_empty_error_views():
+    """The "errors" map and the "Jaccard" plot read the ground truth (``run --gt``):
+    a recording without one had them empty (a fresh user's trial, session 65). They
+    are laid out only with it, in the plain and the --compare layouts alike."""
+    names = ["a/0001.jpg", "b/0001.jpg"]
+    with_gt = _view_names(make_blueprint(names).root_container)
+    without = _view_names(make_blueprint(names, jaccard=False).root_container)
+    assert "errors" in with_gt and "Jaccard" in with_gt
+    assert "errors" not in without and "Jaccard" not in without
+    assert set(with_gt) - set(without) == {"errors", "Jaccard"}
+    cmp = _view_names(make_compare_blueprint(names, ["runs/a", "runs/b"],
+                                             jaccard=False).root_container)
+    assert "errors" not in cmp and "Jaccard" not in cmp and "runs/a" in cmp
+
+
+def test_the_sink_lays_out_error_views_only_with_ground_truth(tmp_path, monkeypatch):
+    """The sink passes whether it has a ground-truth mask to the layout it saves."""
+    import viewer.sink as vs
+
+    seen = []
+    real = vs.make_blueprint
+
+    def spy(*a, **k):
+        seen.append(k.get("jaccard", True))
+        return real(*a, **k)
+
+    monkeypatch.setattr(vs, "make_blueprint", spy)
+    for gt in (None, np.zeros((H, W), bool)):
+        seen.clear()
+        sink = RerunSink(tmp_path / f"gt{gt is not None}.rrd", gt_mask=gt,
+                         record_every_rows=8)
+        fabricate_run([sink], H=H, W=W, S=S, n_scans=1)
+        assert seen and set(seen) == {gt is not None}, (gt is not None, seen)

@@ -44,15 +44,17 @@ def _dynamic_view(p: P.Paths, name: str = "L") -> rrb.Spatial2DView:
                              contents=[p(P.REFERENCE_DYNAMIC), p(P.REFERENCE_SCANLINE)])
 
 
-def _maps(p: P.Paths) -> rrb.Tabs:
+def _maps(p: P.Paths, *, errors: bool = True) -> rrb.Tabs:
+    # "errors" (L against the ground truth) only where the run has one (``run --gt``)
     return rrb.Tabs(
         _dynamic_view(p),
         rrb.Spatial2DView(name="M", origin=p(P.REFERENCE),
                           contents=[p(P.REFERENCE_M), p(P.REFERENCE_SCANLINE),
                                     p(P.REFERENCE_CURRENT), p(P.REFERENCE_CURRENT_LABEL)]),
-        rrb.Spatial2DView(name="errors", origin=p(P.REFERENCE),
-                          contents=[p(P.REFERENCE_IMAGE), p(P.ERRORS_LABELS),
-                                    p(P.ERRORS_LEGEND), p(P.REFERENCE_SCANLINE)]),
+        *([rrb.Spatial2DView(name="errors", origin=p(P.REFERENCE),
+                             contents=[p(P.REFERENCE_IMAGE), p(P.ERRORS_LABELS),
+                                       p(P.ERRORS_LEGEND), p(P.REFERENCE_SCANLINE)])]
+          if errors else []),
         name="maps",
     )
 
@@ -136,11 +138,13 @@ def _plot(p: P.Paths, name: str, stats: Sequence[str]) -> rrb.TimeSeriesView:
         plot_legend=rrb.PlotLegend(rrb.components.Corner2D.LeftTop))
 
 
-def _plots(p: P.Paths) -> rrb.Tabs:
+def _plots(p: P.Paths, *, jaccard: bool = True) -> rrb.Tabs:
+    # the Jaccard plot only where the run has a ground-truth mask (``run --gt``):
+    # without one it would stay empty
     return rrb.Tabs(
         _plot(p, "counts", ("n_dynamic", "n_replaced", "n_undecided",
                                      "dynamic_px")),
-        _plot(p, "Jaccard", ("jaccard",)),
+        *([_plot(p, "Jaccard", ("jaccard",))] if jaccard else []),
         _plot(p, "seconds", ("seconds",)),
         name="plots",
     )
@@ -155,21 +159,24 @@ def _texts(p: P.Paths) -> rrb.Tabs:
     )
 
 
-def _run_layout(names: list[str], p: P.Paths, *, label: str | None = None) -> rrb.Container:
+def _run_layout(names: list[str], p: P.Paths, *, label: str | None = None,
+                jaccard: bool = True) -> rrb.Container:
     sources = rrb.Grid(*[_source_view(p, n, s) for s, n in enumerate(names)],
                        grid_columns=max(1, min(3, len(names))), name="sources")
     similarity = rrb.Grid(*[rrb.Spatial2DView(name=f"{n} C_{s}", origin=p(P.similarity(n)))
                             for s, n in enumerate(names)],
                           grid_columns=max(1, min(3, len(names))), name="similarity C_s")
     return rrb.Vertical(
-        rrb.Horizontal(_reference_view(p), rrb.Vertical(_maps(p), _more(p, names), name="maps",
-                                                          row_shares=[3, 2]),
+        rrb.Horizontal(_reference_view(p),
+                       rrb.Vertical(_maps(p, errors=jaccard), _more(p, names), name="maps",
+                                    row_shares=[3, 2]),
                        column_shares=[3, 2], name="reference"),
         rrb.Horizontal(
             rrb.Tabs(sources, similarity,
                      rrb.Spatial2DView(name="coverage", origin=p(P.COVERAGE)),
                      name="sources"),
-            rrb.Vertical(_plots(p), _texts(p), row_shares=[1, 1], name="plots and log"),
+            rrb.Vertical(_plots(p, jaccard=jaccard), _texts(p), row_shares=[1, 1],
+                         name="plots and log"),
             column_shares=[3, 2], name="sources and plots"),
         row_shares=[3, 2],
         name=label or "run",
@@ -186,7 +193,7 @@ def _panels(size: tuple[int, int] | None = None) -> list:
 
 
 def make_blueprint(source_names: Sequence[str], *, root: str = "",
-                   size: tuple[int, int] | None = None) -> rrb.Blueprint:
+                   size: tuple[int, int] | None = None, jaccard: bool = True) -> rrb.Blueprint:
     """Default layout of one run.
 
     Parameters
@@ -199,14 +206,18 @@ def make_blueprint(source_names: Sequence[str], *, root: str = "",
     size : (H, W), optional
         Image size: the time panel then plays one scan (H·W steps) in about
         :data:`SCAN_SECONDS` seconds instead of one step per frame.
+    jaccard : bool
+        Whether the run has a ground-truth mask: the "errors" map and the
+        "Jaccard" plot are shown only then (they would stay empty).
     """
     names = P.entity_names(list(source_names))
-    return rrb.Blueprint(_run_layout(names, P.Paths(root)), *_panels(size),
+    return rrb.Blueprint(_run_layout(names, P.Paths(root), jaccard=jaccard), *_panels(size),
                          auto_views=False)
 
 
 def make_compare_blueprint(source_names: Sequence[str], roots: Sequence[str], *,
-                           size: tuple[int, int] | None = None) -> rrb.Blueprint:
+                           size: tuple[int, int] | None = None,
+                           jaccard: bool = True) -> rrb.Blueprint:
     """Layout of several runs logged side by side under ``roots`` (``--compare``).
 
     The first tab shows every run's reference and L next to each other; then
@@ -222,6 +233,6 @@ def make_compare_blueprint(source_names: Sequence[str], roots: Sequence[str], *,
                                             time_ranges=_whole_run())
                          for r in roots], name="stats"),
         row_shares=[3, 2, 1], name="side by side")
-    tabs = [_run_layout(names, P.Paths(r), label=r) for r in roots]
+    tabs = [_run_layout(names, P.Paths(r), label=r, jaccard=jaccard) for r in roots]
     return rrb.Blueprint(rrb.Tabs(side, *tabs, name="runs"), *_panels(size),
                          auto_views=False)

@@ -299,8 +299,8 @@ class RerunSink(StepColumns):
         self.rec = rr.RecordingStream(self.application_id, recording_id=self.recording_id,
                                       batcher_config=rr.ChunkBatcherConfig(**self.BATCHER))
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        bp = None if src_names is None else make_blueprint(src_names, root=self.p.root,
-                                                           size=size)
+        bp = None if src_names is None else make_blueprint(
+            src_names, root=self.p.root, size=size, jaccard=self.gt_mask is not None)
         if self.path.exists():
             self._earlier = self.path
             self.path = self.path.with_name(f".{self.path.name}.{uuid.uuid4().hex[:8]}.tmp")
@@ -331,7 +331,8 @@ class RerunSink(StepColumns):
         elif self._owns_rec and getattr(self, "_bp_sources", None) != self.src_names:
             # begin() guessed the sources; some were dropped since (near-copies)
             self.rec.send_blueprint(make_blueprint(self.src_names, root=self.p.root,
-                                                   size=(self.H, self.W)))
+                                                   size=(self.H, self.W),
+                                                   jaccard=self.gt_mask is not None))
         self._scan = 0
         self._direction = 1
         self._last_step = 0
@@ -931,13 +932,16 @@ class RerunSink(StepColumns):
 
 
 def open_compare_stream(path: str | Path, source_names: list[str], *, roots: list[str],
-                        application_id: str = "dynremove") -> rr.RecordingStream:
+                        application_id: str = "dynremove",
+                        jaccard: bool = True) -> rr.RecordingStream:
     """One recording for several runs logged under ``roots`` (``run --compare``).
 
     The caller passes it as ``rec`` to one RerunSink per run and disconnects it.
+    ``jaccard``: whether the runs have a ground-truth mask (the "Jaccard" plots).
     """
     rec = rr.RecordingStream(application_id, recording_id=f"dynremove-{uuid.uuid4().hex[:12]}",
                              batcher_config=rr.ChunkBatcherConfig(**RerunSink.BATCHER))
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    rec.save(Path(path), default_blueprint=make_compare_blueprint(source_names, roots))
+    rec.save(Path(path), default_blueprint=make_compare_blueprint(source_names, roots,
+                                                                  jaccard=jaccard))
     return rec
