@@ -512,3 +512,43 @@ def test_a_ctrl_c_after_the_run_finished_keeps_its_exit_status(tmp_path):
     assert p.returncode == 0, p.stderr
     assert "Traceback" not in p.stderr and "interrupted" not in p.stderr, p.stderr
     assert (tmp_path / "out" / "clean.png").exists()
+
+
+class _StopAtTheLastRows(RerunSink):
+    """A sink whose recording of the scan's last rows is cut by a Ctrl-C."""
+
+    def chunk(self, events, state):
+        super().chunk(events, state)
+        if max(events.rows) == self.H - 1:  # (scan 0 visits the rows top down)
+            raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("where", ["progress", "recording"])
+def test_a_ctrl_c_as_the_scan_ends_keeps_its_maps(tmp_path, where):
+    """A Ctrl-C that lands once the scan has visited its last row (as its end is told
+    to the progress bar, or while its last rows are being recorded) keeps the whole
+    scan's maps in the recording, and it says the run stopped after the scan; a
+    fresh-user trial's Ctrl-C there lost them (session 65)."""
+    from dynremove.pipeline import remove_dynamic
+
+    scene = synth.make_scene(seed=0, n_views=4, size=(120, 160))
+    full = remove_dynamic(scene.images, ref=scene.ref_index, params="default")
+    path = tmp_path / f"{where}.rrd"
+    cls = _StopAtTheLastRows if where == "recording" else RerunSink
+    sink = cls(path, record_every_rows=8)
+
+    def progress(stage, frac):
+        if where == "progress" and stage == "scan 0" and frac >= 1.0:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        remove_dynamic(scene.images, ref=scene.ref_index, params="default", sink=sink,
+                       progress=progress)
+    sink.interrupted("during scan 0")
+    maps = vi.read_scan_maps(path)
+    assert [m["scan"] for m in maps] == [0]
+    np.testing.assert_array_equal(np.isnan(maps[0]["M"]), np.isnan(full.M[0]))
+    np.testing.assert_allclose(maps[0]["M"], full.M[0], atol=1e-4, equal_nan=True)
+    # (the default preset's one scan: "after the scans")
+    msg = vi.interruption(_store(path))
+    assert msg.startswith("interrupted after") and "step" not in msg, msg

@@ -268,27 +268,52 @@ def run_scans(st: ScanInputs, params: Params, *, sink: EventSink, probe: np.ndar
         dirty = np.zeros((H, W), np.uint8)
         if record:
             sink.scan_started(scan, direction, state())
-        for r0 in range(0, H, chunk_rows):
-            r1 = min(H, r0 + chunk_rows)
-            scan_fn(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
-                    st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L, Mmap,
-                    Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, use_pre, preM, preB, preK, dirty,
-                    scan=scan, direction=direction,
-                    r0=r0, r1=r1, stats=stats)
-            if record:
-                base = scan * H * W
-                batch = bufs.take(scan, (r0, r1 - 1), (base + r0 * W, base + r1 * W))
-                sink.chunk(batch, state())
-            if progress is not None:
-                progress(scan, r1, H)
-        summary = np.zeros((), SCAN_SUMMARY_DTYPE)
-        summary["scan"], summary["direction"] = scan, direction
-        summary["n_dynamic"], summary["n_replaced"], summary["n_undecided"] = stats
-        summary["seconds"] = time.perf_counter() - t0
+
+        def summarise() -> np.ndarray:
+            summary = np.zeros((), SCAN_SUMMARY_DTYPE)
+            summary["scan"], summary["direction"] = scan, direction
+            summary["n_dynamic"], summary["n_replaced"], summary["n_undecided"] = stats
+            summary["seconds"] = time.perf_counter() - t0
+            return summary
+
+        visited = whole = False  # every row of this scan visited (known / certain)
+        try:
+            for r0 in range(0, H, chunk_rows):
+                r1 = min(H, r0 + chunk_rows)
+                # (a compiled call is not cut by a signal: a stop raised in it
+                # surfaces once it has returned, its rows done)
+                whole = r1 == H and kernel == "numba"
+                scan_fn(st.img, st.lab, st.gray, st.fc_r, st.fg_r, st.src_img, st.src_lab,
+                        st.src_gray, st.fc_s, st.fg_s, st.N, st.C, st.F, st.hasF, L, Mmap,
+                        Kmap, Bmap, probe, hb_r, hm_r, hb_s, hm_s, use_pre, preM, preB, preK,
+                        dirty, scan=scan, direction=direction,
+                        r0=r0, r1=r1, stats=stats)
+                visited = r1 == H
+                if record:
+                    base = scan * H * W
+                    batch = bufs.take(scan, (r0, r1 - 1), (base + r0 * W, base + r1 * W))
+                    sink.chunk(batch, state())
+                if progress is not None and r1 < H:
+                    progress(scan, r1, H)
+        except BaseException as e:
+            # a Ctrl-C (or SIGTERM) that lands once the scan has visited its last row,
+            # while its last rows are being recorded: the scan is whole, so the
+            # recording keeps its maps (a trial's Ctrl-C there lost them)
+            if record and (visited or (whole and not isinstance(e, Exception))):
+                try:
+                    sink.scan_finished(summarise(), state())
+                except Exception:  # noqa: BLE001 - the interruption is what is raised
+                    pass
+            raise
+        summary = summarise()
         summaries.append(summary)
         M_maps.append(Mmap)
         if record:
             sink.scan_finished(summary, state())
+        # the scan's end is told after its maps are recorded: a stop that the progress
+        # callback raises there (the command line's) keeps the whole scan's maps
+        if progress is not None:
+            progress(scan, H, H)
         if stats[0] == 0:
             break
     return L.astype(bool), M_maps, summaries
