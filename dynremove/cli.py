@@ -521,13 +521,14 @@ def build_parser() -> argparse.ArgumentParser:
                                    "positives/negatives (run --gt) and the steps to jump "
                                    "to in the viewer.")
     i.add_argument("recording", help="a .rrd file")
-    i.add_argument("--pixel", type=parse_xy, metavar="X,Y",
+    i.add_argument("--pixel", type=parse_xy, metavar="X,Y", action="append",
                    help="pixel to explain, in the image the run analysed (as the viewer and "
-                        "--failures count)")
-    i.add_argument("--photo-pixel", type=parse_xy, metavar="X,Y",
+                        "--failures count); give it again for more pixels (each glossary "
+                        "is printed once)")
+    i.add_argument("--photo-pixel", type=parse_xy, metavar="X,Y", action="append",
                    help="pixel to explain, in the photos as read (as clean.png at full size, "
                         "--probe and --gt count); the same as --pixel when the run analysed "
-                        "the photos at their own size")
+                        "the photos at their own size; may be given again, and with --pixel")
     i.add_argument("--failures", action="store_true", help="list the worst FP/FN regions")
     i.add_argument("--top", type=parse_positive, default=None,
                    help="how many failures --failures lists (default 10)")

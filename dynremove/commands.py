@@ -895,77 +895,90 @@ def cmd_view(args: argparse.Namespace) -> int:
 def cmd_inspect(args: argparse.Namespace) -> int:
     ins, vd = args.viewer("inspect"), args.viewer("verdict")
     path = _recording(args.recording)
-    photo = getattr(args, "photo_pixel", None)
-    if args.pixel is None and photo is None and not args.failures:
+    pixels = [(xy, None) for xy in (args.pixel or [])]
+    pixels += [(None, xy) for xy in (getattr(args, "photo_pixel", None) or [])]
+    if not pixels and not args.failures:
         raise InputError("inspect: give --pixel X,Y, --photo-pixel X,Y or --failures")
-    if args.pixel is not None and photo is not None:
-        raise InputError("inspect: give --pixel X,Y (the analysed image's) or --photo-pixel "
-                         "X,Y (the photos'), not both")
     if args.top is not None and not args.failures:  # (a trial's --top went unnoticed)
         _note(args, "--top counts the failures of --failures: without it, not used")
-    if args.pixel is not None or photo is not None:
+    if pixels:
         info = ins.read_run_info(path, root=ins.resolve_root(path, args.root))
         size = ins.photo_size(info)
-        if photo is not None:
-            px, py = photo
-            if size is not None and not (0 <= px < size[0] and 0 <= py < size[1]):
-                raise InputError(f"--photo-pixel {px},{py}: outside the {size[0]}x{size[1]} "
-                                 f"photos (x in 0..{size[0] - 1}, y in 0..{size[1] - 1})")
-            x, y = ins.photo_to_analysis(info, px, py) or (px, py)
-        else:
-            x, y = args.pixel
-        if size is not None and 0 <= x < int(info["width"]) and 0 <= y < int(info["height"]):
-            # the run analysed smaller images: say which photo pixel this is (the one
-            # asked for: an analysis pixel covers several, the centre one is named
-            # only when the analysis pixel was asked for)
-            if photo is not None:
-                print(f"photo pixel ({photo[0]}, {photo[1]}) of the {size[0]}x{size[1]} "
-                      f"photos is pixel ({x}, {y}) of the {info['width']}x{info['height']} "
-                      "analysis image")
-            else:
-                qx, qy = ins.analysis_to_photo(info, x, y)
-                # (and the photo pixels it covers: a trial's --photo-pixel 1000,2160 gave
-                # analysis pixel (400, 864), whose centre is photo pixel (1001, 2161))
-                (x0, x1), (y0, y1) = ins.photo_span(info, x, y)
-                print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis "
-                      f"image = photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos "
-                      f"(the one nearest its centre; it covers photo pixels x {x0}–{x1}, "
-                      f"y {y0}–{y1})")
-        hist = ins.pixel_history(path, x, y, root=args.root)
-        written = (None if photo is None or size is None else
-                   _written_mask_at(info, path, photo[0], photo[1]))
-        if written is not None:
-            # (a trial: "kept" for a photo pixel that dynamic_mask.png holds; the run's
-            # own output folder, when the recording names it and it still holds this
-            # run's outputs, settles it)
-            fin = bool(hist.get("final_dynamic"))
-            out_dir = info["output_dir"]
-            if written != fin:
-                print(for_terminal(
-                    f"NOTE: {out_dir}/dynamic_mask.png {'holds' if written else 'leaves out'} "
-                    f"this photo pixel: at full size it is {'' if written else 'not '}"
-                    "replaced in clean.png (the mask is refined on the photo's edges), where "
-                    f"the verdict below, the analysis image's, has it "
-                    f"{'in' if fin else 'out of'} the final mask"))
-        elif size is not None and hist.get("final_dynamic") is False:
-            # (before the verdict, whose "not in the final mask" is the analysis
-            # image's: a fresh-user trial read it as the photo's, at a border pixel
-            # that dynamic_mask.png holds)
-            L = ins.read_final_dynamic(path, root=ins.resolve_root(path, args.root))
-            # (3 px: the full-size refinement adds specks that far out: a trial's
-            # speck 3 analysis px from the border had no note)
-            if L is not None and L[max(y - 3, 0):y + 4, max(x - 3, 0):x + 4].any():
-                print(for_terminal(
-                    "NOTE: within 3 analysis pixels of the final mask's border. The verdict "
-                    "below is the analysis image's; at full size the mask is refined on the "
-                    "photo's edges and the fill reaches about one analysis pixel beyond it, "
-                    "so this photo pixel may be in dynamic_mask.png and changed in clean.png "
-                    "(it is there if it changed by ΔE 10 or more)"))
-        print(for_terminal(vd.format_pixel_history(hist)))
+        for _, photo in pixels:  # every pixel checked before any is explained
+            if photo is not None and size is not None and not (
+                    0 <= photo[0] < size[0] and 0 <= photo[1] < size[1]):
+                raise InputError(f"--photo-pixel {photo[0]},{photo[1]}: outside the "
+                                 f"{size[0]}x{size[1]} photos (x in 0..{size[0] - 1}, y in "
+                                 f"0..{size[1] - 1})")
+        # each glossary once, where it is first needed (a trial: it repeated at every
+        # pixel of a teaching session)
+        seen: set[str] = set()
+        for i, (analysed, photo) in enumerate(pixels):
+            if i:
+                print()
+            _inspect_pixel(args, ins, vd, path, info, size, analysed, photo, seen)
     if args.failures:
         print(for_terminal(vd.format_failures(ins.failures(path, top=args.top or 10,
                                                             root=args.root))))
     return EXIT_OK
+
+
+def _inspect_pixel(args: argparse.Namespace, ins: Any, vd: Any, path: Path, info: dict,
+                   size: tuple[int, int] | None, analysed: tuple[int, int] | None,
+                   photo: tuple[int, int] | None, seen: set[str]) -> None:
+    """``inspect --pixel`` / ``--photo-pixel``: one pixel's verdict and history."""
+    if photo is not None:
+        x, y = ins.photo_to_analysis(info, photo[0], photo[1]) or photo
+    else:
+        x, y = analysed
+    if size is not None and 0 <= x < int(info["width"]) and 0 <= y < int(info["height"]):
+        # the run analysed smaller images: say which photo pixel this is (the one
+        # asked for: an analysis pixel covers several, the centre one is named
+        # only when the analysis pixel was asked for)
+        if photo is not None:
+            print(f"photo pixel ({photo[0]}, {photo[1]}) of the {size[0]}x{size[1]} "
+                  f"photos is pixel ({x}, {y}) of the {info['width']}x{info['height']} "
+                  "analysis image")
+        else:
+            qx, qy = ins.analysis_to_photo(info, x, y)
+            # (and the photo pixels it covers: a trial's --photo-pixel 1000,2160 gave
+            # analysis pixel (400, 864), whose centre is photo pixel (1001, 2161))
+            (x0, x1), (y0, y1) = ins.photo_span(info, x, y)
+            print(f"pixel ({x}, {y}) of the {info['width']}x{info['height']} analysis "
+                  f"image = photo pixel ({qx}, {qy}) of the {size[0]}x{size[1]} photos "
+                  f"(the one nearest its centre; it covers photo pixels x {x0}–{x1}, "
+                  f"y {y0}–{y1})")
+    hist = ins.pixel_history(path, x, y, root=args.root)
+    written = (None if photo is None or size is None else
+               _written_mask_at(info, path, photo[0], photo[1]))
+    if written is not None:
+        # (a trial: "kept" for a photo pixel that dynamic_mask.png holds; the run's
+        # own output folder, when the recording names it and it still holds this
+        # run's outputs, settles it)
+        fin = bool(hist.get("final_dynamic"))
+        out_dir = info["output_dir"]
+        if written != fin:
+            print(for_terminal(
+                f"NOTE: {out_dir}/dynamic_mask.png {'holds' if written else 'leaves out'} "
+                f"this photo pixel: at full size it is {'' if written else 'not '}"
+                "replaced in clean.png (the mask is refined on the photo's edges), where "
+                f"the verdict below, the analysis image's, has it "
+                f"{'in' if fin else 'out of'} the final mask"))
+    elif size is not None and hist.get("final_dynamic") is False:
+        # (before the verdict, whose "not in the final mask" is the analysis
+        # image's: a fresh-user trial read it as the photo's, at a border pixel
+        # that dynamic_mask.png holds)
+        L = ins.read_final_dynamic(path, root=ins.resolve_root(path, args.root))
+        # (3 px: the full-size refinement adds specks that far out: a trial's
+        # speck 3 analysis px from the border had no note)
+        if L is not None and L[max(y - 3, 0):y + 4, max(x - 3, 0):x + 4].any():
+            print(for_terminal(
+                "NOTE: within 3 analysis pixels of the final mask's border. The verdict "
+                "below is the analysis image's; at full size the mask is refined on the "
+                "photo's edges and the fill reaches about one analysis pixel beyond it, "
+                "so this photo pixel may be in dynamic_mask.png and changed in clean.png "
+                "(it is there if it changed by ΔE 10 or more)"))
+    print(for_terminal(vd.format_pixel_history(hist, seen_legends=seen)))
 
 
 def _nothing_scored(report: dict) -> bool:

@@ -95,6 +95,15 @@ def test_cli_recordings_verify_and_inspect(scene, tmp_path, capsys):
     assert main(["inspect", str(rec), "--pixel", "10,12"]) == 0
     out = capsys.readouterr().out
     assert "pixel (10, 12)" in out and "scan 0" in out
+    assert out.count(vd.LEGEND) == 1  # the probe's decisions have M
+    # several pixels in one call (the same twice, and as a photo pixel): each verdict,
+    # each glossary once (it repeated at every pixel of a teaching session)
+    assert main(["inspect", str(rec), "--pixel", "10,12", "--pixel", "11,12",
+                 "--photo-pixel", "10,12"]) == 0
+    many = capsys.readouterr().out
+    assert many.count("pixel (10, 12): ") == 2 and many.count("pixel (11, 12): ") == 1
+    assert many.count(vd.LEGEND) == 1
+    assert many.index(vd.LEGEND) < many.index("pixel (11, 12): ")  # where first needed
     assert main(["inspect", str(rec), "--failures", "--top", "3"]) == 0
     assert main(["export", str(rec), "--gif", str(tmp_path / "a.gif")]) == 0
     assert (tmp_path / "a.gif").read_bytes()[:6] in (b"GIF89a", b"GIF87a")

@@ -358,8 +358,14 @@ def test_photo_pixel_explains_the_analysis_pixel_it_falls_in(downscaled, capsys)
     assert (rc, out) == (2, "") and err == [
         "dynremove: error: --photo-pixel 256,10: outside the 256x192 photos (x in 0..255, "
         "y in 0..191)"], err
-    rc, out, err = _inspect(capsys, downscaled, "--photo-pixel", "1,1", "--pixel", "1,1")
-    assert rc == 2 and "not both" in err[0], err
+    # both in one call (the glossary once): each pixel's verdict, in that order
+    rc, out3, err = _inspect(capsys, downscaled, "--pixel", "50,37", "--photo-pixel", "200,150")
+    assert rc == 0, err
+    _, photo_out, _ = _inspect(capsys, downscaled, "--photo-pixel", "200,150")
+    blocks = out3.split("\n\n")
+    assert len(blocks) == 2 and blocks[0] + "\n" == out2, out3
+    assert vd.LEGEND in photo_out and blocks[1] == photo_out.replace(
+        "  " + vd.LEGEND + "\n", ""), out3
 
 
 def test_without_a_photo_size_the_message_is_unchanged(tmp_path, capsys):

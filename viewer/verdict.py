@@ -830,11 +830,14 @@ def plain_words(h: dict[str, Any]) -> str | None:
             + ("; the others show something else here" + hedge if few else ""))
 
 
-def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
+def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30,
+                         seen_legends: set[str] | None = None) -> str:
     """The verdict in words (≤ 5 lines), then the steps that changed the pixel.
 
     Runs of patch writes over the pixel are folded into one line per scan;
-    the whole text stays within ``max_lines`` lines.
+    the whole text stays within ``max_lines`` lines. With ``seen_legends`` (a set,
+    updated here), a glossary already in it is not repeated: several pixels of one
+    ``inspect`` call give each glossary once.
     """
     verdict = verdict_lines(h)
     fin = h.get("final_dynamic")
@@ -849,10 +852,12 @@ def format_pixel_history(h: dict[str, Any], *, max_lines: int = 30) -> str:
     st = static_test_line(h)
     if st is not None:
         lines.append("  " + st)
-    if any(("M = " in ln or "b_m" in ln) for ln in lines):
-        lines.append("  " + LEGEND)
-    if any("by the border votes" in ln for ln in lines):
-        lines.append("  " + VOTES_LEGEND)
+    for legend, needed in ((LEGEND, any(("M = " in ln or "b_m" in ln) for ln in lines)),
+                           (VOTES_LEGEND, any("by the border votes" in ln for ln in lines))):
+        if needed and (seen_legends is None or legend not in seen_legends):
+            lines.append("  " + legend)
+            if seen_legends is not None:
+                seen_legends.add(legend)
     ev: list[tuple[int, str]] = []
     dec_scans = {d["scan"] for d in h["decisions"]}
     for sc in h.get("scans", []):
