@@ -429,6 +429,35 @@ def test_the_compile_note_follows_numbas_own_cache(tmp_path, record):
     assert cached() == "False"
 
 
+@pytest.mark.parametrize("record", [False, True])
+def test_the_kernels_the_compile_note_waits_for_are_called_by_every_run(monkeypatch, record):
+    """``compiled_kernels`` lists only kernels that a run of the default preset calls,
+    even one that stops after its first scan (the default's usual run): a kernel
+    listed but never called is never cached, and every run then said "compiling the
+    scan kernels (once per install, about 30-60 s ...)" (a fresh-user trial)."""
+    from dynremove.events import MemorySink, NullSink
+    from dynremove.evaluation import synth
+    from dynremove.method.scan import _kernels as kn
+    from dynremove.method.scan.driver import compiled_kernels
+    from dynremove.pipeline import remove_dynamic
+
+    listed = {k.__name__ for k in compiled_kernels(record)}
+    called = set()
+    for name in ("_scan", "_decide_all"):
+        real = getattr(kn, name)
+
+        def spy(*a, _real=real, _name=name, **k):
+            called.add(_name)
+            return _real(*a, **k)
+
+        monkeypatch.setattr(kn, name, spy)
+    scene = synth.make_scene(seed=0, n_views=4, size=(96, 128))
+    res = remove_dynamic(scene.images, ref=scene.ref_index,
+                         sink=MemorySink() if record else NullSink())
+    assert len(res.scans) == 1  # the case: one scan
+    assert listed <= called, (listed, called)
+
+
 def test_an_empty_ref_is_an_error_not_the_default(capsys, folder):
     with pytest.raises(SystemExit) as e:
         main(["run", str(folder), "--ref", ""])

@@ -171,10 +171,15 @@ def scan_on_all_cores(record: bool) -> bool:
 
 
 def compiled_kernels(record: bool) -> list:
-    """The compiled scan kernels a run calls (recorded or not): the scan itself
-    (``_kernels._scan``, the same entry for both) and the decisions precomputed
-    on all cores (``_kernels._decide_all``)."""
-    return [kn._scan] + ([kn._decide_all] if PRECOMPUTE else [])
+    """The compiled scan kernels every run calls (recorded or not): the scan itself
+    (``_kernels._scan``, the same entry for both), and the decisions precomputed on
+    all cores (``_kernels._decide_all``) where the first scan takes them (one not
+    in the pipeline: recorded, or on one thread). A pipelined run takes them only
+    from its second scan on, which the default's one scan never reaches: were they
+    listed for it, its cache would never be complete and every run would say it
+    compiles (a fresh-user trial: "compiling the scan kernels" at every run)."""
+    pre = PRECOMPUTE and not scan_on_all_cores(record)
+    return [kn._scan] + ([kn._decide_all] if pre else [])
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
