@@ -38,7 +38,8 @@ from dynremove.evaluation.evaluate import (METHODS, format_ablation, format_tabl
                                           run_ablation, run_eval)
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 from dynremove.params import PRESETS, Params, preset
-from dynremove.pipeline import remove_dynamic
+from dynremove.pipeline import (MEMORY_BASE_BYTES, MEMORY_BYTES_PER_PX, physical_memory,
+                                remove_dynamic)
 from dynremove.progress import ProgressBar, SetProgress, stage_labels
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
@@ -362,10 +363,8 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     return EXIT_OK
 
 
-# peak memory of a run ≈ _BASE_BYTES + _BYTES_PER_PX × views × analysed pixels: fitted
-# on `dynremove bench` (7 × 854×480: 1.9 GB) and 5 × 4032×3024 analysed at full size
-# (21.4 GB, /usr/bin/time -v); a rough figure, for the warning only
-_BASE_BYTES, _BYTES_PER_PX = 0.3e9, 350.0
+# peak memory of a run (``pipeline.MEMORY_*``), for the note and the refusal
+_BASE_BYTES, _BYTES_PER_PX = MEMORY_BASE_BYTES, MEMORY_BYTES_PER_PX
 
 
 def _written_mask_at(info: dict, path: Path, x: int, y: int) -> bool | None:
@@ -424,10 +423,7 @@ def _probes_at_analysis_size(args: argparse.Namespace, iset: io.ImageSet
 
 
 def _physical_memory() -> float | None:
-    try:
-        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        return None
+    return physical_memory()
 
 
 def _check_memory(args: argparse.Namespace, iset: io.ImageSet) -> None:

@@ -644,11 +644,32 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
     to it (``conform``): the set's size is the most common one, or photo
     ``size_of``'s (the reference: its clean photo keeps its own size).
 
+    ``args``: the photos' paths, folders of photos, or one video file, as the command
+    line takes them (a list; one path or folder, a ``str`` or ``Path``, is taken as
+    a list of one; any iterable of paths, e.g. a ``glob``, as a list).
+
     ``max_side=None`` downscales only images larger than AUTO_MAX_SIDE (with a note);
     ``max_side=0`` never downscales. One video file instead of images: ``frames``
     frames are taken from ``span`` (see :func:`read_video`). ``valid_mask``: see
     :func:`read_valid_masks`; it is combined with the alpha channel and black borders.
+
+    The returned ImageSet may be given to ``pipeline.remove_dynamic`` as it is: it
+    then takes the set's names, validity masks and loading notes too.
+    InputError for what cannot be read, and for a ``max_side`` that is not an int.
     """
+    if isinstance(args, (str, os.PathLike)):
+        # (a trial's load_image_set("photos/") read the folder's name letter by letter)
+        args = [args]
+    elif not isinstance(args, Sequence):
+        try:
+            args = list(args)
+        except TypeError:
+            raise InputError(f"load_image_set: give the photos' paths, a folder or a "
+                             f"video, not {type(args).__name__}") from None
+    if max_side is not None and (isinstance(max_side, bool)
+                                 or not isinstance(max_side, (int, np.integer))):
+        raise InputError(f"max_side={max_side!r}: give an int (0: the full size; None: "
+                         f"photos over {AUTO_MAX_SIDE} px analysed at {AUTO_MAX_SIDE})")
     if max_side is not None and max_side != 0 and max_side < MIN_MAX_SIDE:
         raise InputError(f"--max-side {max_side}: must be 0 (keep the full size) or at "
                          f"least {MIN_MAX_SIDE} px")

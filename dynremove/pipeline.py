@@ -27,9 +27,9 @@ from dynremove.events import EventSink, NullSink, RunInfo
 from dynremove.method import correspondence, exposure, features, geometry
 from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
-from dynremove.io import resolve_ref, size_hint
+from dynremove.io import AUTO_MAX_SIDE, ImageSet, resolve_ref, size_hint
 from dynremove.params import DEFAULT, Params, preset
-from dynremove.refine.concurrency import for_each_source, numba_threads_safe
+from dynremove.refine.concurrency import check_fork_safe, for_each_source, numba_threads_safe
 from dynremove.refine.duplicates import agreement_with_reference, duplicate_sources
 from dynremove.refine.fill import fuse_background
 from dynremove.refine.mask import refine_mask, snap_to_edges, veto_agreed
@@ -42,9 +42,19 @@ from dynremove.refine.upsample import full_resolution
 Progress = Callable[[str, float], None]
 
 
-@dataclass
+@dataclass(eq=False)
 class Result:
-    """What a run produces. Images are BGR uint8; masks are (H, W) bool."""
+    """What ``remove_dynamic`` produces, at the size it analysed (H, W).
+
+    Images are BGR uint8, masks (H, W) bool. What a user reads first: ``clean``,
+    ``dynamic``, ``coverage``, ``warnings`` (the run's notes) and ``ref_index`` (the
+    reference used: the one ``ref="auto"`` chose). ``pipeline.full_resolution_output``
+    makes the clean photo and mask at the photos' own size. ``M``, ``N``, ``C``,
+    ``dynamic_raw``, ``clean_scan`` and ``stages`` are the method's (Sec. 3)
+    intermediate maps, as the debugger shows them; ``selection`` the fill's.
+    Printed, it summarises itself (the arrays are not listed); compared, it is the
+    same object or not (``==`` of its arrays would be ambiguous).
+    """
 
     clean: npt.NDArray[np.uint8]  # (H, W, 3) the reference with dynamic objects removed
     clean_scan: npt.NDArray[np.uint8]  # (H, W, 3) as the scans left it (= replayed events)
@@ -77,6 +87,14 @@ class Result:
     # matched its exposure to the reference's (``method.exposure``; the identity where
     # not changed); the full-size fill maps the full-size sources through them too
     source_curves: list[np.ndarray] = field(default_factory=list)
+
+    def __repr__(self) -> str:
+        H, W = self.dynamic.shape
+        t = self.timings.get("total")
+        return (f"Result({W}x{H}, reference {self.ref_index}, sources "
+                f"{self.source_indices}, {100 * self.dynamic.mean():.1f} % dynamic, "
+                f"{len(self.scans)} scan(s), {len(self.warnings)} note(s)"
+                + (f", {t:.1f} s" if t is not None else "") + ")")
 
 
 def api_params(params: Params | str | dict | None) -> Params:
@@ -191,8 +209,9 @@ def _array_hint(i: int, im: object, *, bits: int = 16) -> str:
                 "read: check that path)")
     if isinstance(im, (str, bytes, os.PathLike)):
         return (f"image {i} is a path ({os.fsdecode(im)!r}), not an image: read the photos "
-                "with dynremove.io.load_image_set(paths, max_side=1280).images (EXIF "
-                "orientation, the command line's analysis size) or cv2.imread")
+                "with dynremove.io.load_image_set(paths, max_side=1280) and pass the set "
+                "itself (EXIF orientation, borders, the command line's analysis size) or "
+                "cv2.imread")
     if not isinstance(im, np.ndarray):
         kind = f"{type(im).__module__}.{type(im).__qualname__}".removeprefix("builtins.")
         if kind.startswith("PIL."):
@@ -263,6 +282,38 @@ def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
 UNCONFIRMED_SHARE = 0.5
 # a reference this dark against the other photos' median level (×) gets a note
 DARK_REFERENCE = 0.5
+
+
+# peak memory of a run ≈ MEMORY_BASE_BYTES + MEMORY_BYTES_PER_PX × views × analysed
+# pixels: fitted on `dynremove bench` (7 × 854×480: 1.9 GB) and 5 × 4032×3024 analysed
+# at full size (21.4 GB, /usr/bin/time -v); a rough figure
+MEMORY_BASE_BYTES, MEMORY_BYTES_PER_PX = 0.3e9, 350.0
+
+
+def physical_memory() -> float | None:
+    """This machine's physical memory in bytes (None where the OS does not say)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(n: int, H: int, W: int) -> None:
+    """InputError when analysing ``n`` images of H × W px would need more memory than
+    the machine has (``remove_dynamic`` on full-size phone photos: a trial's six of
+    12 MP asked for 7 GB at once and died with MemoryError, where the command line
+    refuses them in one line), saying how to analyse a smaller copy."""
+    need = MEMORY_BASE_BYTES + MEMORY_BYTES_PER_PX * n * H * W
+    have = physical_memory()
+    if have is None or need <= have:
+        return
+    raise InputError(
+        f"analysing {n} images of {W}x{H} ({W * H / 1e6:.1f} MP) needs about "
+        f"{need / 1e9:.0f} GB of memory, more than this machine's {have / 1e9:.0f} GB: "
+        f"read them with dynremove.io.load_image_set(paths, max_side={AUTO_MAX_SIDE}) "
+        "(an analysis copy, as the command line makes; "
+        "pipeline.full_resolution_output then gives the clean photo at full size), or "
+        "pass fewer or smaller images")
 
 
 def prepare(images: Sequence[np.ndarray], ref: int, params: Params, *,
@@ -422,9 +473,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
 
     Parameters
     ----------
-    images : sequence (or iterable) of (H, W, 3) uint8 BGR ndarrays
+    images : sequence (or iterable) of (H, W, 3) uint8 BGR ndarrays, or an ImageSet
         The set; all the same size (as ``cv2.imread`` gives; a stacked (N, H, W, 3)
-        array too).
+        array too). An ``ImageSet`` from ``dynremove.io.load_image_set`` is taken
+        whole: its images, and its names, validity masks and loading notes where
+        ``names`` and ``valid_masks`` are not given (the command line's reading).
+        They are analysed at the size given: full-size photos at full size.
     ref : int or str, optional
         The reference: an index (negative counts from the end, as in Python), a
         name of ``names``, or ``"auto"`` (the sharpest image with the most keypoint
@@ -488,10 +542,25 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         or is out of range; an unknown preset, Params field, a value of the wrong
         type or range; a probe that is not an (x, y) pair of ints or lies outside the
         image; ``sample_static`` outside [0, 1]; ``chunk_rows`` under 1;
-        ``valid_masks`` not one (H, W) mask per image; an unknown ``kernel``.
-    TypeError
-        ``params`` of another type.
+        ``valid_masks`` not one (H, W) mask per image; an unknown ``kernel``; images
+        whose analysis would need more memory than the machine has (``check_memory``);
+        ``params`` of another type; a ``progress`` that is not callable, a ``sink``
+        without the EventSink methods.
+    RuntimeError
+        In a process forked from one that had already run dynremove on numba's
+        OpenMP layer (``refine.concurrency.check_fork_safe``): use the "spawn" or
+        "forkserver" start method of ``multiprocessing``.
     """
+    check_fork_safe()
+    set_notes: list[str] = []
+    if isinstance(images, ImageSet):
+        # as ``load_image_set`` read them: its names, validity masks (a border or
+        # transparency: without them the README's recipe flagged a black border as
+        # moving, a trial's 10 190 px) and notes, where the call gives none
+        set_notes = list(images.notes)
+        names = images.names if names is None else names
+        valid_masks = images.valid_masks if valid_masks is None else valid_masks
+        images = images.images
     if isinstance(params, str) and preset_name == "custom":
         preset_name = params.strip().lower()
     params = api_params(params)
@@ -510,6 +579,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             raise InputError("images must be a sequence of (H, W, 3) uint8 BGR arrays, got "
                              f"{type(images).__name__}") from None
     validate_images(images, 0)
+    check_memory(len(images), *images[0].shape[:2])
     if kernel not in ("numba", "reference"):
         raise InputError(f"kernel must be 'numba' or 'reference', got {kernel!r}")
     names_given = names is not None
@@ -525,6 +595,15 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     images, gray_note = gray_like_reference(images, ref)
     gray_apart, gray_apart_note = gray_beside_colour(images, ref, names)
     sink = NullSink() if sink is None else sink
+    missing = [m for m in ("enabled", "start", "scan_started", "chunk", "scan_finished",
+                           "finish") if not hasattr(sink, m)]
+    if missing:
+        raise InputError(f"sink={type(sink).__name__}: an EventSink is needed (it lacks "
+                         f"{', '.join(missing)}): a viewer.RerunSink, a "
+                         "dynremove.events.MemorySink, or None")
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress={progress!r}: give a callable (stage: str, fraction: "
+                         "float) -> None, or None")
     H, W = images[0].shape[:2]
     probes = _api_probes(probes, W, H)
     if not (isinstance(sample_static, (int, float, np.number))
@@ -540,7 +619,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
     clock = _Clock(timings, progress)
-    msgs: list[str] = auto_note + [n for n in (gray_note, gray_apart_note) if n]
+    msgs: list[str] = set_notes + auto_note + [n for n in (gray_note, gray_apart_note) if n]
     srcs = [i for i in range(len(images)) if i != ref]
     keep: list[np.ndarray] = []
 

@@ -555,7 +555,8 @@ def _bad_images(scene):
                                        "list(images.values())"),
         "paths": (["a.jpg", "b.jpg", "c.jpg"],
                   "image 0 is a path ('a.jpg'), not an image: read the photos with "
-                  "dynremove.io.load_image_set(paths, max_side=1280).images"),
+                  "dynremove.io.load_image_set(paths, max_side=1280) and pass the set "
+                  "itself"),
         "channels first": ([np.moveaxis(im, -1, 0)] * 3,
                            "channels first; pass np.ascontiguousarray(np.moveaxis(img, 0, -1))"),
     }

@@ -47,6 +47,43 @@ def numba_threads_safe() -> bool:
     return numba.threading_layer() != "workqueue"
 
 
+# set in a child process forked from one whose numba kernels ran on the OpenMP layer
+_FORKED_FROM_OMP = False
+
+
+def _note_fork_in_child() -> None:
+    global _FORKED_FROM_OMP
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # no parallel kernel ran before the fork: nothing to fear
+        return
+    _FORKED_FROM_OMP = layer == "omp"
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_note_fork_in_child)
+
+
+def check_fork_safe() -> None:
+    """RuntimeError in a process forked from one that had run numba's OpenMP layer.
+
+    GNU OpenMP (libgomp, numba's "omp" threading layer on Linux) is not fork-safe:
+    numba terminates a forked child at its first parallel kernel ("Terminating:
+    fork() called from a process already using GNU OpenMP"), and a
+    ``multiprocessing.Pool`` whose workers die so waits forever (a fresh-user
+    trial: one call in the notebook, then a pool of the default "fork" start
+    method, hung). This says what to do instead, before any kernel runs.
+    """
+    if _FORKED_FROM_OMP:
+        raise RuntimeError(
+            "this process was forked from one that had already run dynremove "
+            "(multiprocessing's 'fork' start method, the default on Linux): numba's "
+            "OpenMP threading layer is not fork-safe and would end it. Start the "
+            "worker processes with multiprocessing.get_context('spawn') or "
+            "'forkserver' (ProcessPoolExecutor(mp_context=...)), or run dynremove "
+            "in the parent only after the pool has started")
+
+
 def for_each_source(fn: Callable[[int], T], n: int, *,
                     on_done: Callable[[int], None] | None = None) -> list[T]:
     """``[fn(k) for k in range(n)]``, on threads when OpenCV may use more than one
