@@ -68,6 +68,7 @@ _API = {"remove_dynamic": "dynremove.pipeline", "Result": "dynremove.pipeline",
         "Params": "dynremove.params", "PRESETS": "dynremove.params",
         "DEFAULT": "dynremove.params", "PAPER": "dynremove.params",
         "preset": "dynremove.params", "InputError": "dynremove.errors",
+        "Note": "dynremove.errors",
         "EventSink": "dynremove.events", "NullSink": "dynremove.events",
         "MemorySink": "dynremove.events"}
 
@@ -87,5 +88,5 @@ def __dir__() -> list[str]:
 
 
 __all__ = ["remove_dynamic", "Result", "Params", "PRESETS", "DEFAULT", "PAPER", "preset",
-           "InputError", "EventSink", "NullSink", "MemorySink"]
+           "InputError", "Note", "EventSink", "NullSink", "MemorySink"]
 __version__ = "0.1.0"

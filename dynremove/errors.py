@@ -12,6 +12,13 @@ class InputError(ValueError):
     """The inputs cannot be processed (the CLI exits with code 2)."""
 
 
+class Note(UserWarning):
+    """A run's note (``Result.warnings``): what it did that the user should know (a
+    photo left out, pixels inpainted, a mover that lingered). Issued as a warning of
+    this category, so a caller can filter them: ``warnings.simplefilter("ignore",
+    dynremove.Note)`` (the notes stay in ``Result.warnings``)."""
+
+
 class Terminated(BaseException):
     """SIGTERM, raised in the main thread between chunks of work."""
 
@@ -33,4 +40,4 @@ def interruption(e: BaseException | None) -> BaseException | None:
     return None
 
 
-__all__ = ["InputError", "Terminated", "interruption"]
+__all__ = ["InputError", "Note", "Terminated", "interruption"]

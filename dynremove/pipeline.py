@@ -22,7 +22,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-from dynremove.errors import InputError
+from dynremove.errors import InputError, Note
 from dynremove.events import EventSink, NullSink, RunInfo
 from dynremove.method import correspondence, exposure, features, geometry
 from dynremove.method.scan import _kernels as kn
@@ -140,7 +140,7 @@ def api_ref(ref: int | str | None, images: Sequence[np.ndarray],
         from dynremove.video import auto_reference
 
         r, note, _ = auto_reference(images, names)
-        warnings.warn(note, stacklevel=3)
+        warnings.warn(note, Note, stacklevel=3)
         if notes is not None:
             notes.append(note)
         return r
@@ -525,7 +525,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         ``dynamic``: 0 where inpainted), the counts that the CLI's coverage.png
         scales to 0–255 (its report.json gives the factor, ``value_per_source``);
         ``warnings``: the run's notes as sentences (each also issued as a
-        ``UserWarning``); ``timings``: seconds per stage (they add up to
+        warning of category ``dynremove.Note``, a ``UserWarning``); ``timings``: seconds per stage (they add up to
         ``"total"``); ``scans``: one record per scan (``SCAN_SUMMARY_DTYPE``'s
         fields: scan, direction, n_dynamic, n_replaced, n_undecided, seconds).
         The notes name the command line's flags; the same setting here is the
@@ -716,7 +716,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         if all(v.F is None for v in views) and params.use_epipolar:
             msgs.append("no source has a fundamental matrix: the epipolar terms are off")
         for m in msgs:
-            warnings.warn(m, stacklevel=4)
+            warnings.warn(m, Note, stacklevel=4)
 
     st, views = _prepare(images, ref, params, clock, on_geometry=geometry_notes)
     if keep:  # near-copies dropped (the notes said so)
@@ -743,7 +743,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         msgs.append("photos exposed differently from the reference, their colours mapped to "
                     "its levels before comparing: " + ", ".join(level(k) for k in scaled)
                     + " (--exposure-match 0 turns this off)")
-        warnings.warn(msgs[-1], stacklevel=2)
+        warnings.warn(msgs[-1], Note, stacklevel=2)
         if factors and np.median(factors) <= DARK_REFERENCE:
             # the others' colours squeezed into the reference's few levels: its
             # differences shrink as much, and the thresholds (ΔE, t_r) see less (a
@@ -752,7 +752,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         f"×{np.median(factors):.2f} to match it): what moved differs less in "
                         "its few levels, so less of it may be found; a brighter photo as "
                         "--ref may do better")
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
     probe = np.zeros((H, W), np.bool_)
     for (x, y) in probes:
         probe[y, x] = True
@@ -859,7 +859,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             msgs.append(f"{n_ns} px ({'under 0.1' if share < 0.1 else f'{share:.1f}'} % of "
                         "the replaced region) were seen free by no source: inpainted "
                         f"(OpenCV Telea){why}")
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
         n_lg = int((dyn & selection.lingering).sum()) if selection.lingering is not None else 0
         if n_lg >= 5e-4 * dyn.size:  # (a few stray pixels of a mover are no such case)
             lg = dyn & selection.lingering
@@ -892,7 +892,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "that saw the background is enough), --select-minority 0 the whole step"
                    if len(srcs) == 2 and params.select_minority_one else
                    "; --select-minority 0 turns this step off"))
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and selection.blur_sigma is not None and selection.blur_sigma.any():
         # (the fill blurred to the reference's sharpness: said, so that a soft fill
         # is not taken for a fault of the sources)
@@ -901,7 +901,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                     "(camera shake or focus?): their fill was blurred to match it (σ "
                     + ", ".join(f"{selection.blur_sigma[k]:.1f}" for k in soft)
                     + " working px)")
-        warnings.warn(msgs[-1], stacklevel=2)
+        warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and selection.completed is not None:
         n_pk = int((selection.completed == PARTIAL_KEPT).sum())
         if n_pk >= 5e-4 * selection.completed.size:
@@ -914,7 +914,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "the background (they show the mover there too, or movers of their "
                         "own), so the mover is kept whole rather than left with holes "
                         "(--select-keep-partial 0 turns this rule off)")
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and dyn.any():
         # pieces of a mover left inside the replaced region: islands of the reference
         # that the fill kept because photos showing the mover in place vouch for them.
@@ -930,7 +930,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "over the fill (its lettering, parts of it that stayed in place in "
                         "those photos): look at them (a run with --record, then 'dynremove "
                         "inspect --pixel', says why each was kept)")
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
         # most of the fill resting on one photo that the others contradict: three
         # photos whose movers overlap (a fresh-user trial on tim6 as tim3, tim4, tim5
         # found half a cup left and nothing said; measured on the composites, the
@@ -954,18 +954,18 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         "it: the coverage map, coverage.png or Result.coverage, counts one "
                         "photo there; more photos, or photos taken further apart in time, "
                         "let the fill be cross-checked)")
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and dyn.any():
         note = _knee_note(views, params)
         if note:
             msgs.append(note)
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
     # (with two photos most of the photo is undecided on every run: said only where
     # it left nothing found, beside the note on two photos)
     undecided = _undecided_note(summaries, ref_img.shape[0] * ref_img.shape[1], len(srcs))
     if undecided and (len(srcs) > 1 or not dyn.any()):
         msgs.append(undecided)
-        warnings.warn(msgs[-1], stacklevel=2)
+        warnings.warn(msgs[-1], Note, stacklevel=2)
     if not dyn.any():
         flagged = int(sum(int(sm["n_dynamic"]) for sm in summaries))
         n_pre = int(pre_fill.sum()) if selection is not None else 0
@@ -983,7 +983,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                             "clean-up of L removed: each thinner than its opening, or under "
                             f"--min-region-px {params.min_region_px} px)"
                             if flagged and params.clean_mask else ""))
-        warnings.warn(msgs[-1], stacklevel=2)
+        warnings.warn(msgs[-1], Note, stacklevel=2)
     elif selection is not None:
         # almost nothing left of much that was flagged: said, as where nothing is (a
         # fresh-user trial on tim4, tim5, tim6: 23 468 px flagged, 42 removed, no note)
@@ -991,7 +991,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         n_dyn = int(dyn.sum())
         if flagged >= 2e-3 * dyn.size and n_dyn < LITTLE_REMOVED * flagged:
             msgs.append(_little_removed_note(flagged, pre_fill, dyn, selection.explained))
-            warnings.warn(msgs[-1], stacklevel=2)
+            warnings.warn(msgs[-1], Note, stacklevel=2)
     last = int(summaries[-1]["n_dynamic"]) if summaries else 0
     if params.max_scans > 1 and len(summaries) == params.max_scans and last > 0:
         # the paper's scans alternate until one calls no pixel dynamic; the cap stops
@@ -1000,7 +1000,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         msgs.append(f"the scans stopped at --max-scans {params.max_scans} while the last "
                     f"still called {last} px dynamic (the paper's scans go on until one "
                     "calls none): a larger --max-scans runs more")
-        warnings.warn(msgs[-1], stacklevel=2)
+        warnings.warn(msgs[-1], Note, stacklevel=2)
     clock.stop()
     timings["total"] = time.perf_counter() - t_all
     result = Result(

@@ -149,3 +149,24 @@ def test_a_pool_forked_after_a_run_gets_an_error_not_a_hang(tmp_path):
         assert "get_context('spawn')" in lines[1] and "Terminating" not in p.stderr
     else:
         assert lines[1].startswith("ok ["), (p.stdout, p.stderr)
+
+
+def test_the_notes_are_warnings_of_their_own_category():
+    """A caller can filter the run's notes (they were plain UserWarnings) and still
+    read them in ``Result.warnings``."""
+    import warnings
+
+    import dynremove
+
+    scene = synth.make_scene(seed=0, n_views=4, size=(48, 64))  # few matches: notes
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = remove_dynamic(scene.images)
+    notes = [w for w in caught if issubclass(w.category, dynremove.Note)]
+    assert res.warnings and [str(w.message) for w in notes] == res.warnings
+    assert issubclass(dynremove.Note, UserWarning)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        warnings.simplefilter("ignore", dynremove.Note)
+        again = remove_dynamic(scene.images)
+    assert not caught and again.warnings == res.warnings
