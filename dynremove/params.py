@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dynremove.errors import InputError
+
 CORRESPONDENCE_METHODS = ("homography+flow", "homography", "flow", "gated")
 WRITE_MODES = ("patch", "pixel")
 FILL_MODES = ("select", "median")
@@ -145,47 +147,47 @@ class Params:
             if f.default is not dataclasses.MISSING and f.default is not None:
                 _check_type(f.name, v, type(f.default))
             if isinstance(v, float) and not math.isfinite(v):  # NaN passes every comparison
-                raise ValueError(f"{f.name} must be a finite number, got {v}")
+                raise InputError(f"{f.name} must be a finite number, got {v}")
         if self.patch_size < 3 or self.patch_size % 2 == 0:
-            raise ValueError(f"patch_size must be odd and >= 3, got {self.patch_size}")
+            raise InputError(f"patch_size must be odd and >= 3, got {self.patch_size}")
         if self.dbscan_eps <= 0:
-            raise ValueError(f"dbscan_eps must be > 0, got {self.dbscan_eps}")
+            raise InputError(f"dbscan_eps must be > 0, got {self.dbscan_eps}")
         if self.dbscan_min_pts < 1:
-            raise ValueError(f"dbscan_min_pts must be >= 1, got {self.dbscan_min_pts}")
+            raise InputError(f"dbscan_min_pts must be >= 1, got {self.dbscan_min_pts}")
         if not 0.0 <= self.t_r <= 1.0:
-            raise ValueError(f"t_r must be in [0, 1], got {self.t_r}")
+            raise InputError(f"t_r must be in [0, 1], got {self.t_r}")
         if self.max_scans < 1:
-            raise ValueError(f"max_scans must be >= 1, got {self.max_scans}")
+            raise InputError(f"max_scans must be >= 1, got {self.max_scans}")
         for name in ("sigma_c", "sigma_g", "sigma_e", "sigma_h", "sift_scale",
                      "hog_scale", "coord_scale_px"):
             if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+                raise InputError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.correspondence not in CORRESPONDENCE_METHODS:
-            raise ValueError(
+            raise InputError(
                 f"correspondence must be {_one_of(CORRESPONDENCE_METHODS)}, "
                 f"got {self.correspondence!r}")
         if self.write not in WRITE_MODES:
-            raise ValueError(f"write must be {_one_of(WRITE_MODES)}, got {self.write!r}")
+            raise InputError(f"write must be {_one_of(WRITE_MODES)}, got {self.write!r}")
         if self.flow_preset not in ("fast", "medium", "ultrafast"):
-            raise ValueError(f"flow_preset must be {_one_of(('fast', 'medium', 'ultrafast'))}, "
+            raise InputError(f"flow_preset must be {_one_of(('fast', 'medium', 'ultrafast'))}, "
                              f"got {self.flow_preset!r}")
         if not 0.0 <= self.exposure_match < 1.0:
-            raise ValueError(f"exposure_match must be in [0, 1), got {self.exposure_match}")
+            raise InputError(f"exposure_match must be in [0, 1), got {self.exposure_match}")
         if not 0.0 <= self.near_copy_agree <= 1.0:
-            raise ValueError(f"near_copy_agree must be in [0, 1], got {self.near_copy_agree}")
+            raise InputError(f"near_copy_agree must be in [0, 1], got {self.near_copy_agree}")
         if self.fill not in FILL_MODES:
-            raise ValueError(f"fill must be {_one_of(FILL_MODES)}, got {self.fill!r}")
+            raise InputError(f"fill must be {_one_of(FILL_MODES)}, got {self.fill!r}")
         for name in ("select_tau", "select_beta"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+                raise InputError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.select_complete != 0 and not 0.5 < self.select_complete <= 1.0:
-            raise ValueError(f"select_complete must be 0 (off) or in (0.5, 1], got "
+            raise InputError(f"select_complete must be 0 (off) or in (0.5, 1], got "
                              f"{self.select_complete}")
         if not 0.0 <= self.select_keep_partial <= 1.0:
-            raise ValueError(f"select_keep_partial must be in [0, 1] (0 = off), got "
+            raise InputError(f"select_keep_partial must be in [0, 1] (0 = off), got "
                              f"{self.select_keep_partial}")
         if self.select_minority != 0 and not self.select_minority >= 1:
-            raise ValueError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
+            raise InputError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
                      "select_parallax_px", "select_parallax_p95_px", "select_margin_px",
                      "select_search_de",
@@ -194,21 +196,21 @@ class Params:
                      "select_halo_px",
                      "select_misfit_levels"):
             if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.fuse_combine not in ("median", "medoid"):
-            raise ValueError(f"fuse_combine must be median/medoid, got {self.fuse_combine!r}")
+            raise InputError(f"fuse_combine must be median/medoid, got {self.fuse_combine!r}")
         if not self.fuse_realign_max_px > 0:
-            raise ValueError(f"fuse_realign_max_px must be > 0, got {self.fuse_realign_max_px}")
+            raise InputError(f"fuse_realign_max_px must be > 0, got {self.fuse_realign_max_px}")
         if self.refine_tau < 0 or not 0.0 < self.refine_shrink_frac <= 1.0:
-            raise ValueError("refine_tau must be >= 0 and refine_shrink_frac in (0, 1]")
+            raise InputError("refine_tau must be >= 0 and refine_shrink_frac in (0, 1]")
         for name in ("refine_rim_px", "refine_ring_px", "refine_iters", "fuse_realign",
                      "fuse_margin_px", "snap_inner_px", "snap_outer_px", "snap_iters"):
             if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+                raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.hog_bins < 2:
-            raise ValueError(f"hog_bins must be >= 2, got {self.hog_bins}")
+            raise InputError(f"hog_bins must be >= 2, got {self.hog_bins}")
         if self.candidate_set not in (True, False):
-            raise ValueError(f"candidate_set must be True or False, got {self.candidate_set!r}")
+            raise InputError(f"candidate_set must be True or False, got {self.candidate_set!r}")
 
     # λ4, λ5 of Eq. (DB_cost) and M
     @property
@@ -227,7 +229,7 @@ class Params:
 
 
 def _check_type(name: str, value: object, kind: type) -> None:
-    """Raise ValueError unless ``value`` fits a field whose default is a ``kind``:
+    """Raise InputError (a ValueError) unless ``value`` fits a field whose default is a ``kind``:
     a bool for a switch, an int (not a bool) for a count, a number for a real, a
     str for a choice (NumPy scalars too)."""
     if kind is bool:
@@ -244,7 +246,7 @@ def _check_type(name: str, value: object, kind: type) -> None:
         ok = isinstance(value, kind)
         what = f"a {kind.__name__}"
     if not ok:
-        raise ValueError(f"{name} must be {what}, got {value!r} ({type(value).__name__})")
+        raise InputError(f"{name} must be {what}, got {value!r} ({type(value).__name__})")
 
 
 # Chosen on the even-indexed DAVIS sets, checked on the odd ones (README "Results"):
@@ -266,7 +268,7 @@ def preset(name: str) -> Params:
     try:
         return PRESETS[name]
     except KeyError:
-        raise ValueError(f"unknown preset {name!r}; choose from {sorted(PRESETS)}") from None
+        raise InputError(f"unknown preset {name!r}; choose from {sorted(PRESETS)}") from None
 
 
 FIELD_CHOICES: dict[str, tuple[str, ...]] = {

@@ -170,3 +170,14 @@ def test_the_notes_are_warnings_of_their_own_category():
         warnings.simplefilter("ignore", dynremove.Note)
         again = remove_dynamic(scene.images)
     assert not caught and again.warnings == res.warnings
+
+
+def test_params_and_presets_reject_with_the_inputerror_the_readme_names():
+    """The README says bad input raises InputError; Params and preset raised a plain
+    ValueError, which ``except InputError`` missed (it stays a ValueError)."""
+    from dynremove import Params, preset
+
+    for bad in (lambda: Params(select_tau=-1), lambda: preset("x")):
+        with pytest.raises(InputError):
+            bad()
+    assert issubclass(InputError, ValueError)
