@@ -483,7 +483,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         The reference: an index (negative counts from the end, as in Python), a
         name of ``names``, or ``"auto"`` (the sharpest image with the most keypoint
         matches, as ``run --ref auto``; a note in ``Result.warnings`` names it).
-        Default: the middle image.
+        Default: the middle image (of an even number, the later of the two middle ones).
     params : Params, str, dict or None
         The method's parameters: a Params, a preset name (``"default"``,
         ``"paper"``), a dict of Params fields applied over the default preset, or
