@@ -603,8 +603,22 @@ def viewer_module(name: str):
     ``args.viewer`` and never import the viewer themselves.
     """
     import importlib
+    import importlib.util
 
-    return importlib.import_module(f"viewer.{name}")
+    try:
+        return importlib.import_module(f"viewer.{name}")
+    except ImportError:
+        # a viewer.py (or viewer/ folder) of the user's, first on sys.path (the folder
+        # a script or ``python -m`` runs from), shadows the debugger's package: a
+        # fresh-user trial got "internal error: No module named 'viewer.sink'"
+        spec = importlib.util.find_spec("viewer")
+        origin = getattr(spec, "origin", None) or ""
+        ours = Path(__file__).resolve().parents[1] / "viewer"
+        if spec is not None and not Path(origin).resolve().is_relative_to(ours):
+            raise InputError(f"the debugger's package 'viewer' is shadowed by {origin}: "
+                             "rename that file (or folder), or run from another folder"
+                             ) from None
+        raise
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -818,3 +818,24 @@ def test_the_demo_scores_itself_and_says_what_to_try_next(tmp_path, capsys):
         and tail[2].startswith(f"  dynremove inspect {rec} --failures ") \
         and tail[3].startswith("  dynremove run YOUR_PHOTOS/"), text
     assert main(["inspect", str(rec), "--failures"]) == 0  # the line it offers works
+
+
+def test_a_users_viewer_py_shadowing_the_debugger_is_named(tmp_path, folder):
+    """A ``viewer.py`` of the user's in the folder ``python -m dynremove`` runs from
+    shadows the debugger's top-level package: "internal error: No module named
+    'viewer.sink'" (a fresh-user trial's notebook folder). Now one line naming the
+    file, exit 2, before anything is written."""
+    import subprocess
+    import sys
+
+    work = tmp_path / "notebooks"
+    work.mkdir()
+    (work / "viewer.py").write_text("x = 1\n")
+    p = subprocess.run([sys.executable, "-m", "dynremove", "run", str(folder), "--out",
+                        str(tmp_path / "out"), "--record", str(tmp_path / "r.rrd"), "-q"],
+                       cwd=work, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.strip() == (f"dynremove: error: the debugger's package 'viewer' is "
+                                f"shadowed by {work / 'viewer.py'}: rename that file (or "
+                                "folder), or run from another folder"), p.stderr
+    assert not (tmp_path / "out").exists() and not (tmp_path / "r.rrd").exists()
