@@ -295,4 +295,23 @@ def params_fields() -> list[dataclasses.Field]:
     return list(dataclasses.fields(Params))
 
 
+def _document_fields() -> None:
+    """Each field, its default and its comment in ``Params.__doc__``, so that
+    ``help(Params)`` says what the CLI's help says (a fresh-user trial: 77 fields and
+    not a word on any)."""
+    if Params.__doc__ is None:  # (python -OO)
+        return
+    docs = field_docs()
+    lines = [f"    {f.name} : {f.type}, default {getattr(DEFAULT, f.name)!r}"
+             + ("" if getattr(PAPER, f.name) == getattr(DEFAULT, f.name)
+                else f" (paper {getattr(PAPER, f.name)!r})")
+             + (f"\n        {docs[f.name]}" if f.name in docs else "")
+             for f in dataclasses.fields(Params)]
+    Params.__doc__ = (Params.__doc__.rstrip() + "\n\n    Fields (the CLI's flags, "
+                      "``--patch-size`` for ``patch_size``)\n    ------\n" + "\n".join(lines))
+
+
+_document_fields()
+
+
 __all__ = ["Params", "PRESETS", "PAPER", "DEFAULT", "preset", "params_fields", "field"]

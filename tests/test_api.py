@@ -181,3 +181,16 @@ def test_params_and_presets_reject_with_the_inputerror_the_readme_names():
         with pytest.raises(InputError):
             bad()
     assert issubclass(InputError, ValueError)
+
+
+def test_help_on_params_names_every_field():
+    """``help(Params)`` lists each field with its default and meaning (the CLI's help
+    text), where it gave the class's two sentences only."""
+    import dataclasses
+
+    from dynremove import PAPER, Params
+
+    doc = Params.__doc__
+    for f in dataclasses.fields(Params):
+        assert f"    {f.name} : " in doc, f.name
+    assert "patch_size : int, default 13 (paper 9)" in doc and PAPER.patch_size == 9
