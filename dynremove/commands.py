@@ -15,6 +15,7 @@ import json
 import re
 import shutil
 import signal
+import subprocess
 import sys
 import os
 import textwrap
@@ -39,7 +40,7 @@ from dynremove.evaluation.evaluate import (METHODS, format_ablation, format_tabl
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 from dynremove.params import PRESETS, Params, preset
 from dynremove.pipeline import (MEMORY_BASE_BYTES, MEMORY_BYTES_PER_PX, physical_memory,
-                                remove_dynamic)
+                                remove_dynamic, versions)
 from dynremove.progress import ProgressBar, SetProgress, stage_labels
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
@@ -697,9 +698,16 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.variants and not args.ablation:
         _note(args, "--variants is used with --ablation only: ignored")
     if args.json:
-        out = Path(args.json)
-        if out.is_dir():
-            raise InputError(f"--json {out}: is a folder")
+        # before any scoring: a trial's unwritable --json failed after five minutes of it
+        io.check_out_file(args.json, "--json")
+    changed = {k: v for k, v in params.to_dict().items()
+               if v != getattr(preset(args.preset), k)}
+    if not args.ablation and (changed or args.preset != "default") and "dynremove" not in methods:
+        # (a trial's --t-r 0.5 with --methods paper,median changed nothing, silently)
+        _note(args, "the method flags (--preset " + args.preset + "".join(
+            f", --{k.replace('_', '-')} {v}" for k, v in changed.items()) + ") apply to the "
+            "'dynremove' method only, which --methods does not list: not used ('paper' and "
+            "'single-scan' are the paper's method as written)")
     progress = not args.quiet
     if args.ablation or any(m not in ("median", "median-flow", "telea") for m in methods):
         _note_compile(args)  # (each set's seconds leave the compilation out)
@@ -718,11 +726,22 @@ def cmd_eval(args: argparse.Namespace) -> int:
                           max_side=args.max_side, ref=args.ref, progress=progress)
         if not _nothing_scored(report):  # (else a table of dashes before the error)
             print(format_table(report))
+            if "dynremove" in methods and (changed or args.preset != "default"):
+                # (two variants' tables looked alike: a trial told them apart by the JSON)
+                print(f"dynremove = the {args.preset} preset"
+                      + (" with " + ", ".join(f"{k}={v}" for k, v in changed.items())
+                         if changed else ""))
+    # what made these figures (a trial: "a figure cannot be tied to the code")
+    report["provenance"] = {
+        "command": ["dynremove", *sys.argv[1:]] if sys.argv[1:] else None,
+        "data_dir": str(Path(args.data_dir).resolve()), "preset": args.preset,
+        "params_changed": changed, "versions": versions(), "commit": source_commit(),
+        "date": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     n_sets = len({r["set"] for r in report["sets"]})
-    print(f"{n_sets} set{'' if n_sets == 1 else 's'}, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
-          + (f" -> {args.json}" if args.json else ""))
     if args.json:
         io.write_json(args.json, report)
+    print(f"{n_sets} set{'' if n_sets == 1 else 's'}, wall {report['wall_s']:.1f} s (jobs {args.jobs})"
+          + (f" -> {args.json}" if args.json else ""))
     info = report.get("set_info", [])
     errors = {i["set"]: i["error"] for i in info if "error" in i}
     if _nothing_scored(report):
@@ -742,6 +761,25 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"not be run: {', '.join(sorted(errors))}", file=sys.stderr)
         return 1
     return EXIT_OK
+
+
+def source_commit() -> str | None:
+    """The git commit of the source tree this package runs from (an editable install or
+    a checkout), with "+changes" where it differs from that commit; None elsewhere."""
+    root = Path(__file__).resolve().parents[1]
+    if not (root / ".git").exists():
+        return None
+    try:
+        head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"],
+                              capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
+                                "--untracked-files=no"], capture_output=True, text=True,
+                               timeout=10)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if head.returncode != 0:
+        return None
+    return head.stdout.strip() + ("+changes" if dirty.stdout.strip() else "")
 
 
 def _composite_ref(folder: Path) -> str:

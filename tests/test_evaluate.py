@@ -364,7 +364,15 @@ def test_eval_full_size_and_ablation_skips_unknown_fields(data, tmp_path, monkey
     assert any("bogus" in n for n in rep["skipped"])
     assert rep["set_info"][0]["size"] == [128, 96] and rep["max_side"] == 0
     assert all(0 <= a["mean_jaccard"] <= 1 for a in rep["ablation"])
-    assert "no-update" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "no-update" in text
+    # the set has a true background: the whole-photo measures are in the table, as
+    # in the JSON (a trial: J and the in-mask PSNR alone favoured a variant that
+    # tripled the damage)
+    header = text.splitlines()[0]
+    assert "PSNR in mask dB" in header and "damage %" in header and "PSNR whole dB" in header
+    full = [ln for ln in text.splitlines() if ln.startswith("full ")][0]
+    assert f"{rep['ablation'][0]['mean_damage']:.2f}" in full.split()
     # --methods has no say in an ablation: a note says so (a trial ran 18 variants of
     # the method after asking for the median stack)
     assert main(["eval", str(data), "--sets", "syn1", "--methods", "median", "--ablation",
@@ -387,3 +395,31 @@ def test_composite_on_real_data(tmp_path):
     assert 0.03 < info["ref_mask_fraction"] < 0.2
     covered = [c for c in info["ref_region_covered"] if c is not None]
     assert sum(c <= 0.5 for c in covered) > len(covered) / 2  # uncovered in most views
+
+
+def test_eval_checks_its_json_path_first_and_records_what_made_the_figures(data, tmp_path,
+                                                                          capsys):
+    """A --json that cannot be written is an error before any scoring (a trial lost
+    five minutes of it, and the table said "-> /proc/x.json"); the JSON says what
+    made its figures (the command, the data, the changed parameters, the versions,
+    the commit); a flag no listed method uses is said to be unused; the variant of
+    'dynremove' is named under the table."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["eval", str(data), "--sets", "syn1", "--methods", "median", "--json",
+                 str(blocker / "e.json")]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and "--json" in cap.err and "syn1" not in cap.err
+    out = tmp_path / "e.json"
+    assert main(["eval", str(data), "--sets", "syn1", "--methods", "median", "--t-r", "0.5",
+                 "--json", str(out)]) == 0
+    cap = capsys.readouterr()
+    assert ("the method flags (--preset default, --t-r 0.5) apply to the 'dynremove' "
+            "method only") in cap.err
+    prov = json.loads(out.read_text())["provenance"]
+    assert prov["params_changed"] == {"t_r": 0.5} and prov["preset"] == "default"
+    assert prov["data_dir"] == str(data.resolve()) and prov["versions"]["dynremove"]
+    assert "commit" in prov and "date" in prov
+    assert main(["eval", str(data), "--sets", "syn1", "--methods", "dynremove",
+                 "--patch-size", "9", "--quiet"]) == 0
+    assert "dynremove = the default preset with patch_size=9" in capsys.readouterr().out
