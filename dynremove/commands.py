@@ -721,9 +721,15 @@ def cmd_eval(args: argparse.Namespace) -> int:
                               progress=progress, preset_name=args.preset)
         print(format_ablation(report))
     else:
-        report = run_eval(args.data_dir, sets=args.sets, params=params,
-                          preset_name=args.preset, methods=methods, jobs=args.jobs,
-                          max_side=args.max_side, ref=args.ref, progress=progress)
+        try:
+            report = run_eval(args.data_dir, sets=args.sets, params=params,
+                              preset_name=args.preset, methods=methods, jobs=args.jobs,
+                              max_side=args.max_side, ref=args.ref, progress=progress)
+        except BaseException as e:
+            partial = getattr(e, "partial_report", None)
+            if interruption(e) is not None and partial:
+                _keep_partial_eval(args, partial, changed)
+            raise
         if not _nothing_scored(report):  # (else a table of dashes before the error)
             print(format_table(report))
             if "dynremove" in methods and (changed or args.preset != "default"):
@@ -731,12 +737,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
                 print(f"dynremove = the {args.preset} preset"
                       + (" with " + ", ".join(f"{k}={v}" for k, v in changed.items())
                          if changed else ""))
-    # what made these figures (a trial: "a figure cannot be tied to the code")
-    report["provenance"] = {
-        "command": ["dynremove", *sys.argv[1:]] if sys.argv[1:] else None,
-        "data_dir": str(Path(args.data_dir).resolve()), "preset": args.preset,
-        "params_changed": changed, "versions": versions(), "commit": source_commit(),
-        "date": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+    report["provenance"] = _provenance(args, changed)
     n_sets = len({r["set"] for r in report["sets"]})
     if args.json:
         io.write_json(args.json, report)
@@ -761,6 +762,35 @@ def cmd_eval(args: argparse.Namespace) -> int:
               f"not be run: {', '.join(sorted(errors))}", file=sys.stderr)
         return 1
     return EXIT_OK
+
+
+def _provenance(args: argparse.Namespace, changed: dict) -> dict:
+    """What made an eval's figures (a trial: "a figure cannot be tied to the code")."""
+    return {"command": ["dynremove", *sys.argv[1:]] if sys.argv[1:] else None,
+            "data_dir": str(Path(args.data_dir).resolve()), "preset": args.preset,
+            "params_changed": changed, "versions": versions(), "commit": source_commit(),
+            "date": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+
+
+def _keep_partial_eval(args: argparse.Namespace, report: dict, changed: dict) -> None:
+    """Ctrl-C / SIGTERM during ``eval``: the table of the sets already scored, and the
+    JSON of them (``"interrupted": true``), written with further signals held (a
+    trial's Ctrl-C threw away the two of six sets done)."""
+    held = _hold_signals()
+    try:
+        n_done = len({r["set"] for r in report["sets"]})
+        if not _nothing_scored(report):
+            print(format_table(report))
+        report["provenance"] = _provenance(args, changed)
+        if args.json:
+            io.write_json(args.json, report)
+        print(f"interrupted after {n_done} of {report['n_sets_found']} sets: the table holds "
+              "those" + (f"; {args.json} too (\"interrupted\": true)" if args.json else ""))
+    except Exception as e:  # noqa: BLE001 - the interruption is what the command reports
+        print(f"dynremove: note: the sets scored before the interruption could not be "
+              f"kept ({e})", file=sys.stderr)
+    finally:
+        _release_signals(held)
 
 
 def source_commit() -> str | None:

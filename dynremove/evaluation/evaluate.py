@@ -494,10 +494,16 @@ def _run_parallel(sets: Sequence[EvalSet], variants: Sequence[tuple[str, dict | 
     else:
         quiet_worker_restarts()
         gen = Parallel(n_jobs=jobs, return_as="generator_unordered")(tasks)
-    for k, res in enumerate(gen, 1):
-        results[res["set"]] = res
-        if on_done:
-            on_done(k, len(sets), res)
+    try:
+        for k, res in enumerate(gen, 1):
+            results[res["set"]] = res
+            if on_done:
+                on_done(k, len(sets), res)
+    except BaseException as e:
+        # the sets already scored, in the sets' order, for the caller to keep (a
+        # Ctrl-C threw away every finished set: a trial's two of six)
+        e.partial_results = [results[es.name] for es in sets if es.name in results]
+        raise
     return [results[es.name] for es in sets]
 
 
@@ -591,8 +597,22 @@ def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | Non
         for _, pd in variants:
             if pd is not None:
                 warm_up(pd)
-    results = _run_parallel(found, variants, jobs=jobs, max_side=max_side, ref=ref,
-                            on_done=_stderr_progress if progress else None)
+    try:
+        results = _run_parallel(found, variants, jobs=jobs, max_side=max_side, ref=ref,
+                                on_done=_stderr_progress if progress else None)
+    except BaseException as e:
+        done = getattr(e, "partial_results", None)
+        if done:  # what was scored before the interruption, as a report of those sets
+            e.partial_report = {**_eval_report(done, methods, variants, t0, jobs, max_side,
+                                               preset_name, chosen),
+                                "interrupted": True, "n_sets_found": len(found)}
+        raise
+    return _eval_report(results, methods, variants, t0, jobs, max_side, preset_name, chosen)
+
+
+def _eval_report(results: list[dict], methods: Sequence[str], variants: list, t0: float,
+                 jobs: int, max_side: int | None, preset_name: str, chosen: Any) -> dict:
+    """``run_eval``'s JSON report of the sets scored (``results``, in order)."""
     rows = [r for res in results for r in res["rows"]]
     return {
         "sets": rows,
