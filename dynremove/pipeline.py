@@ -525,9 +525,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         ``dynamic``: 0 where inpainted), the counts that the CLI's coverage.png
         scales to 0–255 (its report.json gives the factor, ``value_per_source``);
         ``warnings``: the run's notes as sentences (each also issued as a
-        warning of category ``dynremove.Note``, a ``UserWarning``); ``timings``: seconds per stage (they add up to
-        ``"total"``); ``scans``: one record per scan (``SCAN_SUMMARY_DTYPE``'s
-        fields: scan, direction, n_dynamic, n_replaced, n_undecided, seconds).
+        warning of category ``dynremove.Note``, a ``UserWarning``); ``timings``:
+        seconds per stage (they add up to ``"total"``); ``scans``: one record per
+        scan (``SCAN_SUMMARY_DTYPE``'s fields: scan, direction, n_dynamic,
+        n_replaced, n_undecided, seconds).
         The notes name the command line's flags; the same setting here is the
         ``Params`` field of that name with underscores (``--select-minority 0``:
         ``params={"select_minority": 0}``).
