@@ -39,8 +39,8 @@ from dynremove.evaluation.evaluate import (METHODS, format_ablation, format_tabl
                                           run_ablation, run_eval)
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 from dynremove.params import PRESETS, Params, preset
-from dynremove.pipeline import (MEMORY_BASE_BYTES, MEMORY_BYTES_PER_PX, physical_memory,
-                                remove_dynamic, versions)
+from dynremove import pipeline
+from dynremove.pipeline import remove_dynamic, versions
 from dynremove.progress import ProgressBar, SetProgress, stage_labels
 
 EXIT_OK, EXIT_INTERNAL, EXIT_INPUT = 0, 1, 2
@@ -364,10 +364,6 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     return EXIT_OK
 
 
-# peak memory of a run (``pipeline.MEMORY_*``), for the note and the refusal
-_BASE_BYTES, _BYTES_PER_PX = MEMORY_BASE_BYTES, MEMORY_BYTES_PER_PX
-
-
 def _written_mask_at(info: dict, path: Path, x: int, y: int) -> bool | None:
     """Whether the run's written ``dynamic_mask.png`` holds photo pixel (x, y): read
     from the output folder the recording names (``run/info``'s ``output_dir``) when
@@ -423,19 +419,15 @@ def _probes_at_analysis_size(args: argparse.Namespace, iset: io.ImageSet
     return out
 
 
-def _physical_memory() -> float | None:
-    return physical_memory()
-
-
 def _check_memory(args: argparse.Namespace, iset: io.ImageSet) -> None:
     """A note when the analysis will need several GB, and an InputError when it needs
     more than the machine has (``--max-side 0`` on phone photos)."""
     H, W = iset.images[0].shape[:2]
     n = len(iset.images)
-    need = _BASE_BYTES + _BYTES_PER_PX * n * H * W
+    need = pipeline.memory_needed(n, H, W)  # (the estimate remove_dynamic refuses by)
     if need < 4e9:
         return
-    have = _physical_memory()
+    have = pipeline.physical_memory()
     what = (f"analysing {n} images of {W}x{H} ({W * H / 1e6:.1f} MP) needs about "
             f"{need / 1e9:.0f} GB of memory")
     # what would lower it: a smaller analysis copy where the images are larger than
@@ -700,8 +692,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.json:
         # before any scoring: a trial's unwritable --json failed after five minutes of it
         io.check_out_file(args.json, "--json")
-    changed = {k: v for k, v in params.to_dict().items()
-               if v != getattr(preset(args.preset), k)}
+    base = preset(args.preset).to_dict()
+    changed = {k: v for k, v in params.to_dict().items() if v != base[k]}
     if not args.ablation and (changed or args.preset != "default") and "dynremove" not in methods:
         # (a trial's --t-r 0.5 with --methods paper,median changed nothing, silently)
         _note(args, "the method flags (--preset " + args.preset + "".join(

@@ -298,12 +298,17 @@ def physical_memory() -> float | None:
         return None
 
 
+def memory_needed(n: int, H: int, W: int) -> float:
+    """The rough peak memory, in bytes, of analysing ``n`` images of H × W px."""
+    return MEMORY_BASE_BYTES + MEMORY_BYTES_PER_PX * n * H * W
+
+
 def check_memory(n: int, H: int, W: int) -> None:
     """InputError when analysing ``n`` images of H × W px would need more memory than
     the machine has (``remove_dynamic`` on full-size phone photos: a trial's six of
     12 MP asked for 7 GB at once and died with MemoryError, where the command line
     refuses them in one line), saying how to analyse a smaller copy."""
-    need = MEMORY_BASE_BYTES + MEMORY_BYTES_PER_PX * n * H * W
+    need = memory_needed(n, H, W)
     have = physical_memory()
     if have is None or need <= have:
         return

@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 import pytest
 
-from dynremove import commands, io
+from dynremove import io, pipeline
 from dynremove.cli import build_parser, main
 from dynremove.errors import InputError
 from dynremove.progress import stage_labels
@@ -360,8 +360,8 @@ def test_an_analysis_too_large_for_the_memory_is_refused(tmp_path, capsys, folde
     a one-line error, before any work, naming what would lower it: --max-side where
     the photos are larger than its default (a trial's 960-px frames were told to use
     it, which changes nothing there), else fewer or smaller photos."""
-    monkeypatch.setattr(commands, "_BYTES_PER_PX", 1e6)  # 4 views × 64×48 → ~12 GB
-    monkeypatch.setattr(commands, "_physical_memory", lambda: 8e9)
+    monkeypatch.setattr(pipeline, "MEMORY_BYTES_PER_PX", 1e6)  # 4 views × 64×48 → ~12 GB
+    monkeypatch.setattr(pipeline, "physical_memory", lambda: 8e9)
     out = tmp_path / "out"
     rc, _, err = run_cli(capsys, folder, "--out", out, *FAST)
     assert rc == 2 and "more than this machine's 8 GB: use fewer or smaller photos" in err, err
@@ -371,12 +371,12 @@ def test_an_analysis_too_large_for_the_memory_is_refused(tmp_path, capsys, folde
     for i in range(3):
         assert cv2.imwrite(str(big / f"p{i}.png"),
                            np.random.default_rng(i).integers(40, 200, (20, 1400, 3), np.uint8))
-    monkeypatch.setattr(commands, "_BYTES_PER_PX", 1e5)  # 3 × 1400×20 → ~8.4 GB
+    monkeypatch.setattr(pipeline, "MEMORY_BYTES_PER_PX", 1e5)  # 3 × 1400×20 → ~8.4 GB
     rc, _, err = run_cli(capsys, big, "--max-side", "0", "--out", out, "--max-scans", "1")
     assert rc == 2 and "more than this machine's 8 GB: use --max-side 1280" in err, err
     assert not out.exists()
-    monkeypatch.setattr(commands, "_BYTES_PER_PX", 1e6)
-    monkeypatch.setattr(commands, "_physical_memory", lambda: 64e9)
+    monkeypatch.setattr(pipeline, "MEMORY_BYTES_PER_PX", 1e6)
+    monkeypatch.setattr(pipeline, "physical_memory", lambda: 64e9)
     rc, _, err = run_cli(capsys, folder, "--out", out, *FAST)
     assert rc == 0 and "needs about 13 GB of memory (this machine has 64 GB)" in err, err
 
