@@ -222,10 +222,28 @@ class Params:
         return self.lambda2 / (self.lambda1 + self.lambda2)
 
     def replace(self, **changes: object) -> "Params":
+        """A copy with ``changes`` (field names as keywords). Raises InputError on
+        a name that is no field (naming the closest) or a bad value."""
+        _check_names(changes)
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+def _check_names(kw: dict) -> None:
+    """Raise InputError for a keyword that names no field of Params, with the closest
+    field names (a mistyped name raised Python's TypeError, which ``except
+    InputError`` missed)."""
+    import difflib
+
+    names = [f.name for f in dataclasses.fields(Params)]
+    for k in kw:
+        if k not in names:
+            close = difflib.get_close_matches(str(k), names, n=3, cutoff=0.6)
+            hint = f"; did you mean {' or '.join(close)}?" if close else \
+                "; help(dynremove.Params) lists them"
+            raise InputError(f"Params has no field {k!r}{hint}")
 
 
 def _check_type(name: str, value: object, kind: type) -> None:
@@ -312,6 +330,20 @@ def _document_fields() -> None:
 
 
 _document_fields()
+
+
+def _checked_init(init):
+    """Params' generated ``__init__`` behind ``_check_names``."""
+    import functools
+
+    @functools.wraps(init)
+    def __init__(self, **kw):
+        _check_names(kw)
+        init(self, **kw)
+    return __init__
+
+
+Params.__init__ = _checked_init(Params.__init__)
 
 
 __all__ = ["Params", "PRESETS", "PAPER", "DEFAULT", "preset", "params_fields", "field"]

@@ -183,6 +183,23 @@ def test_params_and_presets_reject_with_the_inputerror_the_readme_names():
     assert issubclass(InputError, ValueError)
 
 
+def test_a_mistyped_parameter_name_is_an_inputerror_naming_the_closest():
+    """``Params(select_tua=5)`` raised Python's TypeError (a left-over of session 66's
+    API trial); both ways of making a variant now raise InputError with the name
+    meant, and a right name still works."""
+    from dynremove import Params, preset
+
+    for bad in (lambda: Params(select_tua=5.0), lambda: preset("default").replace(select_tua=5.0)):
+        with pytest.raises(InputError, match="no field 'select_tua'; did you mean select_tau"):
+            bad()
+    with pytest.raises(InputError, match="no field 'zzz'; help"):
+        Params(zzz=1)
+    assert Params(select_tau=5.0).select_tau == 5.0
+    assert preset("paper").replace(t_r=0.5).t_r == 0.5
+    with pytest.raises(TypeError):  # positional arguments stay refused (kw_only)
+        Params(13)
+
+
 def test_help_on_params_names_every_field():
     """``help(Params)`` lists each field with its default and meaning (the CLI's help
     text), where it gave the class's two sentences only."""
