@@ -293,8 +293,10 @@ def _images_in(folder: Path) -> list[Path]:
     except OSError:
         return []
     ours = io.earlier_outputs(q.name for q in files)
+    # (a video named .jpg is a video: a set of its own, not "one photo only")
     return [q for q in files if q.name not in ours
-            and (q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q))]
+            and (q.suffix.lower() in io.IMAGE_EXTS or io.is_image_file(q))
+            and not io.is_video_file(q)]
 
 
 def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
@@ -315,6 +317,8 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
     if not root.is_dir():
         raise InputError(f"{root}: no such folder")
     skip = {p.resolve() for p in exclude}
+    top = root.resolve()
+    visited: set[Path] = set()  # each real folder once (a link back up looped 41 times)
     found: list[BatchSet] = []
 
     def name_of(d: Path) -> str:
@@ -325,8 +329,21 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
         return io.scene_folder(root.resolve()).name
 
     def walk(d: Path) -> None:
-        if d.resolve() in skip:
+        real = d.resolve()
+        if real in skip:
             return
+        if d != root and d.is_symlink():
+            if real != top and top not in real.parents:
+                notes.append(f"{name_of(d)}: a link to a folder outside {root} ({real}): "
+                             "not searched")
+                return
+            if real in visited:
+                notes.append(f"{name_of(d)}: a link to a folder searched already "
+                             f"({real}): not searched again")
+                return
+        if real in visited:
+            return
+        visited.add(real)
         if d != root and (d / "summary.json").is_file() and (d / "summary.csv").is_file():
             # an earlier batch's --out inside ROOT: its sets' outputs are not photos
             notes.append(f"{name_of(d)}: an earlier dynremove batch's outputs (its "
@@ -355,6 +372,12 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
                      and not io.is_video_file(q)]
             if other:  # (as ``run`` on the folder says)
                 notes.append(io.skipped_note(name_of(d), other))
+            videos = [q.name for q in entries if q.is_file() and q.name not in kept
+                      and io.is_video_file(q)]
+            if videos:  # (as ``run`` says; a trial's clip.mp4 beside photos went unsaid)
+                notes.append(f"{name_of(d)}: skipped {len(videos)} video(s) beside its "
+                             f"photos: {', '.join(videos)} (a video is run as a set of its "
+                             "own where its folder holds no set of photos)")
             subs = [q.name for q in entries if q.is_dir() and q.name.lower() not in SKIP_DIRS
                     and q.resolve() not in skip]
             if subs:
@@ -373,7 +396,10 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
                          f"({', '.join(sorted(ours))} beside its report.json): not a set")
         for q in entries:
             if q.is_dir() and q.name.lower() not in SKIP_DIRS:
-                walk(q)
+                if q.is_symlink():
+                    links.append(q)  # after the real folders: they keep their own names
+                else:
+                    walk(q)
             elif q.is_file() and (io.is_video_file(q) or q.suffix.lower() in io.VIDEO_SUFFIXES):
                 # a file named as a video that cannot be read is a set that fails, in
                 # the summary and the exit code (a fresh-user trial's fake.mp4 vanished
@@ -381,8 +407,23 @@ def find_sets(root: str | os.PathLike, *, exclude: Sequence[Path] = (),
                 rel = q.relative_to(root)
                 found.append(BatchSet(rel.with_suffix("").as_posix(), (q,)))
 
+    links: list[Path] = []
     walk(root)
+    while links:
+        walk(links.pop(0))
     return sorted(_distinct_names(found), key=lambda s: s.name)
+
+
+def _set_folder_at(out: Path, root: Path) -> Path | None:
+    """The folder below ``root`` that holds ``out`` (or is it) and whose photos are a
+    set (themselves or in its ``frames/``); None if there is none."""
+    o, top = out.resolve(), root.resolve()
+    for d in (o, *o.parents):
+        if d == top or top not in d.parents:
+            return None
+        if len(_images_in(d)) >= 2 or len(_images_in(d / "frames")) >= 2:
+            return d
+    return None
 
 
 def _distinct_names(sets: list[BatchSet]) -> list[BatchSet]:
@@ -409,8 +450,15 @@ def _distinct_names(sets: list[BatchSet]) -> list[BatchSet]:
 
 
 # --- one set ----------------------------------------------------------------------------
+VIDEO_OPTIONS = ("frames", "span", "pick")  # the options only a video set reads
+
+
 def batch_key(bs: BatchSet, options: dict) -> str:
-    """Hash of the options (parameters, preset, size, reference, ...) and the inputs' bytes."""
+    """Hash of the options (parameters, preset, size, reference, ...) and the inputs' bytes.
+    A folder of photos leaves out the options that take frames from a video
+    (``frames``, ``span``, ``pick``): a changed ``--span`` re-ran every photo set."""
+    if not (len(bs.inputs) == 1 and io.is_video_file(Path(bs.inputs[0]))):
+        options = {k: v for k, v in options.items() if k not in VIDEO_OPTIONS}
     h = hashlib.sha256(json.dumps(options, sort_keys=True, default=str).encode())
     for p in bs.inputs:
         h.update(p.name.encode() + b"\0")
@@ -450,6 +498,9 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
                        seconds=_earlier_seconds(done))
             return row
         _check_writable(out)  # before the analysis, as `run` checks --out
+        # outputs of a run with other options or inputs: replaced, and said (as `run`
+        # says it; a trial's second batch with another --ref replaced them silently)
+        replaced = (out / "report.json").is_file()
         params = Params(**options["params"])
         # --frames and --span are for the video sets (a folder of photos has its own)
         video = len(bs.inputs) == 1 and io.is_video_file(Path(bs.inputs[0]))
@@ -459,6 +510,9 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
             span=options.get("span") if video else None,
             pick=options.get("pick") or "sharpest")
         iset.notes.extend(notes)
+        if replaced:
+            iset.notes.append(f"{out} held the outputs of an earlier run with other options "
+                              "or inputs: this run replaced them")
         with warnings.catch_warnings():  # the run's warnings are in res.warnings
             warnings.simplefilter("ignore")
             res = remove_dynamic(iset.images, ref=ref, params=params, names=iset.names,
@@ -604,6 +658,14 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
     if Path(out).resolve() == Path(root).resolve():
         raise InputError(f"--out {out}: is ROOT itself (the search would meet the outputs "
                          "and skip them); choose a folder beside it, or one below it")
+    held = _set_folder_at(Path(out), Path(root))
+    if held is not None:
+        # (a trial's --out photos/trip1 left trip1 out of this batch and every later one,
+        # and wrote the summary among its photos; `run` refuses its photos' own folder)
+        where = "is" if held == Path(out).resolve() else "is inside"
+        raise InputError(f"--out {out}: {where} the folder of the set "
+                         f"{held.relative_to(Path(root).resolve()).as_posix()} (its photos "
+                         "would not be run); choose a folder beside ROOT, or one of its own")
     if span:  # its form and order, before any set runs (a trial's 9:3 failed at the
         # first video, after the sets before it had run)
         parse_span(span, sys.maxsize)
@@ -678,7 +740,7 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
             workers = None  # (the cluster's, unknown once cut)
         else:  # as a finished batch says it (a trial's cut --jobs 1 batch said null)
             from joblib import effective_n_jobs
-            workers = effective_n_jobs(jobs)  # (what _run_all returns)
+            workers = 1 if jobs == 1 else min(effective_n_jobs(jobs), len(sets))  # (as _run_all)
         _write_summary(out, summary_of([r for r in rows if r is not None], workers,
                                        interrupted=True, n_not_run=n_not_run))
         raise
@@ -725,13 +787,20 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
         else:
             n = min(effective_n_jobs(jobs), len(sets))
             quiet_worker_restarts()
+            cores = os.cpu_count() or 1
+            if on_note is not None and n > cores:
+                on_note(f"--jobs {jobs}: more sets at a time than this machine's {cores} "
+                        "cores; they share the cores (each set runs on one), so the batch "
+                        "is no faster and needs more memory")
             if on_note is not None:
                 on_note(f"{len(sets)} set{'s' if len(sets) != 1 else ''}, {n} at a time: "
                         "a line as each one finishes")
-            _collect(Parallel(n_jobs=jobs, return_as="generator_unordered")(
+            # (n workers, not --jobs: a trial's --jobs 16 on one set started 16)
+            _collect(Parallel(n_jobs=n, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)
-        return [results[bs.name] for bs in sets], effective_n_jobs(jobs)
+            return [results[bs.name] for bs in sets], n
+        return [results[bs.name] for bs in sets], 1
     # Dask: the workers import dynremove and read / write the same paths (shared disk)
     try:
         from distributed import Client
