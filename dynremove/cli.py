@@ -97,6 +97,15 @@ def parse_positive(s: str) -> int:
     return v
 
 
+def parse_port(s: str) -> int:
+    """A TCP port of 1..65535 (0, "any free port", would leave the printed address
+    without its port: a trial got http://127.0.0.1:0/)."""
+    v = _integer(s)
+    if not 1 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"a port is 1..65535, got {v}")
+    return v
+
+
 def parse_nonnegative(s: str) -> int:
     """An integer of at least 0 (seeds)."""
     v = _integer(s)
@@ -508,8 +517,10 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("recording", help="a .rrd file")
     v.add_argument("--web", action="store_true",
                    help="serve the web viewer on 127.0.0.1 only and print the URL")
-    v.add_argument("--port", type=int, default=9876, help="gRPC port (default 9876)")
-    v.add_argument("--web-port", type=int, default=9090, help="web viewer port (default 9090)")
+    v.add_argument("--port", type=parse_port, default=9876,
+                   help="gRPC port, 1..65535 (default 9876)")
+    v.add_argument("--web-port", type=parse_port, default=9090,
+                   help="web viewer port, 1..65535, not --port (default 9090)")
     v.set_defaults(fn=cmd_view)
 
     i = sub.add_parser("inspect", help="explain a pixel or list failures from a recording",

@@ -931,6 +931,9 @@ def _port_in_use(port: int) -> bool:
 def cmd_view(args: argparse.Namespace) -> int:
     rec = _recording(args.recording)
     if args.web:  # (the native viewer sends to a viewer already listening: no check)
+        if args.port == args.web_port:  # (a trial's viewer then exited with code 1)
+            raise InputError(f"--port and --web-port are both {args.port}: the web viewer "
+                             "and its data server need a port each")
         for flag, port in (("--port", args.port), ("--web-port", args.web_port)):
             if _port_in_use(port):
                 raise InputError(f"port {port} on 127.0.0.1 is in use (another viewer "

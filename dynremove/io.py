@@ -808,6 +808,19 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     if isinstance(ref, str) and ref.lstrip("-").isdigit():
         named = _named(ref, names)
         as_index = not (len(ref.lstrip("-")) > 1 and ref.lstrip("-").startswith("0"))
+        clips = {n.rpartition("#")[0] for n in names if "#" in n}
+        if (not named and not ref.startswith("-") and len(clips) == 1
+                and all("#" in n for n in names) and label is None):
+            # frames of a video: digits that are the frame number of one taken frame and
+            # the index of another (a trial's --ref 3 took #16 while #3 was taken too)
+            j = [i for i, n in enumerate(names) if n == f"{next(iter(clips))}#{int(ref)}"]
+            k = int(ref)
+            if j and k < len(names) and j[0] != k:
+                raise InputError(
+                    f"{what}: both the index of {names[k]} (an index counts the frames "
+                    f"taken) and the frame number of {names[j[0]]} (index {j[0]}): give "
+                    f"{names[j[0]]} for that frame, or {k - len(names)} (counted from the "
+                    f"end) for {names[k]}")
         if len(named) == 1:
             i = int(ref)
             if as_index and -len(names) <= i < len(names) and i % len(names) != named[0]:
@@ -1102,7 +1115,7 @@ def atomic_path(path: str | os.PathLike, *, suffix: str = ".tmp") -> Iterator[Pa
     os.close(fd)
     try:
         yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs follow the umask
+        os.chmod(tmp, 0o666 & ~current_umask())  # mkstemp makes 0600; outputs follow the umask
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -1117,7 +1130,8 @@ def _atomic_write_bytes(path: Path, data: bytes) -> None:
         tmp.write_bytes(data)
 
 
-def _umask() -> int:
+def current_umask() -> int:
+    """The process's umask (read by setting it and back: not thread-safe)."""
     mask = os.umask(0o022)
     os.umask(mask)
     return mask

@@ -17,6 +17,7 @@ import numpy as np
 from dynremove.errors import InputError
 
 VIDEO_FRAMES = 7  # frames taken from a video by default
+BLANK_STD = 2.0  # grey levels: a frame whose grey varies less than this has no picture
 
 
 # --- video --------------------------------------------------------------------------
@@ -73,16 +74,51 @@ def sharpness(img: np.ndarray, valid: np.ndarray | None = None, *,
     return float(lap.var())
 
 
+def is_blank(img: np.ndarray) -> bool:
+    """A frame with no picture: one flat colour, black or a fade's (the standard
+    deviation of its grey, at most 160 px, under ``BLANK_STD``)."""
+    g = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    f = min(1.0, 160.0 / max(g.shape))
+    if f < 1.0:
+        g = cv2.resize(g, (max(1, round(g.shape[1] * f)), max(1, round(g.shape[0] * f))),
+                       interpolation=cv2.INTER_AREA)
+    return float(g.std()) < BLANK_STD
+
+
+def _content_range(p: Path, start: int, end: int) -> tuple[int, int] | None:
+    """The first and last frame of ``start:end`` that is not blank (``is_blank``), or
+    None when all are (every frame decoded once)."""
+    cap = cv2.VideoCapture(str(p))
+    first = last = None
+    try:
+        if start:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        for i in range(start, end):
+            ok, fr = cap.read()
+            if not ok:
+                break
+            if not is_blank(fr):
+                first = i if first is None else first
+                last = i
+    finally:
+        cap.release()
+    return None if first is None else (first, last)
+
+
 def read_video(path: str | os.PathLike, *, frames: int | None = None,
                span: str | None = None, pick: str = "sharpest", _replan: bool = True
                ) -> tuple[list[np.ndarray], list[int], list[str]]:
     """Take ``frames`` frames (default 7) from a clip, one per even window of ``span``.
 
-    ``pick="sharpest"``: the frame of each window with the largest variance of the
-    Laplacian; ``"even"``: the window's centre. Returns images (BGR uint8), their
-    frame numbers (0-based) and notes. Read with OpenCV (FFmpeg) in one pass; a
-    clip that cannot be read up to the frame count it reports (a truncated file)
-    is read a second time, its windows over the frames it has.
+    ``pick="sharpest"``: the frame with the largest variance of the Laplacian
+    among the middle half of each window (so that two picks are at least half a
+    window apart: picks at two windows' common edge were neighbours, one of
+    them adding almost nothing); ``"even"``: the window's centre. Returns images
+    (BGR uint8), their frame numbers (0-based) and notes. Read with OpenCV
+    (FFmpeg) in one pass; a clip that cannot be read up to the frame count it
+    reports (a truncated file), or that starts or ends with blank frames (black,
+    a fade: ``is_blank``), is read a second time, its windows over the frames
+    it has with a picture. InputError when no frame of the span has one.
     """
     p = Path(path)
     n_want = VIDEO_FRAMES if frames is None else int(frames)
@@ -110,16 +146,19 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
         n = min(n_want, end - start)
         if n < 2:
             raise InputError(f"{p}: need at least 2 frames, the span has {end - start}")
-        if n < n_want:
-            notes.append(f"{p.name}: only {n} frames in the span, all taken")
         edges = [start + round(k * (end - start) / n) for k in range(n + 1)]
         centres = [(edges[k] + edges[k + 1] - 1) // 2 for k in range(n)]
+        # (sharpest) the middle half of each window: at least half a window between picks
+        inner = [(edges[k] + (edges[k + 1] - edges[k]) // 4,
+                  edges[k + 1] - (edges[k + 1] - edges[k]) // 4) for k in range(n)]
         best: list[tuple[float, int, np.ndarray | None]] = [(-1.0, -1, None)] * n
         if start:
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
         i, k = start, 0
         last = centres[-1] if pick == "even" else end - 1
         stopped = None  # the first frame that could not be read (a truncated clip)
+        content = None  # (sharpest) the first and last frame with a picture
+        blank_pick = False  # (even) a window's centre is blank
         while i <= last:
             ok = cap.grab()
             if not ok:
@@ -132,34 +171,55 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
                     ok, fr = cap.retrieve()
                     if ok:
                         best[k] = (0.0, i, fr)
+                        blank_pick |= is_blank(fr)
             else:
                 ok, fr = cap.retrieve()
-                if ok:
+                if ok and not is_blank(fr):
+                    content = (i, i) if content is None else (content[0], i)
                     s = sharpness(fr)
-                    if s > best[k][0]:
+                    if inner[k][0] <= i < inner[k][1] and s > best[k][0]:
                         best[k] = (s, i, fr)
             i += 1
     finally:
         cap.release()
     got = [(idx, fr) for _, idx, fr in best if fr is not None]
-    if stopped is not None and len(got) < n and stopped - start >= 2 and _replan:
-        # a clip that ends before the frame count it reports (a truncated file):
-        # the windows again, over the frames it has (a trial's clip gave 4 frames
-        # of 12 that could be read, where it had enough for all 7)
-        imgs, idx, again = read_video(p, frames=n_want, span=f"{start}:{stopped}",
-                                      pick=pick, _replan=False)
+    # read again over the frames the clip has, with a picture: a truncated clip (a
+    # trial's gave 4 frames of 12 that could be read, where it had enough for all
+    # 7), and one that starts or ends blank (a trial's fade-in from black stopped
+    # the run: "has content in only 0.0 % of the frame")
+    stop = end
+    if stopped is not None and len(got) < n and stopped - start >= 2:
+        stop = stopped
+    if pick == "even" and blank_pick:
+        content = _content_range(p, start, stop)
+    if content is None and (blank_pick or (pick == "sharpest" and i > start)):
+        raise InputError(f"{p}: every frame of the span {start}:{stop} is blank (one flat "
+                         "colour: black, or a fade); --span chooses the frames to take from")
+    lo, hi = (content[0], content[1] + 1) if content is not None else (start, stop)
+    lo, hi = max(lo, start), min(hi, stop)
+    if (lo, hi) != (start, end) and hi - lo >= 2 and _replan:
+        imgs, idx, again = read_video(p, frames=n_want, span=f"{lo}:{hi}", pick=pick,
+                                      _replan=False)
         # (the user's --span note stays; the first pass's other notes were of its windows)
         said = [n for n in notes if n.startswith("--span")]
-        return imgs, idx, said + [f"{p.name}: the clip reports {n_total} frames but could be "
-                                  f"read only up to frame {stopped - 1} (truncated?): the "
-                                  f"frames were chosen from {start}:{stopped}"] + again
+        if stop < end:
+            said.append(f"{p.name}: the clip reports {n_total} frames but could be read "
+                        f"only up to frame {stop - 1} (truncated?)")
+        if (lo, hi) != (start, stop):
+            blank = [f"{a}..{b - 1}" for a, b in ((start, lo), (hi, stop)) if b > a]
+            said.append(f"{p.name}: frames {' and '.join(blank)} are blank (one flat "
+                        "colour: black, or a fade)")
+        said[-1] += f": the frames were chosen from {lo}:{hi}"
+        return imgs, idx, said + again
     if len(got) < 2:
         raise InputError(f"{p}: could read {len(got)} frame(s) of the span "
                          f"{start}:{end} (truncated or unsupported video)")
     if len(got) < n:
         notes.append(f"{p.name}: {n - len(got)} window(s) had no readable frame")
-    notes.append(f"{p.name}: {len(got)} frames of {n_total} taken ({pick}, span "
-                 f"{start}:{end}): " + ", ".join(str(idx) for idx, _ in got))
+    taken = ("all of them" if len(got) == end - start else
+             f"{pick}, one per {(end - start) / n:.3g}-frame window")
+    notes.append(f"{p.name}: {len(got)} of the {end - start} frames {start}..{end - 1} "
+                 f"taken ({taken}): " + ", ".join(str(idx) for idx, _ in got))
     return [fr for _, fr in got], [idx for idx, _ in got], notes
 
 

@@ -52,7 +52,7 @@ def main() -> None:
                              preset_name=args.preset)
     for w in res.warnings:
         print(f"note: {w}")
-    print(f"wrote {args.out}: {len(res.scans)} scans, Jaccard {jaccard(res.dynamic, scene.masks[r]):.3f}")
+    print(f"wrote {args.out}: {len(res.scans)} scan{'s' if len(res.scans) != 1 else ''}, Jaccard {jaccard(res.dynamic, scene.masks[r]):.3f}")
 
 
 if __name__ == "__main__":

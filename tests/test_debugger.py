@@ -878,3 +878,48 @@ def test_the_followed_movers_are_recorded(method_run):
     from dynremove.refine.select import FOLLOWED
     assert not ((sel.reasons == FOLLOWED) & (sel.label[None] == np.arange(1, len(names) + 1)[
         :, None, None]) & ~sel.no_source[None]).any()
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--port", "70000"], "argument --port: a port is 1..65535, got 70000"),
+    (["--port", "-5"], "argument --port: a port is 1..65535, got -5"),
+    (["--web-port", "0"], "argument --web-port: a port is 1..65535, got 0"),
+    (["--port", "9999", "--web-port", "9999"], "--port and --web-port are both 9999"),
+])
+def test_view_ports_out_of_range_or_alike_are_one_line(fabricated, capsys, argv, words):
+    """A trial's --port 70000 was an internal OverflowError, --web-port 0 printed a URL
+    with port 0, and one port for both servers ended in "the viewer exited with code
+    1" after the URL was printed."""
+    try:
+        code = main(["view", str(fabricated["path"]), "--web", *argv])
+    except SystemExit as e:  # (argparse's own exit for a flag's value)
+        code = e.code
+    out, err = capsys.readouterr()
+    assert code == 2 and words in err and "internal error" not in err and "http" not in out
+
+
+def test_a_ctrl_c_stops_the_viewer_and_exits_130(fabricated, monkeypatch, capsys):
+    """``view --web`` stopped by Ctrl-C exited 0 without a word, where every other
+    command says "interrupted" and exits 130; the viewer process is stopped."""
+    from viewer import serve
+
+    stopped = []
+
+    class Proc:
+        returncode = None
+
+        def wait(self):
+            raise KeyboardInterrupt
+
+        def poll(self):
+            return None
+
+    monkeypatch.setattr(serve.subprocess, "Popen", lambda *a, **k: Proc())
+    monkeypatch.setattr(serve, "stop", lambda p: stopped.append(p))
+    monkeypatch.setattr(serve, "rerun_binary", lambda: "rerun")
+    from test_viewer import _free_port
+
+    code = main(["view", str(fabricated["path"]), "--web", "--port", str(_free_port()),
+                 "--web-port", str(_free_port())])
+    err = capsys.readouterr().err
+    assert code == 130 and "dynremove: interrupted" in err and len(stopped) == 1

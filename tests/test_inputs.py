@@ -619,3 +619,57 @@ def test_a_gray_reference_gives_a_gray_clean_photo(tmp_path, capsys, scene):
     paths = write_set(tmp_path / "c", scene.images[:4])
     assert run_cli(capsys, "run", *paths, "--out", tmp_path / "oc", "-q")[0] == 0
     assert cv2.imread(str(tmp_path / "oc" / "clean.png"), cv2.IMREAD_UNCHANGED).ndim == 3
+
+
+def test_sharpest_picks_are_half_a_window_apart(tmp_path, scene):
+    """A trial's picks of a 300-frame pan came in pairs three frames apart (168, 171):
+    the sharpest frames of two windows met at their common edge, and one view added
+    almost nothing. Each window's pick is from its middle half now."""
+    sharp = {9, 10, 19, 20, 29, 30}  # the frames at the windows' edges are the sharpest
+    frames = [scene.images[i % 5] if i in sharp else
+              cv2.GaussianBlur(scene.images[i % 5], (0, 0), 2) for i in range(40)]
+    clip = tmp_path / "c.avi"
+    write_clip(clip, frames)
+    _, idx, notes = video.read_video(clip, frames=4)
+    assert len(idx) == 4 and min(np.diff(idx)) >= 5, idx
+    assert notes[-1].startswith("c.avi: 4 of the 40 frames 0..39 taken (sharpest, one per "
+                                "10-frame window): "), notes
+
+
+def test_a_clip_that_fades_in_from_black_is_read_from_its_first_picture(tmp_path, scene,
+                                                                          capsys):
+    """A trial's clip with 8 black frames and a 6-frame fade-in stopped the run: "has
+    content in only 0.0 % of the frame" (a black frame was the sharpest of the first
+    window). The blank frames are left out, said in a note; a clip with no picture
+    at all is one line of error."""
+    body = [cv2.resize(scene.images[i % 5], (96, 72)) for i in range(20)]
+    black = [np.zeros_like(body[0])] * 8
+    fade = [(body[0] * a).astype(np.uint8) for a in (0.01, 0.2, 0.4, 0.6, 0.8, 0.9)]
+    clip = tmp_path / "fade.avi"
+    write_clip(clip, black + fade + body + black[:3])
+    for pick in ("sharpest", "even"):
+        imgs, idx, notes = video.read_video(clip, frames=5, pick=pick)
+        assert len(imgs) == 5 and not any(video.is_blank(im) for im in imgs), (pick, idx)
+        assert any("are blank (one flat colour: black, or a fade): the frames were chosen "
+                   "from" in n for n in notes), notes
+    rc, _, err = run_cli(capsys, "run", clip, "--frames", "5", "--out", tmp_path / "o",
+                         "--max-scans", "1")
+    assert rc == 0 and "blank" in err, err
+    dark = tmp_path / "dark.avi"
+    write_clip(dark, black * 2)
+    with pytest.raises(InputError, match="every frame of the span 0:16 is blank"):
+        video.read_video(dark)
+
+
+def test_digits_that_are_a_taken_frames_number_and_another_frames_index_stop(tmp_path):
+    """A trial's ``--ref 3`` on a clip took the 4th frame taken (#16) while frame #3 was
+    taken too: as for photos named by digits, the run stops and says how to give
+    either; digits that only one reading fits pick as before."""
+    names = [f"pan30.mp4#{i}" for i in (3, 7, 9, 16, 20, 25, 29)]
+    with pytest.raises(InputError, match=r"^--ref 3: both the index of pan30.mp4#16 .* and "
+                       r"the frame number of pan30.mp4#3 \(index 0\): give pan30.mp4#3 for "
+                       r"that frame, or -4 \(counted from the end\) for pan30.mp4#16$"):
+        io.resolve_ref("3", names)
+    assert io.resolve_ref("pan30.mp4#3", names) == 0 and io.resolve_ref("-4", names) == 3
+    assert io.resolve_ref("2", names) == 2  # frame #2 was not taken: an index
+    assert io.resolve_ref(3, names, label="ref=3") == 3  # the API's int: an index

@@ -78,8 +78,9 @@ def view(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRPC_PORT,
     web : serve the web viewer on ``http://127.0.0.1:<web_port>`` and print its URL.
     port : gRPC port of the viewer/server (native: if a viewer already listens
         there, the file is streamed into it).
-    wait : block until the viewer exits (Ctrl-C stops it); otherwise return the
-        running process, which the caller must terminate.
+    wait : block until the viewer exits; otherwise return the running process,
+        which the caller must terminate. A Ctrl-C stops the viewer, then goes on
+        up as the KeyboardInterrupt (the CLI's exit 130, as every command's).
     """
     path = Path(path)
     if not path.is_file():
@@ -102,8 +103,6 @@ def view(path: str | Path, *, web: bool = False, port: int = DEFAULT_GRPC_PORT,
         return proc
     try:
         proc.wait()
-    except KeyboardInterrupt:
-        pass
     finally:
         stop(proc)
     return proc

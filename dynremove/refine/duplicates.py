@@ -25,7 +25,9 @@ from dynremove.refine.fields import blurred_lab
 def agreement_with_reference(reference: npt.NDArray[np.uint8],
                              sources: npt.NDArray[np.uint8],
                              homographies: list[npt.NDArray[np.float64]], *,
-                             de_max: float = 5.0) -> npt.NDArray[np.float64]:
+                             de_max: float = 5.0, min_overlap: float = 0.25,
+                             overlap: npt.NDArray[np.float64] | None = None
+                             ) -> npt.NDArray[np.float64]:
     """Share of each source's aligned pixels that agree with the reference.
 
     Parameters
@@ -36,10 +38,15 @@ def agreement_with_reference(reference: npt.NDArray[np.uint8],
         Reference → source (``TwoView.H``).
     de_max : float
         CIE76 distance under which two pixels agree.
+    min_overlap : float
+        A source that covers less of the reference's frame than this (aligned) gets 0.
+    overlap : (S,) float64 ndarray, optional
+        Filled with the share of the reference's frame each source covers.
 
     Returns
     -------
     agree : (S,) float64 ndarray in [0, 1]
+        Over the pixels the source covers.
     """
     H, W = reference.shape[:2]
     h, w = max(8, H // 2), max(8, W // 2)
@@ -55,11 +62,16 @@ def agreement_with_reference(reference: npt.NDArray[np.uint8],
         inside = cv2.warpPerspective(np.ones((h, w), np.uint8), Hh, (w, h),
                                      flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP)
         inside = cv2.erode(inside, np.ones((5, 5), np.uint8)).astype(bool)
-        if inside.sum() < 0.25 * h * w:
+        if overlap is not None:
+            overlap[k] = float(inside.mean())
+        if inside.sum() < min_overlap * h * w:
             continue
         d = delta_e(blurred_lab(warped, 1.5), lab_r)
         out[k] = float((d[inside] < de_max).mean())
     return out
+
+
+MIN_COPY_OVERLAP = 0.9  # a source is a copy of another only where it covers this much of it
 
 
 def duplicate_sources(sources: npt.NDArray[np.uint8],
@@ -69,8 +81,10 @@ def duplicate_sources(sources: npt.NDArray[np.uint8],
 
     Source j is a copy of source k < j when, aligned to k (``H_j H_k⁻¹``: source k
     → reference → source j), at least ``agree_min`` of its pixels agree with k's
-    (``agreement_with_reference`` with k as the reference). A copy of a copy
-    counts against the first one kept.
+    (``agreement_with_reference`` with k as the reference) and it covers at least
+    ``MIN_COPY_OVERLAP`` of k's frame (a source panned away from k shows what k
+    does not: a trial's 300-frame pan dropped frame 298 as a copy of frame 9, alike
+    only where they overlapped). A copy of a copy counts against the first one kept.
 
     Returns
     -------
@@ -88,7 +102,8 @@ def duplicate_sources(sources: npt.NDArray[np.uint8],
             break
         inv_k = np.linalg.inv(homographies[k])
         agree = agreement_with_reference(sources[k], sources[later],
-                                         [homographies[j] @ inv_k for j in later])
+                                         [homographies[j] @ inv_k for j in later],
+                                         min_overlap=MIN_COPY_OVERLAP)
         for j, a in zip(later, agree):
             if a >= agree_min:
                 dropped.append((j, k, float(a)))
