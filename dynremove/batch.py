@@ -740,7 +740,7 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
             workers = None  # (the cluster's, unknown once cut)
         else:  # as a finished batch says it (a trial's cut --jobs 1 batch said null)
             from joblib import effective_n_jobs
-            workers = 1 if jobs == 1 else min(effective_n_jobs(jobs), len(sets))  # (as _run_all)
+            workers = min(effective_n_jobs(jobs), len(sets))  # (as _run_all)
         _write_summary(out, summary_of([r for r in rows if r is not None], workers,
                                        interrupted=True, n_not_run=n_not_run))
         raise
@@ -779,7 +779,10 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
     results = {} if results is None else results
     on_done = _with_earlier(on_done, prev or {})
     if not scheduler:
-        if jobs == 1:
+        # one at a time in this process, on all its threads: with --jobs 1, or one set
+        # (a trial's --jobs 16 on one set started 16 workers; a joblib pool of one
+        # would run it here on one thread)
+        if jobs == 1 or min(effective_n_jobs(jobs), len(sets)) == 1:
             def one(k: int, bs: BatchSet) -> dict:
                 progress = on_start(k, len(sets), bs) if on_start else None
                 return run_set(bs, out, options, progress=progress)
