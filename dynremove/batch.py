@@ -50,7 +50,8 @@ from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
 from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_restarts
 from dynremove.pipeline import full_resolution_output, remove_dynamic
-from dynremove.video import auto_reference, blurry_reference_note, parse_span
+from dynremove.video import (auto_reference, blurry_reference_note, blurry_sources_note,
+                             parse_span)
 
 OUTPUT_FILES = (*io.RUN_OUTPUTS, "report.json")
 SUMMARY_FIELDS = ("set", "status", "skipped", "n_images", "reference", "dynamic_fraction",
@@ -272,9 +273,11 @@ def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dic
             info["n_distinct"] = n
         if n % 2 == 0:  # the other middle one, for the note's --ref hint
             info["other_middle"] = distinct[n // 2 - 1]
-        note = blurry_reference_note(iset.images, i, iset.names, valid)
-        return i, info, [note] if note else []
-    return i, {"chosen_by": "given"}, []
+        notes = [n for n in (blurry_reference_note(iset.images, i, iset.names, valid),
+                             blurry_sources_note(iset.images, i, iset.names, valid)) if n]
+        return i, info, notes
+    note = blurry_sources_note(iset.images, i, iset.names, valid)
+    return i, {"chosen_by": "given"}, [note] if note else []
 
 
 # --- finding sets ---------------------------------------------------------------------

@@ -319,6 +319,18 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
             rec.flush()
             rec.disconnect()
     res.timings = {"load": t_load, **res.timings}  # first, as on the terminal
+    kept = sorted([ref, *res.source_indices])
+    if (ref_info.get("chosen_by") == "middle" and len(kept) < len(iset.names)
+            and any(str(w).startswith("left out, no homography") for w in res.warnings)):
+        # photos left out moved the middle (a trial's photo of another scene, left
+        # out, made 00054 the reference of dance-twirl instead of 00044)
+        mid = kept[len(kept) // 2]
+        if mid != ref:
+            msg = (f"the reference is the middle of the photos given; of the "
+                   f"{len(kept)} used, the middle is {iset.names[mid]}: --ref "
+                   f"{iset.names[mid]} to take it")
+            _note(args, msg)
+            res.warnings.append(msg)
     bar = _bar(args, params)  # the steps after the pipeline's, on the same bar
     if args.output_size == "full" and iset.scale < 1.0:
         bar("full-size output", 0.0)

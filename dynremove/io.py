@@ -214,8 +214,11 @@ def _conform_note(name: str, shape: tuple[int, int], target: tuple[int, int],
                   op: dict) -> str:
     (h, w), (H0, W0) = shape, target
     if op["kind"] == "resize":
-        return (f"{name}: {w}x{h}, the set {W0}x{H0} (the same frame at another "
-                f"resolution): resized to {W0}x{H0}")
+        # (a trial's centre crop of one photo, of the set's shape, read "the same
+        # frame": the size alone cannot tell a crop of the same shape from it)
+        return (f"{name}: {w}x{h}, the set {W0}x{H0} (the same shape: another "
+                f"resolution, or a crop or zoom): resized to {W0}x{H0}; the alignment "
+                "takes up a crop or zoom")
     return (f"{name}: {w}x{h}, the set {W0}x{H0} (a few pixels off: cropped?): "
             "centred on the set's frame" + (", the added border counted as no content"
                                             if h < H0 or w < W0 else "")

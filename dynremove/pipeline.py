@@ -644,9 +644,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
 
         strays = _strays(views)
         if strays:
-            good = [v.n_inliers_H for v in views if geometry.aligned(v)]
+            good = [v.n_inliers_H for k, v in enumerate(views)
+                    if geometry.aligned(v) and k not in strays]
             msgs.append(_strays_note([(names[srcs[k]], views[k].n_matches,
-                                       views[k].n_inliers_F) for k in strays], min(good)))
+                                       views[k].n_inliers_F, views[k].n_inliers_H)
+                                      for k in strays], min(good)))
             drop(strays)
         all_copies = False
         if params.near_copy_agree > 0 and len(srcs) >= 1:
@@ -835,8 +837,15 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         clock.start("fusion")
     pre_fill = dyn  # L as the fill by selection takes it
     if params.fuse and params.fill == "select":
-        selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=None if
-                                valid_masks is None else np.stack([valid_masks[s] for s in srcs]),
+        valid_src = None if valid_masks is None else np.stack([valid_masks[s] for s in srcs])
+        if st.curves is not None:
+            for k, s in enumerate(srcs):
+                clip = clipped_highlights(np.asarray(images[s]), st.curves[k])
+                if clip is not None:
+                    if valid_src is None:
+                        valid_src = np.ones((len(srcs),) + clip.shape, bool)
+                    valid_src[k] &= ~clip
+        selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=valid_src,
                                 flows=st.Nf_flow, no_fill=gray_apart[srcs])
         clean = selection.clean
         dyn = stages["select"] = selection.replaced
@@ -1226,6 +1235,30 @@ def _selection_coverage(cov: np.ndarray, dynamic: np.ndarray, selection: Selecti
     return np.where(dynamic, np.where(selection.no_source, 0, n), cov).astype(cov.dtype)
 
 
+def clipped_highlights(source: np.ndarray, curve: np.ndarray) -> np.ndarray | None:
+    """Where a source shot brighter than the reference is clipped white: (H, W) bool
+    (its pixels at 254-255 in all three channels, 2 px wider), or None where its
+    tone ``curve`` (3, 256) does not darken level 255 below 250 in every channel
+    (the source is not brighter) or nothing is clipped.
+
+    Mapped to the reference's levels (``exposure.apply_curves``), such a highlight is
+    one flat colour with no texture; as evidence and fill it is no view of the scene
+    (a trial's burst with two photos 1-1.2 stops brighter: their clipped glare agreed
+    with each other, "witnessed" a lingering mover on the table and replaced the
+    glare with a flat grey-blue patch). The fill by selection treats it as no content.
+    """
+    if not (np.asarray(curve)[:, 255] < 250).all():
+        return None
+    m = cv2.inRange(source, (254, 254, 254), (255, 255, 255))
+    if not m.any():
+        return None
+    return cv2.dilate(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))) > 0
+
+
+STRAY_SHARE_OF_MEDIAN = 0.15  # homography inliers under this share of the others' median ...
+STRAY_SHARE_OF_MATCHES = 0.2  # ... and under this share of its own matches: a stray
+
+
 def _strays(views: list[geometry.TwoView]) -> list[int]:
     """Sources without a homography (``geometry.aligned``) while the aligned ones have
     a median of ``4 × MIN_MATCHES`` or more homography inliers: a photo of another
@@ -1239,7 +1272,16 @@ def _strays(views: list[geometry.TwoView]) -> list[int]:
     good = [v.n_inliers_H for v in views if geometry.aligned(v)]
     if not good or np.median(good) < 4 * geometry.MIN_MATCHES:
         return []
-    return [k for k, v in enumerate(views) if not geometry.aligned(v)]
+    med = float(np.median(good))
+    # ... and a source whose homography fits few of its own matches and far fewer
+    # than the others' (a trial: tim2 mirrored, 10 of 83 matches on a homography
+    # against the others' 82-183; a desk photo among tim6's, 8 of 45). Legitimate
+    # sources measured on the 19 DAVIS sets, the bursts and the 48 composites: the
+    # fewest inliers against the median 0.07 (dog's last frame, 9 of its 24 matches),
+    # the smallest share of its matches 0.21 (parkour, 18 of 87): never both.
+    return [k for k, v in enumerate(views) if not geometry.aligned(v)
+            or (v.n_inliers_H < STRAY_SHARE_OF_MEDIAN * med
+                and v.n_inliers_H < STRAY_SHARE_OF_MATCHES * v.n_matches)]
 
 
 def _undecided_note(summaries: list, n_px: int, n_sources: int, *,
@@ -1306,14 +1348,17 @@ def _knee_note(views: list[geometry.TwoView], params: Params) -> str:
             "the mover, --select-parallax-px 0 treats the set as 3-D")
 
 
-def _strays_note(strays: list[tuple[str, int, int]], least: int) -> str:
-    """The note for the sources ``_strays`` leaves out (``(name, matches, F inliers)``);
-    ``least``: the fewest homography inliers among the aligned sources."""
-    parts = ", ".join(f"{name} ({m} keypoint match{'' if m == 1 else 'es'}, {f} on one F)"
-                      for name, m, f in strays)
+def _strays_note(strays: list[tuple[str, int, int, int]], least: int) -> str:
+    """The note for the sources ``_strays`` leaves out (``(name, matches, F inliers,
+    homography inliers)``); ``least``: the fewest homography inliers among the
+    sources kept."""
+    parts = ", ".join(f"{name} ({m} keypoint match{'' if m == 1 else 'es'}, {f} on one F"
+                      + (f", {h} on a homography" if h >= geometry.ALIGNED_MIN_INLIERS
+                         else "") + ")"
+                      for name, m, f, h in strays)
     return (f"left out, no homography with the reference: {parts}, where the photos "
-            f"that align have {least} or more homography inliers. Another scene, too "
-            "blurred, or too little overlap?")
+            f"that align have {least} or more homography inliers. Another scene, "
+            "mirrored, too blurred, or too little overlap?")
 
 
 def _weak_reference_note(images, ref: int, srcs: list[int], views, names,

@@ -285,3 +285,24 @@ def blurry_reference_note(images: Sequence[np.ndarray], ref: int, names: Sequenc
     return (f"the reference {names[ref]} is much blurrier than the others (variance of "
             f"the Laplacian over the image's, {sharp[ref]:.3f} vs a median of {med:.3f}): "
             "try --ref auto")
+
+
+def blurry_sources_note(images: Sequence[np.ndarray], ref: int, names: Sequence[str],
+                        valid: Sequence[np.ndarray | None] | None = None,
+                        *, ratio: float = 0.5) -> str | None:
+    """A note naming the sources much blurrier than the set (variance of the Laplacian
+    relative to the image's own variance, below ``ratio`` x the median of all the
+    photos): where one of them alone shows the background, the fill is as soft (a
+    trial's tim2 with a 25 px motion blur filled part of the cup's place with a
+    smooth oval, without a word). None when there is none."""
+    valid = list(valid) if valid else [None] * len(images)
+    sharp = [sharpness(im, v, relative=True) for im, v in zip(images, valid)]
+    med = float(np.median(sharp))
+    soft = [i for i, v in enumerate(sharp) if i != ref and med > 0 and v < ratio * med]
+    if not soft:
+        return None
+    which = ", ".join(f"{names[i]} ({sharp[i]:.3f})" for i in soft)
+    return (f"much blurrier than the other photos (variance of the Laplacian over the "
+            f"image's, median {med:.3f}): {which}; where only such a photo shows the "
+            "background, the fill is as soft: leave it out if the set has enough without")
+

@@ -522,7 +522,8 @@ def test_a_photo_at_another_resolution_is_resized_to_the_set(tmp_path, capsys):
                                                  interpolation=cv2.INTER_CUBIC))
     notes = [n for n in io.load_image_set([d]).notes if "resized to 128x96" in n]
     assert notes == [f"{paths[1].name}, {paths[3].name}: 256x192, the set 128x96 (the "
-                     "same frame at another resolution): resized to 128x96"], notes
+                     "same shape: another resolution, or a crop or zoom): resized to "
+                     "128x96; the alignment takes up a crop or zoom"], notes
 
 
 def test_tiny_images_api():

@@ -839,3 +839,26 @@ def test_a_users_viewer_py_shadowing_the_debugger_is_named(tmp_path, folder):
                                 f"shadowed by {work / 'viewer.py'}: rename that file (or "
                                 "folder), or run from another folder"), p.stderr
     assert not (tmp_path / "out").exists() and not (tmp_path / "r.rrd").exists()
+
+
+def test_a_photo_left_out_that_moved_the_middle_is_said(tmp_path, capsys):
+    """A trial added a photo of another scene to dance-twirl's seven: it was left out,
+    but the default reference, the middle of the photos given, had moved to the next
+    frame, and --gt scored it against the wrong one. The note names the middle of
+    the photos used."""
+    sc = synth.make_scene(seed=3, n_views=5, size=(240, 320), n_objects=1)
+    d = tmp_path / "set"
+    d.mkdir()
+    for i, im in enumerate(sc.images):
+        cv2.imwrite(str(d / f"view{i}.png"), im)
+    rng = np.random.default_rng(1)
+    t = cv2.GaussianBlur(rng.uniform(0, 255, sc.images[0].shape).astype(np.float32),
+                         (0, 0), 2.0)
+    cv2.imwrite(str(d / "view9.png"), np.clip((t - t.mean()) * 4 + 128, 0, 255))
+    rc, _, err = run_cli(capsys, d, "--out", tmp_path / "o", "--max-scans", "1")
+    assert rc == 0, err
+    assert "left out, no homography with the reference: view9.png" in err
+    assert ("the reference is the middle of the photos given; of the 5 used, the middle "
+            "is view2.png: --ref view2.png to take it") in err
+    notes = json.loads((tmp_path / "o" / "report.json").read_text())["notes"]
+    assert any(n.startswith("the reference is the middle of the photos given") for n in notes)

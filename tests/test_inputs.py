@@ -673,3 +673,17 @@ def test_digits_that_are_a_taken_frames_number_and_another_frames_index_stop(tmp
     assert io.resolve_ref("pan30.mp4#3", names) == 0 and io.resolve_ref("-4", names) == 3
     assert io.resolve_ref("2", names) == 2  # frame #2 was not taken: an index
     assert io.resolve_ref(3, names, label="ref=3") == 3  # the API's int: an index
+
+
+def test_a_much_blurrier_source_is_named(scene):
+    """A trial's tim2 with a 25 px motion blur filled part of the cup's place with a
+    smooth oval, and nothing said why; the blurry reference had its note, the
+    sources none. A source much blurrier than the set is named now (the reference
+    keeps its own note)."""
+    ims = list(scene.images)
+    assert video.blurry_sources_note(ims, 2, [f"v{i}" for i in range(len(ims))]) is None
+    k = np.full((1, 25), 1 / 25, np.float32)
+    ims[1] = cv2.filter2D(ims[1], -1, k)
+    note = video.blurry_sources_note(ims, 2, [f"v{i}" for i in range(len(ims))])
+    assert note is not None and ": v1 (" in note and "v0" not in note
+    assert video.blurry_sources_note(ims, 1, [f"v{i}" for i in range(len(ims))]) is None
