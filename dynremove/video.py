@@ -85,11 +85,13 @@ def is_blank(img: np.ndarray) -> bool:
     return float(g.std()) < BLANK_STD
 
 
-def _content_range(p: Path, start: int, end: int) -> tuple[int, int] | None:
+def _content_range(p: Path, start: int, end: int) -> tuple[tuple[int, int] | None, int]:
     """The first and last frame of ``start:end`` that is not blank (``is_blank``), or
-    None when all are (every frame decoded once)."""
+    None when all are, and the end of the frames that could be read (every frame
+    decoded once)."""
     cap = cv2.VideoCapture(str(p))
     first = last = None
+    i = start
     try:
         if start:
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
@@ -100,9 +102,11 @@ def _content_range(p: Path, start: int, end: int) -> tuple[int, int] | None:
             if not is_blank(fr):
                 first = i if first is None else first
                 last = i
+        else:
+            i = end
     finally:
         cap.release()
-    return None if first is None else (first, last)
+    return (None if first is None else (first, last)), i
 
 
 def read_video(path: str | os.PathLike, *, frames: int | None = None,
@@ -190,13 +194,17 @@ def read_video(path: str | os.PathLike, *, frames: int | None = None,
     stop = end
     if stopped is not None and len(got) < n and stopped - start >= 2:
         stop = stopped
+    read_end = stopped if stopped is not None else end  # the frames decoded end here
     if pick == "even" and blank_pick:
-        content = _content_range(p, start, stop)
+        content, read_end = _content_range(p, start, stop)
     if content is None and (blank_pick or (pick == "sharpest" and i > start)):
         raise InputError(f"{p}: every frame of the span {start}:{stop} is blank (one flat "
                          "colour: black, or a fade); --span chooses the frames to take from")
-    lo, hi = (content[0], content[1] + 1) if content is not None else (start, stop)
-    lo, hi = max(lo, start), min(hi, stop)
+    lo, hi = start, stop
+    if content is not None:
+        lo = max(content[0], start)
+        if content[1] + 1 < read_end:  # blank frames after the last picture (read ones)
+            hi = min(content[1] + 1, stop)
     if (lo, hi) != (start, end) and hi - lo >= 2 and _replan:
         imgs, idx, again = read_video(p, frames=n_want, span=f"{lo}:{hi}", pick=pick,
                                       _replan=False)
