@@ -2,6 +2,8 @@
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
+# the shared evaluation data (the tests read DYNREMOVE_DATA too)
+DYNREMOVE_DATA ?= ../shared/data
 
 .PHONY: demo test lint test-nojit bench eval clean
 
@@ -45,7 +47,7 @@ bench: $(BIN)/dynremove
 	$(BIN)/dynremove bench
 
 eval: $(BIN)/dynremove
-	$(BIN)/dynremove eval ../shared/data/davis --jobs 2
+	$(BIN)/dynremove eval $(DYNREMOVE_DATA)/davis --jobs 2
 
 clean:
 	rm -rf out build *.egg-info

@@ -1003,7 +1003,8 @@ def format_failures(items: list[dict[str, Any]]) -> str:
         s = (f"{e['kind']} {e['area']:6d} px  box ({x0},{y0}) {w}x{h} px  pixel "
              f"{e['pixel'][0]},{e['pixel'][1]}"
              + (f" (photo {ph[0]},{ph[1]})" if ph else "")
-             + f"  steps {steps}; {e['n_decisions']} recorded decisions")
+             + f"  steps {steps}; {e['n_decisions']} recorded decision"
+             + ("" if e["n_decisions"] == 1 else "s"))
         if e["worst"]:
             s += (f"; {'highest' if e['kind'] == 'FN' else 'lowest'} M {e['worst']['M']:.2f} at "
                   f"({e['worst']['x']},{e['worst']['y']}) step {e['worst']['step']}")
