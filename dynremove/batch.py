@@ -51,7 +51,7 @@ from dynremove.params import Params
 from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_restarts
 from dynremove.pipeline import full_resolution_output, remove_dynamic
 from dynremove.video import (auto_reference, blurry_reference_note, blurry_sources_note,
-                             parse_span)
+                             parse_span, relative_sharpness)
 
 OUTPUT_FILES = (*io.RUN_OUTPUTS, "report.json")
 SUMMARY_FIELDS = ("set", "status", "skipped", "n_images", "reference", "dynamic_fraction",
@@ -273,8 +273,10 @@ def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dic
             info["n_distinct"] = n
         if n % 2 == 0:  # the other middle one, for the note's --ref hint
             info["other_middle"] = distinct[n // 2 - 1]
-        notes = [n for n in (blurry_reference_note(iset.images, i, iset.names, valid),
-                             blurry_sources_note(iset.images, i, iset.names, valid)) if n]
+        sharp = relative_sharpness(iset.images, valid)
+        notes = [n for n in (blurry_reference_note(iset.images, i, iset.names, sharp=sharp),
+                             blurry_sources_note(iset.images, i, iset.names, sharp=sharp))
+                 if n]
         return i, info, notes
     note = blurry_sources_note(iset.images, i, iset.names, valid)
     return i, {"chosen_by": "given"}, [note] if note else []
@@ -742,8 +744,7 @@ def run_batch(root: str | os.PathLike, out: str | os.PathLike, *, params: Params
         if scheduler:
             workers = None  # (the cluster's, unknown once cut)
         else:  # as a finished batch says it (a trial's cut --jobs 1 batch said null)
-            from joblib import effective_n_jobs
-            workers = min(effective_n_jobs(jobs), len(sets))  # (as _run_all)
+            workers = _workers(jobs, len(sets))  # (as _run_all)
         _write_summary(out, summary_of([r for r in rows if r is not None], workers,
                                        interrupted=True, n_not_run=n_not_run))
         raise
@@ -766,6 +767,14 @@ def _write_summary(out: Path, summary: dict) -> None:
     io._atomic_write_bytes(out / "summary.csv", buf.getvalue().encode())
 
 
+def _workers(jobs: int, n_sets: int) -> int:
+    """Sets run at once without a scheduler: ``--jobs`` (joblib's count: -1 = all
+    cores), at most one per set."""
+    from joblib import effective_n_jobs
+
+    return 1 if jobs == 1 else min(effective_n_jobs(jobs), n_sets)
+
+
 def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
              scheduler: str | None, on_done: Callable[[int, int, dict], None] | None,
              prev: dict[str, dict] | None = None,
@@ -777,7 +786,7 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
     cluster's when ``scheduler``). ``prev``: the previous summary's rows by set
     (:func:`_keep_earlier`). ``results``: filled with each row by set name as it
     arrives (what finished is there when the run is cut short)."""
-    from joblib import Parallel, delayed, effective_n_jobs, parallel_config
+    from joblib import Parallel, delayed, parallel_config
 
     results = {} if results is None else results
     on_done = _with_earlier(on_done, prev or {})
@@ -785,13 +794,13 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
         # one at a time in this process, on all its threads: with --jobs 1, or one set
         # (a trial's --jobs 16 on one set started 16 workers; a joblib pool of one
         # would run it here on one thread)
-        if jobs == 1 or min(effective_n_jobs(jobs), len(sets)) == 1:
+        n = _workers(jobs, len(sets))
+        if n == 1:
             def one(k: int, bs: BatchSet) -> dict:
                 progress = on_start(k, len(sets), bs) if on_start else None
                 return run_set(bs, out, options, progress=progress)
             _collect((one(k, bs) for k, bs in enumerate(sets, 1)), sets, on_done, results)
         else:
-            n = min(effective_n_jobs(jobs), len(sets))
             quiet_worker_restarts()
             cores = os.cpu_count() or 1
             if on_note is not None and n > cores:
@@ -805,8 +814,7 @@ def _run_all(sets: Sequence[BatchSet], out: Path, options: dict, *, jobs: int,
             _collect(Parallel(n_jobs=n, return_as="generator_unordered")(
                 delayed(run_set)(bs, out, options, single_thread=True) for bs in sets),
                 sets, on_done, results)
-            return [results[bs.name] for bs in sets], n
-        return [results[bs.name] for bs in sets], 1
+        return [results[bs.name] for bs in sets], n
     # Dask: the workers import dynremove and read / write the same paths (shared disk)
     try:
         from distributed import Client

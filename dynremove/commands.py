@@ -321,7 +321,7 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
     res.timings = {"load": t_load, **res.timings}  # first, as on the terminal
     kept = sorted([ref, *res.source_indices])
     if (ref_info.get("chosen_by") == "middle" and len(kept) < len(iset.names)
-            and any(str(w).startswith("left out, no homography") for w in res.warnings)):
+            and any(str(w).startswith(pipeline.STRAYS_NOTE) for w in res.warnings)):
         # photos left out moved the middle (a trial's photo of another scene, left
         # out, made 00054 the reference of dance-twirl instead of 00044)
         mid = kept[len(kept) // 2]

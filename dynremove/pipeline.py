@@ -1348,6 +1348,9 @@ def _knee_note(views: list[geometry.TwoView], params: Params) -> str:
             "the mover, --select-parallax-px 0 treats the set as 3-D")
 
 
+STRAYS_NOTE = "left out, no homography with the reference"  # how _strays_note begins
+
+
 def _strays_note(strays: list[tuple[str, int, int, int]], least: int) -> str:
     """The note for the sources ``_strays`` leaves out (``(name, matches, F inliers,
     homography inliers)``); ``least``: the fewest homography inliers among the
@@ -1356,7 +1359,7 @@ def _strays_note(strays: list[tuple[str, int, int, int]], least: int) -> str:
                       + (f", {h} on a homography" if h >= geometry.ALIGNED_MIN_INLIERS
                          else "") + ")"
                       for name, m, f, h in strays)
-    return (f"left out, no homography with the reference: {parts}, where the photos "
+    return (f"{STRAYS_NOTE}: {parts}, where the photos "
             f"that align have {least} or more homography inliers. Another scene, "
             "mirrored, too blurred, or too little overlap?")
 

@@ -91,7 +91,7 @@ def _content_range(p: Path, start: int, end: int) -> tuple[tuple[int, int] | Non
     decoded once)."""
     cap = cv2.VideoCapture(str(p))
     first = last = None
-    i = start
+    read_end = start
     try:
         if start:
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
@@ -99,14 +99,13 @@ def _content_range(p: Path, start: int, end: int) -> tuple[tuple[int, int] | Non
             ok, fr = cap.read()
             if not ok:
                 break
+            read_end = i + 1
             if not is_blank(fr):
                 first = i if first is None else first
                 last = i
-        else:
-            i = end
     finally:
         cap.release()
-    return (None if first is None else (first, last)), i
+    return (None if first is None else (first, last)), read_end
 
 
 def read_video(path: str | os.PathLike, *, frames: int | None = None,
@@ -278,14 +277,23 @@ def auto_reference(images: Sequence[np.ndarray], names: Sequence[str],
     return best, note, info
 
 
+def relative_sharpness(images: Sequence[np.ndarray],
+                       valid: Sequence[np.ndarray | None] | None = None) -> list[float]:
+    """Each image's ``sharpness(..., relative=True)``, over its ``valid`` pixels: what
+    the blurry-reference and blurry-sources notes compare (computed once for both)."""
+    valid = list(valid) if valid else [None] * len(images)
+    return [sharpness(im, v, relative=True) for im, v in zip(images, valid)]
+
+
 def blurry_reference_note(images: Sequence[np.ndarray], ref: int, names: Sequence[str],
                           valid: Sequence[np.ndarray | None] | None = None,
-                          *, ratio: float = 0.5) -> str | None:
+                          *, ratio: float = 0.5, sharp: Sequence[float] | None = None
+                          ) -> str | None:
     """A note suggesting ``--ref auto`` when the reference is much blurrier than the
     others (variance of the Laplacian relative to the image's own variance, below
-    ``ratio`` x the others' median)."""
-    valid = list(valid) if valid else [None] * len(images)
-    sharp = [sharpness(im, v, relative=True) for im, v in zip(images, valid)]
+    ``ratio`` x the others' median). ``sharp``: ``relative_sharpness`` of the images,
+    if already computed."""
+    sharp = relative_sharpness(images, valid) if sharp is None else sharp
     others = [s for i, s in enumerate(sharp) if i != ref]
     med = float(np.median(others)) if others else 0.0
     if med <= 0 or sharp[ref] >= ratio * med:
@@ -297,14 +305,15 @@ def blurry_reference_note(images: Sequence[np.ndarray], ref: int, names: Sequenc
 
 def blurry_sources_note(images: Sequence[np.ndarray], ref: int, names: Sequence[str],
                         valid: Sequence[np.ndarray | None] | None = None,
-                        *, ratio: float = 0.5) -> str | None:
+                        *, ratio: float = 0.5, sharp: Sequence[float] | None = None
+                        ) -> str | None:
     """A note naming the sources much blurrier than the set (variance of the Laplacian
     relative to the image's own variance, below ``ratio`` x the median of all the
     photos): where one of them alone shows the background, the fill is as soft (a
     trial's tim2 with a 25 px motion blur filled part of the cup's place with a
-    smooth oval, without a word). None when there is none."""
-    valid = list(valid) if valid else [None] * len(images)
-    sharp = [sharpness(im, v, relative=True) for im, v in zip(images, valid)]
+    smooth oval, without a word). None when there is none. ``sharp``: as
+    ``blurry_reference_note``'s."""
+    sharp = relative_sharpness(images, valid) if sharp is None else sharp
     med = float(np.median(sharp))
     soft = [i for i, v in enumerate(sharp) if i != ref and med > 0 and v < ratio * med]
     if not soft:
