@@ -381,6 +381,8 @@ def _depth_note(name: str, bits: int) -> str:
     """The note of a 16-bit image read as ``bits``-bit data."""
     if bits == 16:
         return f"{name}: 16-bit image scaled to 8 bits (the outputs are 8-bit)"
+    if bits == 8:
+        return f"{name}: 16-bit image holding 8-bit values (none above 255): read as they are"
     return (f"{name}: 16-bit image holding {bits}-bit values (at most {2 ** bits - 1}): "
             f"scaled to 8 bits by ÷{2 ** (bits - 8)} (the outputs are 8-bit)")
 
@@ -391,13 +393,15 @@ def _to_8_bits(img: np.ndarray, bits: int | None = None) -> tuple[np.ndarray, in
 
     Machine-vision and raw-converter PNGs often store 10-, 12- or 14-bit values
     in 16 bits, unscaled: ``>> 8`` left a 12-bit photo at 0-15 (black, and
-    "nothing was found moving"). The depth is the smallest of 10, 12, 14 and
-    16 bits that holds the colour channels' maximum; an alpha channel (the 4th,
+    "nothing was found moving"). The depth is the smallest of 8, 10, 12, 14
+    and 16 bits that holds the colour channels' maximum (8: an 8-bit photo
+    saved in a 16-bit container, read as it is; as 10-bit data it had come out
+    4× darker, and nothing was found moving); an alpha channel (the 4th,
     or the 2nd of grey + alpha) always scales from 16 bits.
     """
     colour = img if img.ndim == 2 else img[..., :3] if img.shape[2] >= 3 else img[..., :1]
     top = int(colour.max()) if colour.size else 0
-    bits = bits or next(b for b in (10, 12, 14, 16) if top < 2 ** b)
+    bits = bits or next(b for b in (8, 10, 12, 14, 16) if top < 2 ** b)
     out = (img >> (bits - 8)).astype(np.uint8) if bits < 16 else (img >> 8).astype(np.uint8)
     if bits < 16 and img.ndim == 3 and img.shape[2] in (2, 4):
         out[..., -1] = (img[..., -1] >> 8).astype(np.uint8)
@@ -413,7 +417,7 @@ def read_image_valid(path: Path, *, depth16: int | None = None
     connected to its border (the empty border of a pre-aligned frame), None when
     the whole frame has content. Decoded by OpenCV, else Pillow (HEIC/HEIF
     through pillow-heif, the ``heic`` extra). A 16-bit image is read as data of
-    the smallest of 10, 12, 14 or 16 bits that holds its values (``_to_8_bits``),
+    the smallest of 8, 10, 12, 14 or 16 bits that holds its values (``_to_8_bits``),
     or of ``depth16`` bits when given.
     """
     img, valid, notes, _ = _read_image_depth(path, depth16)

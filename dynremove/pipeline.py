@@ -236,8 +236,9 @@ def _array_hint(i: int, im: object, *, bits: int = 16) -> str:
         # then blamed near-copies and too few matches)
         what = ("16-bit" if bits == 16 else
                 f"16-bit holding {bits}-bit values (none above {2 ** bits - 1})")
-        return (f"image {i}: expected (H, W, 3) uint8, {got}: {what}; pass "
-                f"(img >> {bits - 8}).astype(np.uint8), the same shift for every photo, "
+        fix = ("img.astype(np.uint8)" if bits == 8 else
+               f"(img >> {bits - 8}).astype(np.uint8), the same shift for every photo")
+        return (f"image {i}: expected (H, W, 3) uint8, {got}: {what}; pass {fix}, "
                 "as the command line reads them")
     if np.issubdtype(im.dtype, np.floating):
         top = float(np.nanmax(im)) if im.size else 0.0
@@ -249,13 +250,13 @@ def _array_hint(i: int, im: object, *, bits: int = 16) -> str:
 
 
 def _uint16_depth(images: Sequence[object]) -> int:
-    """The bit depth of the 16-bit arrays among ``images``: the smallest of 10, 12, 14
-    and 16 bits that holds their largest value (one depth for the set, as
+    """The bit depth of the 16-bit arrays among ``images``: the smallest of 8, 10, 12,
+    14 and 16 bits that holds their largest value (one depth for the set, as
     ``io.load_image_set`` reads 16-bit files)."""
     tops = [int(im.max()) for im in images
             if isinstance(im, np.ndarray) and im.dtype == np.uint16 and im.size]
     top = max(tops, default=2 ** 16 - 1)
-    return next(b for b in (10, 12, 14, 16) if top < 2 ** b)
+    return next(b for b in (8, 10, 12, 14, 16) if top < 2 ** b)
 
 
 def validate_images(images: Sequence[np.ndarray], ref: int) -> None:
