@@ -130,6 +130,13 @@ def _throughput(res: Any, iset: Any) -> dict:
             "working_mpx": round(h * w / 1e6, 3), "peak_rss_mb": round(own_peak_rss_mb(), 1)}
 
 
+def _relit_outside(res) -> int:
+    """The pixels ``shade.relight_shade`` changed outside ``res.dynamic`` (0 without)."""
+    sel = getattr(res, "selection", None)
+    relit = getattr(sel, "relit", None)
+    return 0 if relit is None else int((relit & ~res.dynamic).sum())
+
+
 def _scene_entry(res) -> dict:
     """report.json's ``scene``: whether the run treated the set as flat or 3-D (the
     sources' median measured parallax against ``select_parallax_px``, and their 95th
@@ -188,6 +195,9 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
                   for s in res.scans],
         "dynamic_fraction": float(res.dynamic.mean()),
         "uncovered_dynamic_px": int((res.dynamic & (res.coverage == 0)).sum()),
+        # a faint shade beside the movers relit to the other photos' light, outside the
+        # mask (at the analysis size; changed by under --select-tau)
+        "relit_px": _relit_outside(res),
         # coverage.png holds count × 255 / sources (uint8, truncated)
         "coverage_png": {"sources": n_src, "value_per_source": round(255.0 / n_src, 4)},
         "geometry": res.geometry,

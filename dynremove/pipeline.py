@@ -29,6 +29,7 @@ from dynremove.method.scan import _kernels as kn
 from dynremove.method.scan.driver import ScanInputs, pack_params, run_scans
 from dynremove.io import AUTO_MAX_SIDE, ImageSet, resolve_ref, size_hint
 from dynremove.params import DEFAULT, Params, preset
+from dynremove.refine.colour import delta_e
 from dynremove.refine.concurrency import check_fork_safe, for_each_source, numba_threads_safe
 from dynremove.refine.duplicates import agreement_with_reference, duplicate_sources
 from dynremove.refine.fill import fuse_background
@@ -37,6 +38,7 @@ from dynremove.refine.morphology import clean_mask
 from dynremove.refine.select import (FOLLOWED, OUTSIDE, OWN_MOVER, PARTIAL_KEPT, STILL_LINGERING,
                                      Selection, kept_pieces, median_parallax_px, select_fill,
                                      treated_as_3d, unconfirmed_fill)
+from dynremove.refine.shade import apply_offset, relight_shade
 from dynremove.refine.upsample import full_resolution
 
 Progress = Callable[[str, float], None]
@@ -848,6 +850,19 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                     valid_src[k] &= ~clip
         selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=valid_src,
                                 flows=st.Nf_flow, no_fill=gray_apart[srcs])
+        shade = relight_shade(selection.clean, st.src_img, selection.fields,
+                              selection.replaced, reach_px=params.select_shade_px,
+                              min_dl=params.select_shade_de, tau=params.select_tau,
+                              valid=valid_src, no_fill=gray_apart[srcs])
+        if shade is not None:
+            selection.clean = apply_offset(selection.clean, shade.offset, shade.relit)
+            selection.relit, selection.relight = shade.relit, shade.offset
+            # a pixel the fill's blend had already moved, relit further: ΔE tau or more
+            # from the reference joins the dynamic map, as the fill's own writes do
+            ys, xs = np.nonzero(shade.relit & ~selection.replaced)
+            moved = delta_e(features.to_lab(selection.clean[ys, xs][None]),
+                            features.to_lab(ref_img[ys, xs][None]))[0] >= params.select_tau
+            selection.replaced[ys[moved], xs[moved]] = True
         clean = selection.clean
         dyn = stages["select"] = selection.replaced
     elif params.fuse:
@@ -916,6 +931,16 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "that saw the background is enough), --select-minority 0 the whole step"
                    if len(srcs) == 2 and params.select_minority_one else
                    "; --select-minority 0 turns this step off"))
+            warnings.warn(msgs[-1], Note, stacklevel=2)
+    if selection is not None and selection.relit is not None:
+        n_rl = int((selection.relit & ~dyn).sum())
+        if n_rl >= 5e-4 * dyn.size:
+            msgs.append(f"{n_rl} px beside the removed movers ({_where(selection.relit & ~dyn)}) "
+                        "were a faint shade that the other photos see lit (a soft cast "
+                        f"shadow: darker by {params.select_shade_de:g} CIE L* or more, less "
+                        f"than ΔE {params.select_tau:g} in all): relit to their light, with "
+                        "the reference's own texture, and left out of the mask "
+                        "(--select-shade-de 0 turns this off)")
             warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and selection.blur_sigma is not None and selection.blur_sigma.any():
         # (the fill blurred to the reference's sharpness: said, so that a soft fill
@@ -1165,7 +1190,8 @@ def full_resolution_output(result: Result, full_images: Sequence[np.ndarray]
 
     ``full_images``: every image of the set at full resolution, in the order the
     run was given them (the run itself used smaller copies). Pixels outside the
-    replaced region are the full-resolution reference's, byte for byte
+    replaced region and the relit shade (``Selection.relit``: changed by less than
+    ``select_tau``) are the full-resolution reference's, byte for byte
     (``refine.upsample.full_resolution``). Raises InputError when they are not
     (H, W, 3) uint8 images of one size with the analysed images' aspect, or too few.
     """

@@ -109,6 +109,7 @@ def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
                    for name, ent in (("kept as static 3-D", P.RESULT_EXPLAINED),
                                      ("lingering mover", P.RESULT_LINGERING),
                                      ("inpainted", P.RESULT_INPAINTED),
+                                     ("faint shade relit", P.RESULT_RELIT),
                                      ("decided with its region", P.RESULT_COMPLETED))],
                  grid_columns=2, name="fill decisions"),
         name="more maps",

@@ -584,7 +584,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     best ΔE × DE_SCALE and where it lies in the source × XY_SCALE, DE_NONE where not
     searched), ``data_cost`` and ``support`` (dicts of uint16 maps × DE_SCALE: what the graph
     cut weighed, ``Selection.data_cost`` and ``Selection.support``),
-    ``inpainted`` (no source free there: OpenCV Telea), ``followed`` (per source, in
+    ``inpainted`` (no source free there: OpenCV Telea), ``relit`` and ``relight_l`` (a
+    faint shade beside the movers relit to the other photos' light, and the L* it
+    gained × DE_SCALE, DE_NONE elsewhere: ``shade.relight_shade``), ``followed`` (per source, in
     its own frame: where the flow followed the reference's mover into it), ``offset``
     ((H, W, 3) int16, B/G/R levels the blend added to the chosen source, 0 where it
     added none or no source filled; ``paths.RESULT_OFFSET``), ``fill_x``, ``fill_y``
@@ -596,7 +598,8 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     out = {}
     for key, rel in (("source", P.RESULT_SOURCE), ("explained", P.RESULT_EXPLAINED),
                      ("seams", P.RESULT_SEAMS), ("lingering", P.RESULT_LINGERING),
-                     ("completed", P.RESULT_COMPLETED), ("inpainted", P.RESULT_INPAINTED)):
+                     ("completed", P.RESULT_COMPLETED), ("inpainted", P.RESULT_INPAINTED),
+                     ("relit", P.RESULT_RELIT)):
         rows = _image_rows(store, p(rel), "SegmentationImage", index=None)
         if rows:
             out[key] = rows[0][1]
@@ -628,6 +631,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     rows = _image_rows(store, p(P.RESULT_REF_MOVER_P), "DepthImage", index=None)
     if rows:
         out["ref_mover_p"] = rows[0][1]
+    rows = _image_rows(store, p(P.RESULT_RELIGHT_L), "DepthImage", index=None)
+    if rows:
+        out["relight_l"] = rows[0][1]
     for key, rel, names in (("data_cost", P.RESULT_DATA_COST, ("reference", "best_source")),
                             ("support", P.RESULT_SUPPORT, ("reference", "sources"))):
         got = {n: rows[0][1] for n in names
@@ -804,6 +810,8 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.P_SCALE
         elif k in ("thresholds", "region_rule"):
             sel[k] = {n: (a[0] if isinstance(a, list) and a else a) for n, a in v.items()}
+        elif k == "relight_l":  # the CIE L* the relit shade gained here
+            sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.DE_SCALE
         elif k in ("fill_x", "fill_y"):  # where the chosen source was sampled
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.XY_SCALE
         elif k == "offset":  # B/G/R levels the blend added to the chosen source

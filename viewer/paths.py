@@ -135,6 +135,10 @@ RESULT_REGION_SHARE = "result/selection/region_share"
 RESULT_DATA_COST = "result/selection/data_cost"
 RESULT_SUPPORT = "result/selection/support"
 RESULT_INPAINTED = "result/selection/inpainted"  # no source free there: OpenCV inpainting
+# a faint shade beside the movers relit to the other photos' light (Selection.relit),
+# and the CIE L* it gained there (uint16, round(ΔL · DE_SCALE), DE_NONE where not relit)
+RESULT_RELIT = "result/selection/relit"
+RESULT_RELIGHT_L = "result/selection/relight_l"
 # what the blend added to the chosen source (Selection.offset), an RGB image of
 # OFFSET_ZERO + levels (clipped to 0..255): grey where it added nothing or no source filled
 RESULT_OFFSET = "result/selection/offset"

@@ -513,6 +513,16 @@ class RerunSink(StepColumns):
                 rr.SegmentationImage(
                 (np.asarray(sel.no_source, bool) & np.asarray(result.dynamic, bool)
                  ).astype(np.uint8)), static=True)
+            if getattr(sel, "relit", None) is not None:
+                relit = np.asarray(sel.relit, bool)
+                self.rec.log(self.p(P.RESULT_RELIT), rr.AnnotationContext(
+                    [(0, "", (0, 0, 0, 0)),
+                     (1, "a faint shade relit to the other photos' light", (255, 230, 120, 150))]),
+                    rr.SegmentationImage(relit.astype(np.uint8)), static=True)
+                gain = np.where(relit, np.asarray(sel.relight, np.float32)[..., 0], np.nan)
+                self.rec.log(self.p(P.RESULT_RELIGHT_L), rr.DepthImage(
+                    _quantised(gain, P.DE_SCALE), meter=float(P.DE_SCALE),
+                    colormap="viridis", depth_range=(0.0, 10.0 * P.DE_SCALE)), static=True)
             if getattr(sel, "offset", None) is not None:
                 # what the blend added to the chosen source, as RGB around grey
                 off = np.nan_to_num(np.asarray(sel.offset, np.float32)[..., ::-1], nan=0.0)

@@ -507,6 +507,12 @@ def outcome_line(h: dict[str, Any]) -> str:
     sel = h.get("selection") or {}
     k = sel.get("source", 0)
     if not h.get("final_dynamic"):
+        if sel.get("relit"):
+            gain = sel.get("relight_l")
+            return ("kept (not in the final mask), relit: a faint shade that the other "
+                    "photos see lit, given their light"
+                    + (f" ({gain:+.1f} CIE L*)" if gain is not None else "")
+                    + " with this photo's own texture (--select-shade-de)")
         if k > 0 and not sel.get("inpainted"):
             # the fill's margin or a seam: a source's value written within ΔE
             # select_tau of the reference's, so not counted in the final mask
@@ -789,6 +795,10 @@ def plain_words(h: dict[str, Any]) -> str | None:
         if k > 0:
             return f"{why}; the clean photo shows {_src_name(h, k - 1)}'s view of the spot"
         return why
+    if sel.get("relit"):
+        return ("it is not counted as moving, but it lies in a faint shade beside what was "
+                "removed (a soft shadow it cast, most likely), which the other photos show "
+                "lit: the clean photo keeps this photo's texture there and takes their light")
     if k > 0 and not sel.get("inpainted"):
         return (f"it is not counted as moving, but it lies on the edge of a filled region, "
                 f"where the clean photo blends in {_src_name(h, k - 1)}'s view of the spot, "

@@ -207,6 +207,12 @@ class Selection:
     # own steps); the blend's pixels that may show a mover (``offset_blend``'s
     # ``suspect``), at full size too (``upsample.full_resolution``)
     mask: npt.NDArray[np.bool_] | None = None
+    # a faint shade beside the replaced region relit to the sources' light
+    # (``shade.relight_shade``): (H, W) bool, the pixels changed (beside ``replaced``,
+    # and inside it where the shade runs into the fill); (H, W, 3) float32, the CIE Lab
+    # offset added there (0 elsewhere). None: nothing relit
+    relit: npt.NDArray[np.bool_] | None = None
+    relight: npt.NDArray[np.float32] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen",

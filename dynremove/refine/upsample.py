@@ -12,6 +12,8 @@ photos are 12 MP. Only the replaced pixels are computed again at full size:
   selection combined there (``Selection.members``, upsampled), at the chosen
   source's level (``select.mixture_detail``), then the exposure-matching offset
   of ``montage.offset_blend`` at full size;
+* a faint shade the working size relit (``shade.relight_shade``) takes its Lab
+  offset, upsampled;
 * every other pixel is the input's, byte for byte.
 
 Without a selection (the paper preset, or ``fill="median"``), the working-size
@@ -42,6 +44,7 @@ from dynremove.refine.montage import (BAND_PX, BAND_SIGMA_PX, DECAY_PX, LIGHT_DE
                                       ring_offset)
 from dynremove.refine.morphology import dilate_disc, grow_replaced
 from dynremove.refine.select import Selection, member_median, mixture_detail
+from dynremove.refine.shade import apply_offset
 
 # offset_blend's max_de: ring pixels departing farther (CIE76) from the ring's
 # median difference do not set the offset
@@ -86,7 +89,8 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     Returns
     -------
     clean : (H, W, 3) uint8 ndarray
-        Equal to ``reference`` outside the replaced region.
+        Equal to ``reference`` outside the replaced region and the relit shade
+        (``Selection.relit``, upsampled).
     dynamic : (H, W) bool ndarray
         ``dynamic`` upsampled, plus every recomputed pixel whose colour moved by
         ``tau`` or more (the full-size fill reaches one working pixel further, and
@@ -185,7 +189,29 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     clean[qy + y0, qx + x0] = out
     moved = delta_e(_lab(out), _lab(reference[qy + y0, qx + x0])) >= tau
     dyn_full[qy[moved] + y0, qx[moved] + x0] = True
+    if selection.relit is not None and selection.relight is not None:
+        _relight(clean, selection)
     return clean, dyn_full
+
+
+def _relight(clean: np.ndarray, selection: Selection) -> None:
+    """The working size's relit shade (``shade.relight_shade``) at full size, in place:
+    its Lab offset upsampled (bilinear: it is smooth) and added at its pixels,
+    upsampled (inside the replaced region too, where the fill was relit)."""
+    Hf, Wf = clean.shape[:2]
+    h, w = selection.relit.shape
+    relit = upsample_mask(selection.relit, (Wf, Hf))
+    if not relit.any():
+        return
+    rows, cols = np.flatnonzero(relit.any(1)), np.flatnonzero(relit.any(0))
+    y0, y1, x0, x1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    # the box's rows and columns in working coordinates (pixel centres), sampled
+    ys = ((np.arange(y0, y1) + 0.5) * h / Hf - 0.5).astype(np.float32)
+    xs = ((np.arange(x0, x1) + 0.5) * w / Wf - 0.5).astype(np.float32)
+    mx, my = np.meshgrid(xs, ys)
+    off = cv2.remap(selection.relight, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    box = (slice(y0, y1), slice(x0, x1))
+    clean[box] = apply_offset(clean[box], off, relit[box])
 
 
 def _sample_sources(reference: np.ndarray, sources: list[np.ndarray], selection: Selection,
