@@ -26,21 +26,51 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
-def _numba_cache_dir(package_dir: str) -> str | None:
-    """Where numba should cache the compiled kernels when it cannot beside the source.
+def _private_dir(d: str) -> bool:
+    """Whether folder ``d`` exists (created 0700 if not) as a real folder of this user
+    that no one else can write to. numba loads its cache files with pickle: a folder
+    in the shared temporary directory that another user made first (or a link) would
+    let them run code as this user (a fresh-user trial)."""
+    import stat
 
-    numba caches in the ``__pycache__`` folders next to the code; a user who cannot
-    write there (a system-wide install, a shared checkout) got a traceback from any
-    command, ``--version`` too: "cannot cache function …: no locator available". Then
-    the cache goes to ``$XDG_CACHE_HOME/dynremove/numba`` (``~/.cache`` by default),
-    else to a per-user folder in the temporary directory. None where the source's
-    folder is writable (numba's own choice stands) or ``NUMBA_CACHE_DIR`` is set.
+    try:
+        os.makedirs(d, mode=0o700, exist_ok=True)
+        st = os.lstat(d)
+    except OSError:
+        return False
+    if not stat.S_ISDIR(st.st_mode) or not os.access(d, os.W_OK):
+        return False
+    if hasattr(os, "getuid") and (st.st_uid != os.getuid() or st.st_mode & 0o022):
+        return False
+    return True
+
+
+def _installed(package_dir: str) -> bool:
+    """Whether the package runs from an installed copy (site-packages), not a checkout."""
+    parts = os.path.normpath(package_dir).split(os.sep)
+    return "site-packages" in parts or "dist-packages" in parts
+
+
+def _numba_cache_dir(package_dir: str) -> str | None:
+    """Where numba should cache the compiled kernels when not beside the source.
+
+    numba caches in the ``__pycache__`` folders next to the code. An installed copy
+    keeps its folders clean (``pip uninstall`` does not know numba's files: a trial
+    found 109 of them left, 5.8 MB, and ``import dynremove`` still "working"), and a
+    user who cannot write there (a system-wide install, a shared checkout) got a
+    traceback from any command. Then the cache goes to
+    ``$XDG_CACHE_HOME/dynremove/numba`` (``~/.cache`` by default), else to a per-user
+    folder in the temporary directory, each only where it is this user's own and
+    private (``_private_dir``), else to a new private temporary folder (compiled
+    anew each run). None where a checkout's source folder is writable (numba's own
+    choice stands) or ``NUMBA_CACHE_DIR`` is set.
     """
     if os.environ.get("NUMBA_CACHE_DIR"):
         return None
     kernels = os.path.join(package_dir, "method", "scan")
     pycache = os.path.join(kernels, "__pycache__")
-    if os.access(pycache if os.path.isdir(pycache) else kernels, os.W_OK):
+    if not _installed(package_dir) and os.access(pycache if os.path.isdir(pycache)
+                                                 else kernels, os.W_OK):
         return None
     import tempfile
 
@@ -48,13 +78,12 @@ def _numba_cache_dir(package_dir: str) -> str | None:
     uid = os.getuid() if hasattr(os, "getuid") else os.getpid()
     for d in (os.path.join(home, "dynremove", "numba"),
               os.path.join(tempfile.gettempdir(), f"dynremove-numba-{uid}")):
-        try:
-            os.makedirs(d, exist_ok=True)
-        except OSError:
-            continue
-        if os.access(d, os.W_OK):
+        if _private_dir(d):
             return d
-    return None
+    try:
+        return tempfile.mkdtemp(prefix="dynremove-numba-")
+    except OSError:
+        return None
 
 
 _cache = _numba_cache_dir(os.path.dirname(os.path.abspath(__file__)))

@@ -18,6 +18,7 @@ import signal
 import subprocess
 import sys
 import os
+import tempfile
 import textwrap
 import time
 import traceback
@@ -680,6 +681,10 @@ def cmd_bench(args: argparse.Namespace) -> int:
         raise InputError(f"bench needs --size of at least 64x48 and --views >= 2, got "
                          f"{args.size} and {args.views}")
     RerunSink = args.viewer("sink").RerunSink
+    if args.json:
+        # before the bench: a trial's read-only folder ran the whole bench, then gave an
+        # internal error writing out/bench.json
+        io.check_out_file(args.json, "--json")
 
     with warnings.catch_warnings():
         # the synthetic scene's run notes (a few pixels inpainted) are not what a
@@ -1266,12 +1271,23 @@ def _note_compile(args: argparse.Namespace) -> None:
     record = bool(getattr(args, "record", None))
     if kernels_cached(record):
         return
+    # where the cache goes (a trial on a read-only install saw "once per install" once
+    # per user, and after each reboot where it fell back to the temporary folder)
+    import dynremove
+
+    cache = os.environ.get("NUMBA_CACHE_DIR")
+    where = f"numba's cache in {cache}" if cache else "numba's cache"
+    ours = dynremove._cache  # the folder dynremove chose, None where numba's or the user's
+    temp = ours is not None and Path(ours).resolve().is_relative_to(
+        Path(tempfile.gettempdir()).resolve())
     if record and kernels_cached(False):  # only the recorded scan's own kernels
         _note(args, "compiling the scan kernels a recorded run adds (once per install, a "
-                    "few seconds; later recorded runs reuse numba's cache)")
+                    f"few seconds; later recorded runs reuse {where})")
     else:
         _note(args, "compiling the scan kernels (once per install, about 30-60 s; later "
-                    "runs reuse numba's cache)")
+                    f"runs reuse {where}"
+                    + (", a temporary folder: your home's cache folder could not be used"
+                       if temp else "") + ")")
 
 
 def _line(args: argparse.Namespace, msg: str, bar: ProgressBar | None) -> None:

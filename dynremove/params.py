@@ -305,7 +305,11 @@ def field_docs() -> dict[str, str]:
     from pathlib import Path
 
     docs = {}
-    for line in Path(__file__).read_text(encoding="utf-8").splitlines():
+    try:
+        text = Path(__file__).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):  # an install of .pyc files only (a trial's)
+        return docs
+    for line in text.splitlines():
         m = re.match(r"^    (\w+): [^=]+=[^#]*#\s*(.+)$", line)
         if m and m.group(1) not in docs:
             docs[m.group(1)] = m.group(2).strip()

@@ -145,6 +145,26 @@ def test_bench_passes_its_parameters_to_the_run_it_times(name):
     assert param_argv(base, name) == ["--preset", name]
 
 
+def test_bench_checks_its_json_before_the_bench_and_runs_small_views(tmp_path, capsys):
+    """A trial's read-only folder ran the whole bench, then gave an internal error
+    writing out/bench.json: the --json file is checked first (exit 2, at once). And a
+    small --size that the bench accepts (200x150) cut an empty crop for its kernel
+    comparison: an internal error after the whole bench."""
+    import time
+
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    t = time.perf_counter()
+    rc = main(["bench", "--json", str(blocker / "bench.json"), "-q"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "cannot create its folder" in err and "a_file is a file" in err, err
+    assert time.perf_counter() - t < 5.0  # (the bench itself takes tens of seconds)
+    rc = main(["bench", "--size", "200x150", "--views", "3", "-q", "--json",
+               str(tmp_path / "b.json")])
+    assert rc == 0, capsys.readouterr().err
+    assert json.loads((tmp_path / "b.json").read_text())["kernel_vs_reference"]["numba_s"] > 0
+
+
 # --- the reference: named at the start, 0-based, negative from the end ----------------
 @pytest.mark.parametrize("ref, line", [
     (None, "reference: view2.png (index 2 of 0..3, the later of the two middle images; "

@@ -923,3 +923,25 @@ def test_a_ctrl_c_stops_the_viewer_and_exits_130(fabricated, monkeypatch, capsys
                  "--web-port", str(_free_port())])
     err = capsys.readouterr().err
     assert code == 130 and "dynremove: interrupted" in err and len(stopped) == 1
+
+
+def test_a_missing_package_is_not_read_as_a_cut_recording():
+    """Without datafusion (rerun-sdk[catalog]'s), every read of a recording failed and
+    was taken for an absent entity: a trial's intact recording was "cut short". The
+    missing package is named instead."""
+    from dynremove.errors import InputError
+    from viewer.inspect import _arrow
+
+    class Store:
+        def reader(self, **kw):
+            raise ModuleNotFoundError("No module named 'datafusion'", name="datafusion")
+
+    with pytest.raises(InputError, match=r"needs datafusion, which is not installed: "
+                                         r"pip install 'rerun-sdk\[catalog\]"):
+        _arrow(Store(), "/result/clean")
+
+    class Empty:
+        def reader(self, **kw):
+            raise ValueError("no such entity")
+
+    assert _arrow(Empty(), "/result/clean") is None  # absent: None, as before

@@ -301,6 +301,11 @@ def load_store(path: str | Path):
 def _arrow(store, entity: str, *, index: str | None = "step"):
     try:
         t = store.reader(index=index, contents=entity).to_arrow_table()
+    except ImportError as e:
+        # a missing package is not a missing entity (a trial without datafusion was
+        # told its intact recording had been cut short)
+        raise InputError(f"reading recordings needs {e.name or 'a package'}, which is not "
+                         "installed: pip install 'rerun-sdk[catalog]==0.41.*'") from None
     except Exception:  # entity absent from this recording
         return None
     if index is not None and t.num_rows:
