@@ -28,7 +28,6 @@ light outline).
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass
 
 import cv2
@@ -137,14 +136,24 @@ def relight_shade(clean: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
         lights.append(coarse_k)
     if len(lights) < 2:
         return None
-    lights = np.stack(lights)
-    with warnings.catch_warnings():  # (NumPy's "All-NaN slice": no source sees it)
-        warnings.simplefilter("ignore", RuntimeWarning)
-        light = np.nanmedian(lights, axis=0)
-    finite = np.isfinite(light[..., 0])
-    light = np.where(finite[..., None], light, coarse_c)
-    agree = (np.sqrt(((lights - light) ** 2).sum(-1)) < min_dl).sum(0)  # NaN: no
-    need = max(2, int(np.ceil(0.5 * len(lights))))
+    # the sources' median light at the zone's pixels (np.nanmedian's values, from one
+    # sort: a pixel's NaNs are all its channels', sorted last; 5x faster than nanmedian)
+    zy, zx = np.nonzero(zone)
+    vals = np.stack([c[zy, zx] for c in lights])  # (S', n, 3)
+    del lights
+    cnt = np.isfinite(vals[..., 0]).sum(0)
+    srt = np.sort(vals, axis=0)
+    pick = np.arange(len(zy))
+    med = 0.5 * (srt[np.maximum(cnt - 1, 0) // 2, pick] + srt[cnt // 2, pick])
+    seen_z = cnt > 0
+    finite = np.zeros(rep.shape, bool)
+    finite[zy[seen_z], zx[seen_z]] = True
+    light = coarse_c.copy()
+    light[zy[seen_z], zx[seen_z]] = med[seen_z]
+    agree = np.zeros(rep.shape, np.int64)
+    # (a source that does not see the pixel, NaN, never agrees)
+    agree[zy, zx] = (np.sqrt(((vals - light[zy, zx]) ** 2).sum(-1)) < min_dl).sum(0)
+    need = max(2, int(np.ceil(0.5 * len(vals))))
     diff = light - coarse_c
     dl = diff[..., 0]
     dab = np.sqrt((diff[..., 1:] ** 2).sum(-1))
