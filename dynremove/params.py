@@ -119,7 +119,8 @@ class Params:
     select_epipolar_px: float = 2.0  # a flow match explaining the reference is this near its line (analysis px)
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (analysis px; 0 = off)
-    select_shade_de: float = 3.0  # a faint shade beside a removed mover (its soft cast shadow), darker than the light the other photos agree on by this much or more in CIE L* (at a 4 px scale) but under --select-tau (a deeper one is replaced), is relit to their light, keeping the reference's texture (0 = off)
+    select_shade_de: float = 3.0  # a faint shade beside a removed mover (its soft cast shadow), darker than the light the other photos agree on by this much or more in CIE L* (at a 4 px scale) but under --select-shade-max-de, is relit to their light, keeping the reference's texture (0 = off)
+    select_shade_max_de: float = 15.0  # a shade that differs from the other photos' light by this CIE76 dE or more (at a 4 px scale) is too deep to relight: a hard shadow, whose relit rim would show as an outline (pixels relit by --select-tau or more join the mask)
     select_shade_px: int = 120  # how far from the replaced region such a shade is looked for (analysis px; at most the replaced region's own area is relit)
     select_grow_alone: bool = True  # L also grows where no source agrees with the reference (at least two see it, even if they disagree among themselves) and the reference shows the colours of L's movers
     select_parallax_px: float = 8.0  # the set's median measured parallax (analysis px; per source the 90th percentile of the keypoint matches' distance from one plane) above which it is treated as 3-D (see also --select-parallax-p95-px): colour consensus may keep the reference in L, the epipolar search and --snap-veto run
@@ -191,6 +192,7 @@ class Params:
         if self.select_minority != 0 and not self.select_minority >= 1:
             raise InputError(f"select_minority must be 0 (off) or >= 1, got {self.select_minority}")
         for name in ("select_grow_px", "select_shade_de", "select_shade_px",
+                     "select_shade_max_de",
                      "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
                      "select_parallax_px", "select_parallax_p95_px", "select_margin_px",
                      "select_search_de",

@@ -852,7 +852,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                                 flows=st.Nf_flow, no_fill=gray_apart[srcs])
         shade = relight_shade(selection.clean, st.src_img, selection.fields,
                               selection.replaced, reach_px=params.select_shade_px,
-                              min_dl=params.select_shade_de, tau=params.select_tau,
+                              min_dl=params.select_shade_de,
+                              max_de=params.select_shade_max_de,
                               valid=valid_src, no_fill=gray_apart[srcs])
         if shade is not None:
             selection.clean = apply_offset(selection.clean, shade.offset, shade.relit)
@@ -938,8 +939,9 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             msgs.append(f"{n_rl} px beside the removed movers ({_where(selection.relit & ~dyn)}) "
                         "were a faint shade that the other photos see lit (a soft cast "
                         f"shadow: darker by {params.select_shade_de:g} CIE L* or more, less "
-                        f"than ΔE {params.select_tau:g} in all): relit to their light, with "
-                        "the reference's own texture, and left out of the mask "
+                        f"than ΔE {params.select_shade_max_de:g} in all): relit to their "
+                        "light, with the reference's own texture; the mask holds only those "
+                        f"changed by ΔE {params.select_tau:g} or more "
                         "(--select-shade-de 0 turns this off)")
             warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and selection.blur_sigma is not None and selection.blur_sigma.any():
@@ -1255,9 +1257,12 @@ def _selection_coverage(cov: np.ndarray, dynamic: np.ndarray, selection: Selecti
     pixels kept in the output), the number of sources the output was made from
     (``Selection.members``: the chosen source and the free ones whose sample through
     their field agrees with it; their median is the output), and 0 exactly where no
-    source showed the background free (``Selection.no_source``: inpainted)."""
+    source showed the background free (``Selection.no_source``: inpainted). A pixel
+    of ``dynamic`` only relit (``Selection.relit``, no source filled it) keeps ``cov``."""
     if selection.members is None or not dynamic.any():
         return cov
+    if selection.relit is not None:  # relit only (no source filled it): not "inpainted"
+        dynamic = dynamic & ~(selection.relit & (selection.label < 1) & ~selection.no_source)
     n = np.minimum(selection.members.sum(0), 255).astype(np.uint8)
     return np.where(dynamic, np.where(selection.no_source, 0, n), cov).astype(cov.dtype)
 
