@@ -26,11 +26,16 @@ larger than its mover), and none of it within 2σ of a pixel that differs by
 blurred rim would come out as a light outline); inside the replaced region
 where it runs into it (the fill's blend took the shade's light from the
 region's ring); and over small holes in it (a knot in the wood), with the
-offset around them. The offset is feathered (σ 2 px). The caller puts a pixel
+offset around them. Each part is kept only where the clean photo is darker
+there than on the ground just around it, by 0.8 × ``select_shade_de``, and
+steps down there against the sources too, and is relit no lighter than that
+ground (``_as_deep_as_its_ring``: a review of real bursts found whiter patches
+on white paper and pale blotches in fills without it). The offset is feathered
+(σ 2 px). The caller puts a pixel
 relit by ``select_tau`` or more into the dynamic map. Measured (session 68):
 on ``bursts/sanitizer`` the bottle's shadow arms go; on the 12 composites (no
-shadows) the leftover falls 15.29 → 15.01 % (movers' faint fringes relit),
-damage unchanged; DAVIS J 0.6302 → 0.6300.
+shadows) the leftover falls 15.29 → 15.17 % (movers' faint fringes relit),
+damage and DAVIS J unchanged.
 """
 
 from __future__ import annotations
@@ -50,6 +55,8 @@ from dynremove.refine.select import _valid_at, capped_growth
 SHADE_SIGMA_PX = 4.0  # the coarse scale of light (analysis px): texture a few px off averages out
 _RING_PX = 60  # the band beyond the reach whose median sets each source's level
 _FEATHER_PX = 2.0  # the relit offset's soft edge (σ, analysis px)
+# the ground around a part of the shade (analysis px from it): past its penumbra
+_RING_IN, _RING_OUT = 5, 13
 
 
 @dataclass
@@ -180,6 +187,9 @@ def relight_shade(clean: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
     n, comp = cv2.connectedComponents((shade & rep).view(np.uint8), connectivity=8)
     touch = np.unique(comp[dilate_disc(outside, 2) & rep & shade])
     shade = outside | (np.isin(comp, touch[touch > 0]) & rep)
+    diff, shade = _as_deep_as_its_ring(coarse_c[..., 0], diff, shade, rep, min_dl)
+    if not shade.any():
+        return None
     # a hole in the shade (a knot in the wood, a pixel the sources disagree on) takes
     # the offset around it: left out, it stayed a dark spot in the relit shade
     holes = fill_holes(shade | rep) & ~(shade | rep)
@@ -201,6 +211,39 @@ def relight_shade(clean: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
     relit = np.zeros((H, W), bool)
     relit[box] = relit_b
     return Relit(offset=offset, relit=relit)
+
+
+def _as_deep_as_its_ring(L: np.ndarray, diff: np.ndarray, shade: np.ndarray,
+                         rep: np.ndarray, min_dl: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each part of ``shade`` kept only where the clean photo is darker there than just
+    around it, and relit to that level at most: ``diff`` scaled per part so that its
+    median L* gain is no more than the ring's (5-13 px out, off the shade and the
+    replaced region ``rep``) median lightness minus the part's. A cast shadow darkens
+    the ground below the ground around it; a region the sources show lighter for
+    other reasons (their exposure over one area, a hillside's haze, glare in a fill)
+    does not, and relit it came out lighter than its surroundings (a fresh-user
+    review: a whiter patch on white paper, pale blotches in tim6's fill, DAVIS goat's
+    hillside 3 L* lighter over 37 000 px). ``L`` (h, w) the coarse clean L*,
+    ``diff`` (h, w, 3) the sources' light minus it; returns (diff, shade)."""
+    n, comp, stats, _ = cv2.connectedComponentsWithStats(shade.view(np.uint8), connectivity=8)
+    scale = np.zeros(n, np.float32)
+    h, w = shade.shape
+    for c in range(1, n):
+        x, y, bw, bh = stats[c, :4]
+        box = (slice(max(y - _RING_OUT - 1, 0), min(y + bh + _RING_OUT + 1, h)),
+               slice(max(x - _RING_OUT - 1, 0), min(x + bw + _RING_OUT + 1, w)))
+        part = comp[box] == c
+        ring = (dilate_disc(part, _RING_OUT) & ~dilate_disc(part, _RING_IN) & ~shade[box]
+                & ~rep[box])
+        if ring.sum() < 10:
+            continue
+        darker = float(np.median(L[box][ring]) - np.median(L[box][part]))
+        gain = float(np.median(diff[box][part][:, 0]))
+        step = gain - float(np.median(diff[box][ring][:, 0]))
+        if darker >= 0.8 * min_dl and step >= 0.8 * min_dl and gain > 0:
+            scale[c] = min(1.0, darker / gain)
+    factor = scale[comp]
+    return diff * factor[..., None], factor > 0
 
 
 def apply_offset(image: npt.NDArray[np.uint8], offset: npt.NDArray[np.float32],
