@@ -130,11 +130,14 @@ def _throughput(res: Any, iset: Any) -> dict:
             "working_mpx": round(h * w / 1e6, 3), "peak_rss_mb": round(own_peak_rss_mb(), 1)}
 
 
-def _relit_outside(res) -> int:
-    """The pixels ``shade.relight_shade`` changed outside ``res.dynamic`` (0 without)."""
+def _relit_outside(res, *, inside: bool = False) -> int:
+    """The pixels ``shade.relight_shade`` changed outside ``res.dynamic`` (inside it with
+    ``inside``; 0 without a relit shade)."""
     sel = getattr(res, "selection", None)
     relit = getattr(sel, "relit", None)
-    return 0 if relit is None else int((relit & ~res.dynamic).sum())
+    if relit is None:
+        return 0
+    return int((relit & (res.dynamic if inside else ~res.dynamic)).sum())
 
 
 def _scene_entry(res) -> dict:
@@ -198,6 +201,8 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
         # a faint shade beside the movers relit to the other photos' light, outside the
         # mask (at the analysis size; changed by under --select-tau)
         "relit_px": _relit_outside(res),
+        # ... and inside it, where the shade runs into the fill
+        "relit_in_mask_px": _relit_outside(res, inside=True),
         # coverage.png holds count × 255 / sources (uint8, truncated)
         "coverage_png": {"sources": n_src, "value_per_source": round(255.0 / n_src, 4)},
         "geometry": res.geometry,

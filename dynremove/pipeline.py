@@ -935,14 +935,19 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and selection.relit is not None:
         n_rl = int((selection.relit & ~dyn).sum())
+        n_in = int((selection.relit & dyn).sum())
         if n_rl >= 5e-4 * dyn.size:
+            # (a review: the fill's pixels it relit were neither counted nor said)
             msgs.append(f"{n_rl} px beside the removed movers ({_where(selection.relit & ~dyn)}) "
                         "were a faint shade that the other photos see lit (a soft cast "
-                        f"shadow: darker by {params.select_shade_de:g} CIE L* or more, less "
-                        f"than ΔE {params.select_shade_max_de:g} in all): relit to their "
-                        "light, with the reference's own texture; the mask holds only those "
-                        f"changed by ΔE {params.select_tau:g} or more "
-                        "(--select-shade-de 0 turns this off)")
+                        f"shadow: darker than their light by {params.select_shade_de:g} CIE L* "
+                        "or more, and than the ground around it, and under ΔE "
+                        f"{params.select_shade_max_de:g} from their light): relit to it, with "
+                        "the reference's own texture"
+                        + (f", as were {n_in} px of the fill where the shade runs into it"
+                           if n_in else "")
+                        + f"; the mask holds only those changed by ΔE {params.select_tau:g} "
+                        "or more (--select-shade-de 0 turns this off)")
             warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and selection.blur_sigma is not None and selection.blur_sigma.any():
         # (the fill blurred to the reference's sharpness: said, so that a soft fill
@@ -1109,8 +1114,12 @@ def _where(mask: np.ndarray, n: int = 3) -> str:
     if k <= 1:
         return "nowhere"
     order = 1 + np.argsort(-stats[1:, cv2.CC_STAT_AREA], kind="stable")
+    # a part under 2 % of the largest is counted, not boxed (a review read
+    # "x 426–426, y 838–838" beside a 5 000 px part)
+    big = stats[order[0], cv2.CC_STAT_AREA]
+    order = [i for i in order[:n] if i == order[0] or stats[i, cv2.CC_STAT_AREA] >= 0.02 * big]
     boxes = [f"x {x}–{x + w - 1}, y {y}–{y + h - 1}" for x, y, w, h, _ in
-             (stats[i] for i in order[:n])]
+             (stats[i] for i in order)]
     more = k - 1 - len(boxes)
     return "at " + "; ".join(boxes) + (f"; and {more} smaller part{'s' * (more > 1)}"
                                        if more > 0 else "")

@@ -1909,6 +1909,8 @@ def test_where_names_the_largest_parts_first():
     m[30:45, 72:75] = True  # 2 px from it: the same part
     m[2, 2] = True
     assert _where(m, n=2) == "at x 40–74, y 30–44; x 5–14, y 10–19; and 1 smaller part"
+    # a part under 2 % of the largest is counted, not boxed ("x 2–2, y 2–2")
+    assert _where(m, n=3) == "at x 40–74, y 30–44; x 5–14, y 10–19; and 1 smaller part"
     assert _where(np.zeros((5, 5), bool)) == "nowhere"
 
 
