@@ -131,13 +131,15 @@ def _throughput(res: Any, iset: Any) -> dict:
 
 
 def _relit_outside(res, *, inside: bool = False) -> int:
-    """The pixels ``shade.relight_shade`` changed outside ``res.dynamic`` (inside it with
-    ``inside``; 0 without a relit shade)."""
+    """The analysis pixels ``shade.relight_shade`` changed outside the fill's dynamic
+    map (inside it with ``inside``; 0 without a relit shade). At the analysis size,
+    as the note counts them: ``res`` may hold the full-size outputs by now."""
     sel = getattr(res, "selection", None)
     relit = getattr(sel, "relit", None)
     if relit is None:
         return 0
-    return int((relit & (res.dynamic if inside else ~res.dynamic)).sum())
+    dyn = sel.replaced
+    return int((relit & (dyn if inside else ~dyn)).sum())
 
 
 def _scene_entry(res) -> dict:

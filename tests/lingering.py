@@ -68,3 +68,21 @@ def with_cast_shadow(sc, linger, *, dx=30, dy=20, factor=0.7):
         s &= ~(m if k == ref else warp_mover(sc, ref, k)[1])
         out[k][s] = (out[k][s] * factor).astype(np.uint8)
     return out, shadow
+
+
+def with_faint_shadow(sc, *, darken=0.12, dx=30, dy=20):
+    """The reference's mover casts a soft shadow on the ground beside it, in the
+    reference only: its mask shifted by (dx, dy) px, blurred (σ 2 px), darkens the
+    ground by ``darken`` at its core (12 %: about 4-6 CIE L* on the scene's ground,
+    under select_tau). Returns the images, the shadow's mask and its core (where
+    the blurred mask is over 0.9)."""
+    ref = sc.ref_index
+    m = sc.masks[ref]
+    s = np.zeros_like(m)
+    s[dy:, dx:] = m[:-dy, :-dx]
+    s = cv2.erode(s.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~m
+    soft = cv2.GaussianBlur(s.astype(np.float32), (0, 0), 2.0)
+    ims = [im.copy() for im in sc.images]
+    gain = 1.0 - darken * soft
+    ims[ref] = np.clip(ims[ref] * gain[..., None] + 0.5, 0, 255).astype(np.uint8)
+    return ims, s, s & (soft > 0.9)

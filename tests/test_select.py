@@ -471,18 +471,12 @@ def test_a_faint_cast_shadow_is_relit_to_the_other_photos_light():
     (``shade.relight_shade``): the reference keeps its texture and takes the
     light the sources agree on. The mask stays the mover's, and no pixel outside
     it moves by select_tau or more."""
+    from lingering import with_faint_shadow
+
     sc = synth.make_scene(seed=0, n_views=6, size=(360, 640))
     ref = sc.ref_index
-    m = sc.masks[ref]
-    s = np.zeros_like(m)
-    s[20:, 30:] = m[:-20, :-30]
-    s = cv2.erode(s.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~m
+    ims, s, core = with_faint_shadow(sc)  # soft-edged, 12 % darker at its core
     assert s.sum() > 500
-    # soft-edged, 12 % darker at its core (ΔL about 4-6 on the scene's ground)
-    gain = 1.0 - 0.12 * cv2.GaussianBlur(s.astype(np.float32), (0, 0), 2.0)
-    ims = [im.copy() for im in sc.images]
-    ims[ref] = np.clip(ims[ref] * gain[..., None] + 0.5, 0, 255).astype(np.uint8)
-    core = s & (cv2.GaussianBlur(s.astype(np.float32), (0, 0), 2.0) > 0.9)
     L_bg = _lab(sc.background)[..., 0]
     assert (L_bg[core] - _lab(ims[ref])[..., 0][core]).mean() > 3.5  # faint, not deep
 
