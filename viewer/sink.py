@@ -522,7 +522,7 @@ class RerunSink(StepColumns):
                 gain = np.where(relit, np.asarray(sel.relight, np.float32)[..., 0], np.nan)
                 self.rec.log(self.p(P.RESULT_RELIGHT_L), rr.DepthImage(
                     _quantised(gain, P.DE_SCALE), meter=float(P.DE_SCALE),
-                    colormap="viridis", depth_range=(0.0, 10.0 * P.DE_SCALE)), static=True)
+                    colormap="viridis", depth_range=(0.0, 15.0 * P.DE_SCALE)), static=True)
             if getattr(sel, "offset", None) is not None:
                 # what the blend added to the chosen source, as RGB around grey
                 off = np.nan_to_num(np.asarray(sel.offset, np.float32)[..., ::-1], nan=0.0)

@@ -48,7 +48,7 @@ import numpy as np
 import numpy.typing as npt
 
 from dynremove.refine.colour import delta_e
-from dynremove.refine.fields import sample_bilinear
+from dynremove.refine.fields import blurred_lab, sample_bilinear
 from dynremove.refine.morphology import dilate_disc, fill_holes
 from dynremove.refine.select import _valid_at, capped_growth
 
@@ -67,10 +67,6 @@ class Relit:
 
     offset: npt.NDArray[np.float32]
     relit: npt.NDArray[np.bool_]
-
-
-def _lab(bgr: npt.NDArray[np.uint8]) -> npt.NDArray[np.float32]:
-    return cv2.cvtColor(bgr.astype(np.float32) / 255.0, cv2.COLOR_BGR2Lab)
 
 
 def _coarse(lab: np.ndarray, weight: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
@@ -128,8 +124,8 @@ def relight_shade(clean: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
     box = (slice(y0, y1), slice(x0, x1))
     rep = replaced[box]
     zone = dilate_disc(rep, reach_px)
-    ring = dilate_disc(rep, reach_px + _RING_PX) & ~dilate_disc(rep, reach_px)
-    lab_c = _lab(clean[box])
+    ring = dilate_disc(rep, reach_px + _RING_PX) & ~zone
+    lab_c = blurred_lab(clean[box], 0.0)
     ones = np.ones(rep.shape, np.float32)
     coarse_c, _ = _coarse(lab_c, ones, sigma)
     lights = []
@@ -140,7 +136,7 @@ def relight_shade(clean: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8],
         warped, ins = sample_bilinear(sources[k], f)
         if valid is not None:
             ins &= _valid_at(valid[k], f)
-        coarse_k, den = _coarse(_lab(warped), ins.astype(np.float32), sigma)
+        coarse_k, den = _coarse(blurred_lab(warped, 0.0), ins.astype(np.float32), sigma)
         seen = ins & (den > 0.5)
         around = ring & seen
         if around.sum() < 200:
