@@ -127,6 +127,7 @@ class Params:
     select_parallax_p95_px: float = 150.0  # the set is 3-D too where the median over the sources of the 95th percentile of the keypoint matches' distance from one plane is over this (analysis px): 3-D structure holding 5-10 % of the matches (a porch before a façade) leaves the 90th percentile (--select-parallax-px) on the plane; a mover's matches that fit the epipolar geometry rarely reach this far (0 = off)
     select_search_de: float = 8.0  # in a 3-D set (see --select-parallax-px), a pixel of L is also static where a source shows its content on its epipolar line: the best match's CIE76 ΔE (mean over ~10 px, weighted: see --select-search-support-de) is under this (0 = off)
     select_search_support_de: float = 5.0  # the epipolar search's window weighs its cells by their colour's likeness to the centre's, exp(-dE / this) in CIE76 dE (adaptive support weights, Yoon & Kweon 2006), so that a thin structure is compared, not the background around it (0 = a plain box)
+    select_search_beyond_px: int = 40  # in a 3-D set, the epipolar search also sweeps the parallax beyond the flow's range that at least 2 keypoint matches (inliers of F) within this many px of a part of L show (a bollard near the camera: 200 px of parallax the flow does not follow); a match there counts where nothing in the flow's range matched and it costs under 1/1.5 of that range's best minus 2 dE (0 = off)
     select_search_unique: float = 1.5  # with three photos or two, where one source's epipolar match would keep a pixel of L as static while the other source found nothing, that match must be unique: the best match farther than 10 px along the line must cost more than this × its ΔE + 2 (a ratio test: a plain dark shirt matches all along a dark screen; 0 = off)
     select_search_against_de: float = 16.0  # in a 3-D set, where fewer than two sources found a pixel of L's content on their epipolar lines, another source that sees the pixel contradicts them when nothing on its own line comes within this CIE76 dE, even where its flow match has the movers' colours (a copy of the reference's mover would match on the line: a dark screen's edge beside a man's head is no copy of him; 0 = off: such a source never contradicts)
     select_minority: float = 4.0  # a mover that lingered: L takes regions where two or more sources agree against the reference and their colour is this many times more common than the reference's in the rest of the photo (0 = off, else >= 1)
@@ -197,6 +198,7 @@ class Params:
                      "select_parallax_px", "select_parallax_p95_px", "select_margin_px",
                      "select_search_de",
                      "select_search_support_de", "select_search_unique",
+                     "select_search_beyond_px",
                      "select_search_against_de", "select_complete_px",
                      "select_halo_px",
                      "select_misfit_levels"):

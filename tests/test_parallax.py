@@ -388,3 +388,83 @@ def test_the_compiled_step_costs_equal_their_numpy_form(rng):
     want = np.where(inside, d, _CAP).T
     assert inside.any() and not inside.all() and (d == _CAP).any() and (d < _CAP).any()
     assert np.array_equal(buf[py, px, :k].view(np.int32), want.astype(np.float32).view(np.int32))
+
+
+def _post_near_the_camera(n_keypoints: int):
+    """A striped wall 80 × 200 px (horizontal epipolar lines, x_s = x + μ, μ a ramp
+    of 0-20 px: the flow's range) with a red post 8 px wide at μ = 70, nearer the
+    camera than anything the flow followed, and a green patch that the source
+    never shows (a mover). The flow does not follow the post (its matches there
+    are the wall's). ``n_keypoints`` F-inlier keypoints at μ 68-72 lie beside the
+    post (the ground at its foot), the rest on the wall. Returns (lab_r, lab_s,
+    field, view, post, mover), both regions (H, W) bool."""
+    h, w = 80, 200
+    rng = np.random.default_rng(7)
+    xx = np.arange(w, dtype=np.float32)[None].repeat(h, 0)
+    grey = 128 + 90 * np.sign(np.sin(2 * np.pi * xx / 9)) + rng.normal(0, 10, (h, w))
+    grey = np.clip(cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 1.0), 0, 255)
+    grey = cv2.cvtColor(grey.astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    k = 20.0 / w
+    src = cv2.remap(grey, gx / (1 + k), gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+    ref = grey.copy()
+    post = np.zeros((h, w), bool)
+    post[10:70, 40:48] = True
+    ref[post] = _RED
+    src[10:70, 40 + 70:48 + 70] = _RED
+    mover = np.zeros((h, w), bool)
+    mover[20:50, 150:170] = True
+    ref[mover] = (40, 200, 40)
+    field = np.stack([gx * (1 + k), gy], -1).astype(np.float32)  # the wall's, everywhere
+    kx = rng.uniform(0, w - 1, 60).astype(np.float32)
+    ky = rng.uniform(0, h - 1, 60).astype(np.float32)
+    kp_r = np.stack([kx, ky], -1)
+    kp_s = np.stack([kx * (1 + k), ky], -1)
+    foot = np.stack([np.linspace(30, 58, n_keypoints), np.full(n_keypoints, 74.0)], -1)
+    kp_r = np.concatenate([kp_r, foot]).astype(np.float32)
+    kp_s = np.concatenate([kp_s, foot + [[70.0, 0.0]] + np.linspace(-2, 2, n_keypoints)[:, None]
+                           * [[1.0, 0.0]]]).astype(np.float32)
+    F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    view = TwoView(F=F, H=np.eye(3), n_matches=100, n_inliers_F=100, n_inliers_H=100,
+                   parallax_px=10.0, inlier_xy_r=kp_r, inlier_xy_s=kp_s)
+    return blurred_lab(ref, 1.0), blurred_lab(src, 1.0), field, view, post, mover
+
+
+def test_the_search_beyond_the_flow_finds_a_post_near_the_camera():
+    """The flow's range of μ (about -2 to 22) leaves out the post's 70 px of
+    parallax: the plain epipolar search does not find it (the static 3-D structure
+    test would call it a mover). Two keypoints beside it at μ ≈ 70 open that
+    stretch of the line (``search_beyond``): the post is found there, at its μ. The
+    mover, a colour the source never shows, is found on neither stretch; and a
+    single keypoint (one match may lie anywhere on its line) opens nothing."""
+    lab_r, lab_s, field, view, post, mover = _post_near_the_camera(2)
+    region = post | mover
+    visible = ~cv2.dilate(region.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)
+    lo, hi = px.flow_mu_range(view, field, visible)
+    assert -5 < lo < 0 and 20 < hi < 26, (lo, hi)
+    inner = np.zeros_like(post)
+    inner[15:65, 42:46] = True
+    core = np.zeros_like(mover)
+    core[25:45, 155:165] = True
+    cost, _ = px.epipolar_search(lab_r, lab_s, view, field, visible, region, support_de=5.0)
+    assert np.median(cost[inner]) > 12.0, np.median(cost[inner])
+    c_far, mu_far = px.search_beyond(lab_r, lab_s, view, field, visible, region, ring_px=40,
+                                     support_de=5.0)
+    assert np.median(c_far[inner]) < 8.0, np.median(c_far[inner])
+    assert np.median(np.abs(mu_far[inner] - 70.0)) <= 2.0, np.median(mu_far[inner])
+    assert (mu_far[post & np.isfinite(mu_far)] > hi).all()  # only beyond the flow's range
+    # the mover is beyond the keypoints' ring: not searched there; nor anywhere off L
+    assert np.isinf(c_far[mover]).all() and np.isinf(c_far[~region]).all()
+    # with the ring over the mover too, it is still not found
+    c_all, _ = px.search_beyond(lab_r, lab_s, view, field, visible, region, ring_px=150,
+                                support_de=5.0)
+    assert np.median(c_all[core]) > 12.0, np.median(c_all[core])
+    # one keypoint beyond the range opens no stretch
+    lab_r, lab_s, field, view, post, mover = _post_near_the_camera(1)
+    c_one, _ = px.search_beyond(lab_r, lab_s, view, field, visible, region, ring_px=40,
+                                support_de=5.0)
+    assert np.isinf(c_one).all()
+    # nor do keypoints without F
+    no_f = TwoView(F=None, H=np.eye(3), n_matches=0, n_inliers_F=0, n_inliers_H=0)
+    assert np.isinf(px.search_beyond(lab_r, lab_s, no_f, field, visible, region,
+                                     ring_px=40)[0]).all()

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numba
@@ -49,6 +49,12 @@ class TwoView:
     # the knee between the plane's few pixels and the structure's tens to hundreds;
     # a run says so when only the 95th is over ``Params.select_parallax_px``
     parallax_p95_px: float = float("inf")
+    # the F inliers' keypoints, (n, 2) float32 (x, y) in the reference and in the
+    # source (None without F): the depths the scene shows where the dense flow may
+    # not follow it (a bollard near the camera, 200 px of parallax; read by
+    # ``parallax.search_beyond``)
+    inlier_xy_r: npt.NDArray[np.float32] | None = field(default=None, compare=False, repr=False)
+    inlier_xy_s: npt.NDArray[np.float32] | None = field(default=None, compare=False, repr=False)
 
 
 def detect(gray_u8: npt.NDArray[np.uint8], *, max_features: int = 4000,
@@ -88,6 +94,7 @@ def estimate_two_view(xy_r: npt.NDArray[np.float32], xy_s: npt.NDArray[np.float3
     """
     n = len(xy_r)
     F = None
+    inl_F = None
     H = np.eye(3)
     nF = nH = 0
     parallax = parallax_p95 = float("inf")
@@ -114,8 +121,13 @@ def estimate_two_view(xy_r: npt.NDArray[np.float32], xy_s: npt.NDArray[np.float3
                 q = q[:, :2] / np.where(np.abs(q[:, 2:]) < 1e-12, 1e-12, q[:, 2:])
                 parallax, parallax_p95 = (float(v) for v in np.percentile(
                     np.hypot(*(b - q).T), [90, 95]))
+    kp_r = kp_s = None
+    if F is not None and inl_F is not None:
+        kp_r = np.ascontiguousarray(xy_r[inl_F], np.float32)
+        kp_s = np.ascontiguousarray(xy_s[inl_F], np.float32)
     return TwoView(F=F, H=H, n_matches=n, n_inliers_F=nF, n_inliers_H=nH,
-                   parallax_px=parallax, parallax_p95_px=parallax_p95)
+                   parallax_px=parallax, parallax_p95_px=parallax_p95,
+                   inlier_xy_r=kp_r, inlier_xy_s=kp_s)
 
 
 def _grid_cells(xy: npt.NDArray[np.float32], grid: int) -> npt.NDArray[np.intp]:

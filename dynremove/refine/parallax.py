@@ -353,10 +353,126 @@ def sweep_fields(src_labs: list[np.ndarray], views: list[TwoView], model: Parall
     return out, gamma
 
 
+def flow_mu_range(view: TwoView, field: np.ndarray, visible: np.ndarray, *,
+                  line_px: float = 1.5) -> tuple[float, float] | None:
+    """The range of μ that ``epipolar_search`` sweeps: the μ of the visible flow
+    matches within ``line_px`` (Sampson) of their epipolar lines, 1st–99th
+    percentile, widened by 10 % of its span on each side.
+
+    field : (H, W, 2) float32 flow matches; visible : (H, W) bool (at most 40 000
+    of its pixels are sampled). None without F or with fewer than 200 such matches.
+    """
+    if view.F is None:
+        return None
+    e = epipole(view.F)
+    ys, xs = np.nonzero(visible)
+    if len(ys) > 40000:
+        pick = np.random.default_rng(0).choice(len(ys), 40000, replace=False)
+        ys, xs = ys[pick], xs[pick]
+    gx, gy = xs.astype(np.float64), ys.astype(np.float64)
+    m = field[ys, xs].astype(np.float64)
+    good = sampson_sq(view.F, np.stack([gx, gy], -1), m) <= line_px ** 2
+    if good.sum() < 200:
+        return None
+    mus = _mu_of(view.H, e, gx[good], gy[good], m[good, 0], m[good, 1])
+    lo, hi = np.percentile(mus, [1, 99])
+    span = max(hi - lo, 1e-9)
+    return float(lo - 0.1 * span), float(hi + 0.1 * span)
+
+
+def search_beyond(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np.ndarray,
+                  visible: np.ndarray, region: np.ndarray, *, ring_px: int,
+                  min_keypoints: int = 2, support_de: float = 0.0,
+                  line_px: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
+    """``epipolar_search`` beyond the flow's range of μ, where the keypoints
+    around a region show that the scene reaches there.
+
+    The dense flow does not follow parallax of hundreds of pixels (a bollard or
+    a sign near the camera), so ``flow_mu_range`` leaves such depths out of the
+    search and static structure there is found on no line. The keypoint matches
+    that are inliers of F (``TwoView.inlier_xy_r``, ``inlier_xy_s``) measure
+    them. For each connected part of ``region`` (parts within 16 px of each other
+    joined), the μ of the inliers that lie in ``visible`` within ``ring_px`` of
+    the part is taken; where at least ``min_keypoints`` of them lie below (or
+    above) the flow's range, the line is searched from the range's end to the
+    ``min_keypoints``-th farthest of them, widened by 10 % of that stretch: one
+    keypoint matched wrongly along its line (an F inlier anywhere on it) does
+    not open a stretch by itself.
+
+    lab_r, lab_s : (H, W, 3) float32 Lab; view : TwoView; field : (H, W, 2)
+    float32 flow matches; visible, region : (H, W) bool; ring_px : px.
+
+    Returns
+    -------
+    cost : (H, W) float32
+        The best window cost (ΔE, as ``epipolar_search``'s) beyond the flow's
+        range, at each pixel of a part of ``region`` that such keypoints
+        surround (inf elsewhere).
+    mu : (H, W) float32
+        Its μ (NaN elsewhere).
+    """
+    Hh, Ww = region.shape
+    cost = np.full((Hh, Ww), np.inf, np.float32)
+    best_mu = np.full((Hh, Ww), np.nan, np.float32)
+    if view.F is None or view.inlier_xy_r is None or not region.any():
+        return cost, best_mu
+    rng = flow_mu_range(view, field, visible, line_px=line_px)
+    if rng is None:
+        return cost, best_mu
+    lo, hi = rng
+    a = view.inlier_xy_r.astype(np.float64)
+    b = view.inlier_xy_s.astype(np.float64)
+    mus = _mu_of(view.H, epipole(view.F), a[:, 0], a[:, 1], b[:, 0], b[:, 1])
+    ix = np.clip(np.round(a[:, 0]).astype(np.intp), 0, Ww - 1)
+    iy = np.clip(np.round(a[:, 1]).astype(np.intp), 0, Hh - 1)
+    keep = visible[iy, ix] & ((mus < lo) | (mus > hi))
+    mus, ix, iy = mus[keep], ix[keep], iy[keep]
+    if len(mus) < min_keypoints:
+        return cost, best_mu
+    join = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (17, 17))
+    n, parts, boxes, _ = cv2.connectedComponentsWithStats(
+        cv2.dilate(region.astype(np.uint8), join), connectivity=8)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * ring_px + 1, 2 * ring_px + 1))
+    for c in range(1, n):
+        # the keypoints within ring_px of the part (its disc dilation, computed on
+        # the part's box widened by ring_px: the same as on the whole photo)
+        bx, by, bw, bh = (int(v) for v in boxes[c, :4])
+        x0, y0 = max(bx - ring_px, 0), max(by - ring_px, 0)
+        x1, y1 = min(bx + bw + ring_px, Ww), min(by + bh + ring_px, Hh)
+        near = (ix >= x0) & (ix < x1) & (iy >= y0) & (iy < y1)
+        if near.sum() < min_keypoints:
+            continue
+        sub = region[y0:y1, x0:x1] & (parts[y0:y1, x0:x1] == c)
+        if not sub.any():
+            continue
+        ring = cv2.dilate(sub.astype(np.uint8), disc) > 0
+        m = mus[near][ring[iy[near] - y0, ix[near] - x0]]
+        part = np.zeros((Hh, Ww), bool)
+        part[y0:y1, x0:x1] = sub
+        below = np.sort(m[m < lo])  # the farthest first
+        above = np.sort(m[m > hi])[::-1]
+        spans = []
+        if len(below) >= min_keypoints:
+            end = below[min_keypoints - 1]
+            spans.append((end - 0.1 * (lo - end), lo))
+        if len(above) >= min_keypoints:
+            end = above[min_keypoints - 1]
+            spans.append((hi, end + 0.1 * (end - hi)))
+        for span in spans:
+            c_s, m_s = epipolar_search(lab_r, lab_s, view, field, visible, part,
+                                       support_de=support_de, line_px=line_px,
+                                       mu_span=span)[:2]
+            better = part & (c_s < cost)
+            cost[better] = c_s[better]
+            best_mu[better] = m_s[better]
+    return cost, best_mu
+
+
 def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np.ndarray,
                     visible: np.ndarray, region: np.ndarray, *, scale: float = 0.5,
                     box: int = 5, step_px: float = 1.0, line_px: float = 1.5,
-                    max_steps: int = 256, support_de: float = 0.0, unique_px: float = 0.0
+                    max_steps: int = 256, support_de: float = 0.0, unique_px: float = 0.0,
+                    mu_span: tuple[float, float] | None = None
                     ) -> tuple[np.ndarray, ...]:
     """Best colour match of each ``region`` pixel along its epipolar line in one source.
 
@@ -385,6 +501,9 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     2002). A plain colour (a dark shirt) matches all along a plain stretch of
     the line (a dark screen): its second minimum is as low as its best.
 
+    With ``mu_span`` (lo, hi) the search sweeps that range of μ instead of the
+    flow's (``search_beyond``).
+
     lab_r, lab_s : (H, W, 3) float32 Lab; view : TwoView with F; field : (H, W, 2)
     float32 flow matches; visible, region : (H, W) bool.
 
@@ -407,19 +526,10 @@ def epipolar_search(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: 
     if view.F is None or not region.any():
         return out
     e = epipole(view.F)
-    ys, xs = np.nonzero(visible)
-    if len(ys) > 40000:
-        pick = np.random.default_rng(0).choice(len(ys), 40000, replace=False)
-        ys, xs = ys[pick], xs[pick]
-    gx, gy = xs.astype(np.float64), ys.astype(np.float64)
-    m = field[ys, xs].astype(np.float64)
-    good = sampson_sq(view.F, np.stack([gx, gy], -1), m) <= line_px ** 2
-    if good.sum() < 200:
+    rng = flow_mu_range(view, field, visible, line_px=line_px) if mu_span is None else mu_span
+    if rng is None:
         return out
-    mus = _mu_of(view.H, e, gx[good], gy[good], m[good, 0], m[good, 1])
-    lo, hi = np.percentile(mus, [1, 99])
-    span = max(hi - lo, 1e-9)
-    lo, hi = lo - 0.1 * span, hi + 0.1 * span
+    lo, hi = rng
     # the coarse grid over the whole image; only the region's cells (and their
     # windows) are sampled
     hh, ww = max(1, int(round(Hh * scale))), max(1, int(round(Ww * scale)))

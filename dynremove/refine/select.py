@@ -99,7 +99,8 @@ from dynremove.refine.concurrency import for_each_source
 from dynremove.refine.fields import (background_fields, blurred_lab, interpolate_field,
                                      sample_bilinear)
 from dynremove.refine.fill import median_fill, realign_fields
-from dynremove.refine.parallax import epipolar_search, fit_parallax, line_points, sweep_fields
+from dynremove.refine.parallax import (epipolar_search, fit_parallax, line_points,
+                                       search_beyond, sweep_fields)
 from dynremove.refine.montage import (LIGHT_SIGMA_PX, expansion_labels, offset_blend,
                                       pairwise_distance)
 from dynremove.refine.morphology import dilate_disc, drop_small, fill_holes, grow_replaced
@@ -402,6 +403,9 @@ EV_AMBIGUOUS = 7
 # along the line (source px: the search window's width, 5 cells at half scale) and
 # must cost more than select_search_unique × the best + _UNIQUE_DE (ΔE)
 _UNIQUE_PX, _UNIQUE_DE = 10.0, 2.0
+# ``select_search_beyond_px``: a match beyond the flow's stretch of the line counts
+# where it costs less than the flow stretch's best / _BEYOND_RATIO - _UNIQUE_DE
+_BEYOND_RATIO = 1.5
 
 
 _BINS = 12  # per Lab axis, in the movers' colour model
@@ -1658,6 +1662,21 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             searched[k] = cost < P.select_search_de
             if test_unique:
                 unique[k] = res[2] > P.select_search_unique * cost + _UNIQUE_DE
+            if P.select_search_beyond_px > 0:
+                # structure nearer (or farther) than the flow followed: found on the
+                # stretch of its line that the keypoints around it show, where
+                # nothing on the flow's stretch matched, and clearly better than
+                # that stretch's best (its ratio test: a mover's colour that turns
+                # up far along a line is no match)
+                c_far, mu_far = search_beyond(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4),
+                                              mask & ~ok, ring_px=P.select_search_beyond_px,
+                                              support_de=P.select_search_support_de)
+                far = ~searched[k] & (c_far < P.select_search_de) & (
+                    cost > _BEYOND_RATIO * c_far + _UNIQUE_DE)
+                searched[k] |= far
+                unique[k] |= far
+                mu = np.where(far, mu_far, mu)
+                cost = np.where(far, c_far, cost)
             line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
             line_xy[k] = line_points(v, mu)  # (NaN where not searched)
         matched[k] = ok
