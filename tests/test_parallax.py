@@ -468,3 +468,23 @@ def test_the_search_beyond_the_flow_finds_a_post_near_the_camera():
     no_f = TwoView(F=None, H=np.eye(3), n_matches=0, n_inliers_F=0, n_inliers_H=0)
     assert np.isinf(px.search_beyond(lab_r, lab_s, no_f, field, visible, region,
                                      ring_px=40)[0]).all()
+
+
+def test_keypoint_windows_need_two_keypoints_that_agree():
+    """``keypoint_windows``: a window around each keypoint's μ beyond the flow's
+    range [0, 20], ± max(4, 10 % of its distance from the range), counted where
+    two keypoints share it; overlapping windows merge."""
+    assert px.keypoint_windows(np.array([70.0]), 0.0, 20.0) == []  # one alone: none
+    assert px.keypoint_windows(np.array([70.0, 90.0]), 0.0, 20.0) == []  # apart: none
+    (a, b), = px.keypoint_windows(np.array([70.0, 73.0]), 0.0, 20.0)
+    assert a == pytest.approx(70.0 - 5.0) and b == pytest.approx(73.0 + 5.3)
+    # below the range, and near it the floor of 4
+    (a, b), = px.keypoint_windows(np.array([-3.0, -1.0]), 0.0, 20.0)
+    assert a == pytest.approx(-7.0) and b == pytest.approx(3.0)
+    # two pairs far apart: two windows, in order; with three keypoints required,
+    # only the triple's
+    mu = np.array([300.0, 30.0, 305.0, 33.0, 310.0])
+    w = px.keypoint_windows(mu, 0.0, 20.0)
+    assert len(w) == 2 and w[0][1] < w[1][0] and w[0][0] < 30.0 < 33.0 < w[0][1]
+    (a, b), = px.keypoint_windows(mu, 0.0, 20.0, min_keypoints=3)
+    assert a < 300.0 and b > 310.0

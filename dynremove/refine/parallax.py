@@ -380,6 +380,29 @@ def flow_mu_range(view: TwoView, field: np.ndarray, visible: np.ndarray, *,
     return float(lo - 0.1 * span), float(hi + 0.1 * span)
 
 
+def keypoint_windows(mu: np.ndarray, lo: float, hi: float, *, min_keypoints: int = 2,
+                     floor: float = 4.0, frac: float = 0.1) -> list[tuple[float, float]]:
+    """The stretches of μ around keypoints beyond the flow's range [lo, hi].
+
+    mu : (n,) float64, the keypoints' μ, all outside [lo, hi]. Each keypoint's
+    window is its μ ± max(``floor``, ``frac`` × its distance from the range); a
+    window counts where at least ``min_keypoints`` keypoints lie in it (one
+    keypoint matched wrongly, anywhere on its epipolar line, opens none);
+    overlapping windows are merged. Returns sorted (lo, hi) pairs.
+    """
+    mu = np.sort(np.asarray(mu, np.float64))
+    half = np.maximum(floor, frac * np.where(mu < lo, lo - mu, mu - hi))
+    wins = [(m - w, m + w) for m, w in zip(mu, half)
+            if np.count_nonzero(np.abs(mu - m) <= w) >= min_keypoints]
+    merged: list[list[float]] = []
+    for a, b in sorted(wins):
+        if merged and a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(float(a), float(b)) for a, b in merged]
+
+
 def search_beyond(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np.ndarray,
                   visible: np.ndarray, region: np.ndarray, *, ring_px: int,
                   min_keypoints: int = 2, support_de: float = 0.0,
@@ -392,12 +415,12 @@ def search_beyond(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np
     search and static structure there is found on no line. The keypoint matches
     that are inliers of F (``TwoView.inlier_xy_r``, ``inlier_xy_s``) measure
     them. For each connected part of ``region`` (parts within 16 px of each other
-    joined), the μ of the inliers that lie in ``visible`` within ``ring_px`` of
-    the part is taken; where at least ``min_keypoints`` of them lie below (or
-    above) the flow's range, the line is searched from the range's end to the
-    ``min_keypoints``-th farthest of them, widened by 10 % of that stretch: one
-    keypoint matched wrongly along its line (an F inlier anywhere on it) does
-    not open a stretch by itself.
+    joined), the μ of the inliers beyond the flow's range that lie in ``visible``
+    within ``ring_px`` of the part are taken, and the line is searched in the
+    windows around them that at least ``min_keypoints`` of them share
+    (``keypoint_windows``). Only there: a sweep of the whole stretch out to the
+    keypoints found the reference's own mover, in another photo, far along the
+    line (a goat kept whole in a composite never used to choose anything).
 
     lab_r, lab_s : (H, W, 3) float32 Lab; view : TwoView; field : (H, W, 2)
     float32 flow matches; visible, region : (H, W) bool; ring_px : px.
@@ -446,19 +469,10 @@ def search_beyond(lab_r: np.ndarray, lab_s: np.ndarray, view: TwoView, field: np
         if not sub.any():
             continue
         ring = cv2.dilate(sub.astype(np.uint8), disc) > 0
-        m = mus[near][ring[iy[near] - y0, ix[near] - x0]]
         part = np.zeros((Hh, Ww), bool)
         part[y0:y1, x0:x1] = sub
-        below = np.sort(m[m < lo])  # the farthest first
-        above = np.sort(m[m > hi])[::-1]
-        spans = []
-        if len(below) >= min_keypoints:
-            end = below[min_keypoints - 1]
-            spans.append((end - 0.1 * (lo - end), lo))
-        if len(above) >= min_keypoints:
-            end = above[min_keypoints - 1]
-            spans.append((hi, end + 0.1 * (end - hi)))
-        for span in spans:
+        m = mus[near][ring[iy[near] - y0, ix[near] - x0]]
+        for span in keypoint_windows(m, lo, hi, min_keypoints=min_keypoints):
             c_s, m_s = epipolar_search(lab_r, lab_s, view, field, visible, part,
                                        support_de=support_de, line_px=line_px,
                                        mu_span=span)[:2]
