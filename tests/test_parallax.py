@@ -236,18 +236,24 @@ def test_the_anchor_is_the_source_of_widest_parallax_not_the_noisiest():
                                np.abs(np.array(true_k[:3]) / true_k[2]), rtol=0.05)
 
 
+def _striped_wall(h, w, rng):
+    """Vertical stripes 9 px apart with ``rng``'s noise, blurred: (h, w, 3) BGR
+    uint8, and the pixel grid gx, gy (h, w) float32."""
+    xx = np.arange(w, dtype=np.float32)[None].repeat(h, 0)
+    grey = 128 + 90 * np.sign(np.sin(2 * np.pi * xx / 9)) + rng.normal(0, 10, (h, w))
+    grey = np.clip(cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 1.0), 0, 255)
+    grey = cv2.cvtColor(grey.astype(np.uint8), cv2.COLOR_GRAY2BGR)
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    return grey, gx, gy
+
+
 def _post_before_a_striped_wall():
     """The scene of the thin-post tests: a striped wall (80 × 120 px, horizontal
     epipolar lines, its parallax a ramp of 0-20 px) and a red post 3 px wide at 18 px
     of parallax. Returns the reference without and the source with the post drawn
     (BGR uint8), the true matches (H, W, 2), the view and the post's slices."""
     h, w = 80, 120
-    rng = np.random.default_rng(5)
-    xx = np.arange(w, dtype=np.float32)[None].repeat(h, 0)
-    grey = 128 + 90 * np.sign(np.sin(2 * np.pi * xx / 9)) + rng.normal(0, 10, (h, w))
-    grey = np.clip(cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 1.0), 0, 255)
-    grey = cv2.cvtColor(grey.astype(np.uint8), cv2.COLOR_GRAY2BGR)
-    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    grey, gx, gy = _striped_wall(h, w, np.random.default_rng(5))
     k = 20.0 / w  # the wall: x_s = x + 20 x / W
     post = (slice(10, 70), slice(58, 61))
     src = cv2.remap(grey, gx / (1 + k), gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
@@ -400,11 +406,7 @@ def _post_near_the_camera(n_keypoints: int):
     field, view, post, mover), both regions (H, W) bool."""
     h, w = 80, 200
     rng = np.random.default_rng(7)
-    xx = np.arange(w, dtype=np.float32)[None].repeat(h, 0)
-    grey = 128 + 90 * np.sign(np.sin(2 * np.pi * xx / 9)) + rng.normal(0, 10, (h, w))
-    grey = np.clip(cv2.GaussianBlur(grey.astype(np.float32), (0, 0), 1.0), 0, 255)
-    grey = cv2.cvtColor(grey.astype(np.uint8), cv2.COLOR_GRAY2BGR)
-    gx, gy = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    grey, gx, gy = _striped_wall(h, w, rng)
     k = 20.0 / w
     src = cv2.remap(grey, gx / (1 + k), gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
     ref = grey.copy()
