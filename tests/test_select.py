@@ -1127,6 +1127,11 @@ def test_a_pillar_nearer_than_the_flow_reached_is_found_beyond_it(tmp_path):
     assert changed.mean() < 0.1, changed.mean()
     assert whole_photo.damage_percent(images[ri], on.clean, bg, mover) < 0.3
     assert (on.dynamic & mover).sum() / (on.dynamic | mover).sum() > 0.7
+    # the debugger says which sources found it beyond the flow's range (inspect's
+    # "found on the epipolar line beyond the parallax the flow followed")
+    from dynremove.refine.select import EV_LINE_BEYOND
+    assert (on.selection.static_evidence[:, box[0], box[1]] == EV_LINE_BEYOND).any()
+    assert not (r.selection.static_evidence == EV_LINE_BEYOND).any()
 
 
 def test_two_pillars_flagged_together_do_not_vouch_for_each_other(tmp_path):

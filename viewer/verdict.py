@@ -662,7 +662,7 @@ def static_test_line(h: dict[str, Any]) -> str | None:
                 else f" (ΔE {de[n]:.1f}{at})")
 
     def named(code: int) -> list[str]:
-        return [n + (on_line(n) if code in (2, 3, 5, 7) and n in de else "")
+        return [n + (on_line(n) if code in (2, 3, 5, 7, 8) and n in de else "")
                 for n, c in ev.items() if c == code]
 
     groups = [(1, "its flow match shows it"),
@@ -682,11 +682,13 @@ def static_test_line(h: dict[str, Any]) -> str | None:
               (6, "outside the frame"),
               (7, "found on the epipolar line, but as well elsewhere on it (a plain "
                   "colour along the line; --select-search-unique), and the other source "
-                  "found nothing: that does not count alone")]
+                  "found nothing: that does not count alone"),
+              (8, "found on the epipolar line beyond the parallax the flow followed, at "
+                  "a depth that keypoints beside it show (--select-search-beyond-px)")]
     parts = [f"{what}: {', '.join(who)}" for code, what in groups if (who := named(code))]
-    counted = sum(c in (1, 2) for c in ev.values())
+    counted = sum(c in (1, 2, 8) for c in ev.values())
     passed = bool(sel.get("explained"))
-    if 2 in ev.values() and sum(c in (1, 2, 4) for c in ev.values()) < max(2, need):
+    if ({2, 8} & set(ev.values())) and sum(c in (1, 2, 4, 8) for c in ev.values()) < max(2, need):
         # (``select_fill``: the epipolar search's weaker evidence counts from one
         # source where no other source that sees the pixel contradicts it)
         # (a trial read "no other source contradicts it" beside another source's

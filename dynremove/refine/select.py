@@ -308,10 +308,10 @@ def _enclosed_islands(replaced: npt.NDArray[np.bool_], *,
 
 
 def _vouching(evidence: npt.NDArray[np.uint8], isl: npt.NDArray[np.bool_]) -> list[int]:
-    """The sources whose static evidence (EV_FLOW or EV_LINE) keeps half of ``isl`` or
-    more: they show its content in place."""
+    """The sources whose static evidence (EV_FLOW, EV_LINE or EV_LINE_BEYOND) keeps
+    half of ``isl`` or more: they show its content in place."""
     return [k for k in range(evidence.shape[0])
-            if np.isin(evidence[k][isl], (EV_FLOW, EV_LINE)).mean() >= 0.5]
+            if np.isin(evidence[k][isl], (EV_FLOW, EV_LINE, EV_LINE_BEYOND)).mean() >= 0.5]
 
 
 def fill_kept_pieces(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
@@ -329,7 +329,7 @@ def fill_kept_pieces(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
       own there) and differs from the reference there (CIE76 ΔE over ``tau``, on
       ``share`` of the island or more): the photo seen free around the island does
       not show what the reference shows there;
-    * no source that keeps the island (``evidence`` EV_FLOW or EV_LINE on half of it
+    * no source that keeps the island (``evidence`` EV_FLOW, EV_LINE or EV_LINE_BEYOND on half of it
       or more) is seen free around it (chosen, or free and within ``tau`` of the
       fill's colour consensus ``d_cons``, on half of the rim or more): only photos
       that show the mover in place vouch for it, as ``kept_pieces`` counts them.
@@ -396,9 +396,12 @@ EVIDENCE = {0: "not in L",
             6: "outside its frame",
             7: "shows the reference's content on its epipolar line, but as well elsewhere "
                "on it (a plain colour matching along the line), and the other source "
-               "found nothing there: an ambiguous match does not count alone"}
+               "found nothing there: an ambiguous match does not count alone",
+            8: "shows the reference's content on its epipolar line beyond the parallax "
+               "the flow followed, at a depth the keypoints beside it show "
+               "(--select-search-beyond-px)"}
 EV_FLOW, EV_LINE, EV_LINE_ALONE, EV_MOVER_COLOUR, EV_NOT_FOUND, EV_UNSEEN = 1, 2, 3, 4, 5, 6
-EV_AMBIGUOUS = 7
+EV_AMBIGUOUS, EV_LINE_BEYOND = 7, 8
 # ``select_search_unique``'s ratio test: the second minimum lies farther than this
 # along the line (source px: the search window's width, 5 cells at half scale) and
 # must cost more than select_search_unique × the best + _UNIQUE_DE (ΔE)
@@ -1585,6 +1588,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     unique = np.ones((S, H, W), bool)
     test_unique = S <= 2 and P.select_search_unique > 0
     line_de = np.full((S, H, W), np.nan, np.float32)  # best ΔE on the line, where searched
+    beyond = np.zeros((S, H, W), bool)  # ... found beyond the flow's range (search_beyond)
     line_xy = (np.full((S, H, W, 2), np.nan, np.float32)  # ... and where it lies
                if mode == "parallax" and P.select_search_de > 0 else None)
     seen = np.zeros((S, H, W), bool)  # the flow match inside the source's content
@@ -1675,6 +1679,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                     cost > _BEYOND_RATIO * c_far + _UNIQUE_DE)
                 searched[k] |= far
                 unique[k] |= far
+                beyond[k] = far
                 mu = np.where(far, mu_far, mu)
                 cost = np.where(far, c_far, cost)
             line_de[k] = np.where(np.isfinite(cost), cost, np.nan)
@@ -1812,6 +1817,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     evidence[mask[None] & searched & ~line_found] = EV_LINE_ALONE
     evidence[mask[None] & ambiguous] = EV_AMBIGUOUS
     evidence[mask[None] & line_found & ~flow_vote] = EV_LINE
+    evidence[mask[None] & line_found & ~flow_vote & beyond] = EV_LINE_BEYOND
     evidence[mask[None] & matched & ~flow_vote & ~line_found] = EV_MOVER_COLOUR
     evidence[mask[None] & flow_vote] = EV_FLOW
     evidence[mask[None] & ~seen & ~flow_vote & ~line_found] = EV_UNSEEN
