@@ -49,7 +49,7 @@ from dynremove.errors import InputError, interruption
 from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
 from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_restarts
-from dynremove.pipeline import full_resolution_output, remove_dynamic
+from dynremove.pipeline import full_resolution_output, relit_px, remove_dynamic
 from dynremove.video import (auto_reference, blurry_reference_note, blurry_sources_note,
                              parse_span, relative_sharpness)
 
@@ -130,18 +130,6 @@ def _throughput(res: Any, iset: Any) -> dict:
             "working_mpx": round(h * w / 1e6, 3), "peak_rss_mb": round(own_peak_rss_mb(), 1)}
 
 
-def _relit_outside(res, *, inside: bool = False) -> int:
-    """The analysis pixels ``shade.relight_shade`` changed outside the fill's dynamic
-    map (inside it with ``inside``; 0 without a relit shade). At the analysis size,
-    as the note counts them: ``res`` may hold the full-size outputs by now."""
-    sel = getattr(res, "selection", None)
-    relit = getattr(sel, "relit", None)
-    if relit is None:
-        return 0
-    dyn = sel.replaced
-    return int((relit & (dyn if inside else ~dyn)).sum())
-
-
 def _scene_entry(res) -> dict:
     """report.json's ``scene``: whether the run treated the set as flat or 3-D (the
     sources' median measured parallax against ``select_parallax_px``, and their 95th
@@ -185,6 +173,7 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
     io.write_image(out / "coverage.png",
                    (res.coverage.astype(np.float32) * (255.0 / n_src)).astype(np.uint8))
     H, W = res.clean.shape[:2]
+    relit = relit_px(getattr(res, "selection", None))
     report = {
         "inputs": [str(p) for p in iset.paths],
         "reference": {"index": ref, "name": iset.names[ref], **(reference or {})},
@@ -201,10 +190,11 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
         "dynamic_fraction": float(res.dynamic.mean()),
         "uncovered_dynamic_px": int((res.dynamic & (res.coverage == 0)).sum()),
         # a faint shade beside the movers relit to the other photos' light, outside the
-        # mask (at the analysis size; changed by under --select-tau)
-        "relit_px": _relit_outside(res),
+        # mask (at the analysis size, as the run's note counts it: ``res`` may hold the
+        # full-size outputs by now; changed by under --select-tau)
+        "relit_px": relit[0],
         # ... and inside it, where the shade runs into the fill
-        "relit_in_mask_px": _relit_outside(res, inside=True),
+        "relit_in_mask_px": relit[1],
         # coverage.png holds count × 255 / sources (uint8, truncated)
         "coverage_png": {"sources": n_src, "value_per_source": round(255.0 / n_src, 4)},
         "geometry": res.geometry,

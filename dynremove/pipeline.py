@@ -934,8 +934,7 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "; --select-minority 0 turns this step off"))
             warnings.warn(msgs[-1], Note, stacklevel=2)
     if selection is not None and selection.relit is not None:
-        n_rl = int((selection.relit & ~dyn).sum())
-        n_in = int((selection.relit & dyn).sum())
+        n_rl, n_in = relit_px(selection, dyn)
         if n_rl >= 5e-4 * dyn.size:
             # (a review: the fill's pixels it relit were neither counted nor said)
             msgs.append(f"{n_rl} px beside the removed movers ({_where(selection.relit & ~dyn)}) "
@@ -1103,6 +1102,18 @@ def _little_removed_note(flagged: int, pre_fill: np.ndarray, dyn: np.ndarray,
             + (f" ({n_ex} px as static 3-D structure that other photos show in place)"
                if n_ex else "")
             + ": 'dynremove inspect' on a recording says why at each pixel")
+
+
+def relit_px(selection: Selection | None, dynamic: np.ndarray | None = None
+             ) -> tuple[int, int]:
+    """The pixels ``shade.relight_shade`` changed outside the dynamic map and inside
+    it: (outside, inside), at the analysis size; (0, 0) without a relit shade.
+    ``dynamic`` (H, W) bool defaults to the fill's (``Selection.replaced``)."""
+    relit = getattr(selection, "relit", None)
+    if relit is None:
+        return 0, 0
+    dyn = selection.replaced if dynamic is None else dynamic
+    return int((relit & ~dyn).sum()), int((relit & dyn).sum())
 
 
 def _where(mask: np.ndarray, n: int = 3) -> str:

@@ -1612,6 +1612,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     track = P.select_track_movers and mode == "scan" and mask.any()
     regions = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)[1] if track else None
 
+    # the visible pixels whose flow matches set the epipolar search's range (L and 4 px)
+    off_l = ~dilate_disc(mask, 4) if mode == "parallax" and P.select_search_de > 0 else None
+
     def match(k):
         v = views[k]
         nf = (flows[k] if flows is not None else
@@ -1659,7 +1662,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # static 3-D structure whose flow match failed (thin, or far off the
             # plane): its best match along the epipolar line in this source
             lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
-            res = epipolar_search(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4), mask & ~ok,
+            res = epipolar_search(lab_r, lab_s[k], v, nf, off_l, mask & ~ok,
                                   support_de=P.select_search_support_de,
                                   unique_px=_UNIQUE_PX if test_unique else 0.0)
             cost, mu = res[0], res[1]
@@ -1672,7 +1675,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                 # nothing on the flow's stretch matched, and clearly better than
                 # that stretch's best (its ratio test: a mover's colour that turns
                 # up far along a line is no match)
-                c_far, mu_far = search_beyond(lab_r, lab_s[k], v, nf, ~dilate_disc(mask, 4),
+                c_far, mu_far = search_beyond(lab_r, lab_s[k], v, nf, off_l,
                                               mask & ~ok, ring_px=P.select_search_beyond_px,
                                               support_de=P.select_search_support_de)
                 far = ~searched[k] & (c_far < P.select_search_de) & (
