@@ -571,7 +571,8 @@ def region_words(sel: dict[str, Any]) -> str | None:
         return None
     rule = sel.get("region_rule") or {}
     share, px = rule.get("select_complete"), rule.get("select_complete_px")
-    head = f"the graph cut replaced {100 * f:.0f} % of its region of L"
+    head = (f"the graph cut replaced {100 * f:.0f} % of its region of L, counting the "
+            "region's pixels that the static 3-D test explained as kept")
     if not isinstance(share, float) or share != share or share <= 0:
         return head + " (--select-complete 0: no region rule)"
     lo, hi = 100 * (1 - share), 100 * share
