@@ -1673,41 +1673,51 @@ def test_complete_regions_decides_a_region_whole_where_the_cut_decided_most_of_i
 
 def test_a_region_is_judged_with_what_the_static_test_explained_in_it():
     """A pillar the scans flagged, its middle explained by the static test: the
-    unexplained fragments at its ends, which the cut mostly replaced, are no mover
-    of their own. Judged alone they were replaced whole; judged with the explained
-    middle (counted as kept) the region is static and they keep the reference.
-    A mover beside explained static structure is still replaced whole, and the
-    explained pixels themselves are never replaced."""
+    unexplained fragments at its ends, which the cut replaced in part, are no
+    mover of their own. Judged alone (half replaced) they stayed as the cut left
+    them; judged with the explained middle, counted as kept, the region is static
+    and they keep the reference. A mover beside a larger explained area stays
+    replaced and is completed, and explained pixels are never replaced."""
     from dynremove.refine.select import complete_regions, region_shares
 
-    lab = np.zeros((60, 80), np.int64)
+    lab = np.zeros((60, 90), np.int64)
     core = np.zeros(lab.shape, bool)
     static = np.zeros(lab.shape, bool)
     # the pillar: 8 px wide, rows 2-57; explained from row 10 to 49
     static[10:50, 10:18] = True
     core[2:10, 10:18] = core[50:58, 10:18] = True
-    lab[2:9, 10:18] = 1  # the cut replaced 7 of each fragment's 8 rows
-    lab[50:57, 10:18] = 1
-    # a mover (rows 5-54, 20 px wide) with a small explained patch on its edge
+    lab[2:6, 10:18] = 1  # the cut replaced 4 of each fragment's 8 rows
+    lab[54:58, 10:18] = 1
+    # a mover (rows 5-54, 20 px wide) beside 50 × 25 explained pixels
     core[5:55, 40:60] = True
-    static[5:55, 60:63] = True
+    static[5:55, 60:85] = True
     lab[5:55, 40:60] = 2
     lab[28:32, 45:55] = 0  # a hole the cut kept
     allowed = np.ones((3,) + lab.shape, bool)
     comp, frac = region_shares(lab, core, static=static)
     assert len(frac) == 3  # the pillar's three parts are one region
-    pillar = comp[30, 12]
+    pillar, mover = comp[30, 12], comp[30, 50]
     assert comp[3, 12] == comp[55, 12] == pillar
-    assert frac[pillar] == pytest.approx(2 * 7 * 8 / (56 * 8))  # 25 %: kept
-    # alone, each fragment (87.5 % replaced) was completed as a mover
-    out, _ = complete_regions(lab, core, allowed, 0.7, 3)
-    assert (out[2:10, 10:18] == 1).all() and (out[50:58, 10:18] == 1).all()
+    assert frac[pillar] == pytest.approx(2 * 4 * 8 / (56 * 8))  # 14 %: static
+    assert frac[mover] == pytest.approx(960 / 2250)  # 43 % with the explained pixels
+    # alone, each fragment (50 % replaced) is left as the cut decided
+    out, changed = complete_regions(lab, core, allowed, 0.7, 3)
+    np.testing.assert_array_equal(out[:, 10:18], lab[:, 10:18])
     out, changed = complete_regions(lab, core, allowed, 0.7, 3, static=static)
-    assert (out[:, 10:18] == 0).all() and (changed[2:9, 10:18] == 2).all()
-    # the mover: 960 of the 1000 + 150 px of its region replaced (83 %), its hole
-    # filled, the explained patch beside it left as it was
-    assert (out[28:32, 45:55] == 2).all() and (changed[28:32, 45:55] == 1).all()
+    assert (out[:, 10:18] == 0).all() and (changed[2:6, 10:18] == 2).all()
+    # the mover: 960 of its 1000 px of core replaced (96 %): its hole is filled,
+    # the explained pixels beside it are left as they were
+    assert (out[5:55, 40:60] == 2).all() and (changed[28:32, 45:55] == 1).all()
     assert (out[static] == 0).all() and not changed[static].any()
+    # a mover judged static with explained pixels (960 replaced of 1000 px, with 2 900
+    # explained around it: 25 %) is still not reverted, its own share being a mover's
+    static[5:55, 60:90] = True
+    static[0:60, 25:40] = True
+    static[0:5, 40:90] = static[55:60, 40:90] = True
+    comp, frac = region_shares(lab, core, static=static)
+    assert frac[comp[30, 50]] == pytest.approx(960 / 3900)
+    out, _ = complete_regions(lab, core, allowed, 0.7, 3, static=static)
+    assert (out[5:55, 40:60] == 2).all()
 
 
 def test_a_region_kept_whole_takes_back_the_margin_its_fragments_reached():

@@ -571,8 +571,7 @@ def region_words(sel: dict[str, Any]) -> str | None:
         return None
     rule = sel.get("region_rule") or {}
     share, px = rule.get("select_complete"), rule.get("select_complete_px")
-    head = (f"the graph cut replaced {100 * f:.0f} % of its region of L, counting the "
-            "region's pixels that the static 3-D test explained as kept")
+    head = f"the graph cut replaced {100 * f:.0f} % of its region of L"
     if not isinstance(share, float) or share != share or share <= 0:
         return head + " (--select-complete 0: no region rule)"
     lo, hi = 100 * (1 - share), 100 * share
@@ -584,7 +583,8 @@ def region_words(sel: dict[str, Any]) -> str | None:
             tail += (f", but this pixel is farther than --select-complete-px {reach} from "
                      "its replaced pixels, or no source next to it may fill it")
     elif f < 1.0 - share:
-        tail = (f"under {lo:.0f} % (1 − --select-complete {share:g}): static, the "
+        tail = (f"under {lo:.0f} % (1 − --select-complete {share:g}), counting the "
+                "region's pixels that the static 3-D test explained as kept: static, the "
                 "reference kept whole")
     elif sel.get("completed") == 4:
         tail = f"between {lo:.0f} and {hi:.0f} %"

@@ -171,8 +171,9 @@ class Selection:
     # (``partial_movers``, ``select_keep_partial``), 0 elsewhere
     completed: npt.NDArray[np.uint8] | None = None
     # the share of each pixel's region of L that the graph cut replaced, before that
-    # rule, its pixels that the static test explained counted as kept
-    # (``region_shares`` with ``static``), float32 in [0, 1]; NaN outside the regions
+    # rule (``region_shares``); where the region's pixels that the static test
+    # explained, counted as kept, bring it under 1 − ``select_complete`` (static), that
+    # share; float32 in [0, 1]; NaN outside the regions
     region_share: npt.NDArray[np.float32] | None = None
     # (S,) float32: the Gaussian σ (working px) each source's fill was blurred by, to
     # match a reference softer than it (``reference_blur``); 0 where it is not
@@ -1325,14 +1326,15 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     whose replaced run only continued them (no pixel of ``core`` left in it).
 
     With ``static``, the pixels of L that the static 3-D test explained (the
-    graph cut keeps the reference there), a region is judged with them: the
-    regions are those of ``core`` ∪ ``static``, and what the test explained counts
-    as kept. A scans' flag whose middle the sources explained (a pillar, a
-    statue's edge) leaves unexplained fragments around it; judged alone, a
-    fragment the cut mostly replaced counted as a mover and was replaced whole,
-    and the replaced fragments of a part that most of it is explained stayed in
-    the photo. Only ``core``'s pixels are ever replaced, and ``partial`` still
-    names regions of ``core`` alone.
+    graph cut keeps the reference there), whether a region is static is judged
+    with them: over the regions of ``core`` ∪ ``static``, what the test explained
+    counting as kept. A scans' flag whose middle the sources explained (a pillar,
+    a statue's edge) leaves unexplained fragments around it, which the cut
+    replaced in part: judged alone they were no static region, and their
+    misplaced fills stayed in the photo. Whether a region is a mover is still
+    judged on ``core`` alone, and a region of ``core`` judged a mover is never
+    reverted: a mover beside structure that the test explained (a rider in front
+    of a fountain's edge) would otherwise be kept, or not completed.
 
     Parameters
     ----------
@@ -1381,10 +1383,14 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     rep = out != 0
     kept = jfrac < 1.0 - share
     kept[0] = False  # (not a region of core)
-    back = kept[jcomp] & rep & allowed[0]
+    whole = frac >= share
+    whole[0] = False
+    # (a part of core that the cut replaced as a mover's stays replaced, whatever the
+    # explained pixels around it: a rider before a fountain whose edges the test
+    # explained)
+    back = kept[jcomp] & ~whole[comp] & rep & allowed[0]
     out[back] = 0
     changed[back] = 2
-    keep_p = None
     if partial is not None:
         keep_p = np.asarray(partial, bool).copy()
         keep_p[0] = False
@@ -1411,11 +1417,7 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         if partial is not None:
             # (a trail next to a region kept whole as a part of a mover says so)
             changed[trail & touching(changed == PARTIAL_KEPT)[rc]] = PARTIAL_KEPT
-    whole = jfrac >= share
-    whole[0] = False
-    todo = whole[jcomp] & ~rep & core
-    if keep_p is not None:
-        todo &= ~keep_p[comp]
+    todo = whole[comp] & ~rep
     if not todo.any() or reach_px <= 0:
         return out, changed
     # the replaced pixels' labels grown into the region's kept pixels only (−1: fixed)
@@ -1998,10 +2000,14 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                            distance=dist, forbidden=_FORBIDDEN)
     region_rule = np.zeros(lab.shape, np.uint8)
     rcomp, rfrac = region_shares(lab, in_core)
-    # the shares the region rule judges: each region of L with its explained pixels,
-    # counted as kept (``complete_regions``' ``static``)
+    # the share the region rule decided on, for the debugger: a region of L is static
+    # with its explained pixels counted as kept, a mover on its own
+    # (``complete_regions``' ``static``); with explained pixels the share only falls
     jcomp, jfrac = region_shares(lab, in_core, static=explained[roi])
-    share_map = np.where(jcomp > 0, jfrac[jcomp], np.nan).astype(np.float32)
+    share_map = np.where(rcomp > 0, rfrac[rcomp], np.nan).astype(np.float32)
+    share_map = np.where(in_core & (jfrac[jcomp] < 1.0 - P.select_complete)
+                         & (rfrac[rcomp] < P.select_complete), jfrac[jcomp],
+                         share_map).astype(np.float32)
     if P.select_complete > 0:
         # a region replaced only in part whose kept part is the mover's rest, which
         # no source showed free: kept whole (tim6 as tim1, tim3, tim5: a cup with
@@ -2013,9 +2019,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                                   seen=usable[1:].any(0))
                    if P.select_keep_partial > 0 else None)
         # (a region whose middle the static test explained, a pillar or a statue, is
-        # judged with it: its unexplained fragments are no mover of their own;
-        # 12 composites damage 0.226 -> 0.206 %, relit 0.266 -> 0.186 %, DAVIS J
-        # 0.6302 -> 0.6309; README, session 70)
+        # judged static with it: its unexplained fragments are no mover of their own;
+        # 12 composites damage 0.226 -> 0.223 %, relit 0.266 -> 0.204 %, seed-21
+        # 0.501 -> 0.469 %, leftover unchanged; DAVIS J 0.6302 -> 0.6307; README,
+        # session 70)
         lab, region_rule = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
                                             P.select_complete_px, regions=(rcomp, rfrac),
                                             partial=partial, static=explained[roi])
