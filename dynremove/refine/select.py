@@ -1305,7 +1305,8 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
                      allowed: npt.NDArray[np.bool_], share: float, reach_px: int, *,
                      regions: tuple[np.ndarray, np.ndarray] | None = None,
                      partial: npt.NDArray[np.bool_] | None = None,
-                     static: npt.NDArray[np.bool_] | None = None
+                     static: npt.NDArray[np.bool_] | None = None,
+                     judged: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.uint8]]:
     """Decide each region of L whole where the graph cut decided most of it.
 
@@ -1357,6 +1358,8 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
         (``partial_movers``); their pixels are marked ``PARTIAL_KEPT``.
     static : (h, w) bool ndarray, optional
         The pixels of L that the static test explained (disjoint from ``core``).
+    judged : (comp, frac), optional
+        ``region_shares(label, core, static=static)``, when the caller has it already.
 
     Returns
     -------
@@ -1378,8 +1381,10 @@ def complete_regions(label: npt.NDArray[np.intp], core: npt.NDArray[np.bool_],
     if len(frac) <= 1:
         return out, changed
     # the regions judged: those of core, or of core and what the static test explained
-    jcomp, jfrac = (comp, frac) if static is None else region_shares(label, core,
-                                                                      static=static)
+    if static is None:
+        jcomp, jfrac = comp, frac
+    else:
+        jcomp, jfrac = region_shares(label, core, static=static) if judged is None else judged
     rep = out != 0
     kept = jfrac < 1.0 - share
     kept[0] = False  # (not a region of core)
@@ -2025,7 +2030,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         # session 70)
         lab, region_rule = complete_regions(lab, in_core, D < _FORBIDDEN, P.select_complete,
                                             P.select_complete_px, regions=(rcomp, rfrac),
-                                            partial=partial, static=explained[roi])
+                                            partial=partial, static=explained[roi],
+                                            judged=(jcomp, jfrac))
     movers = np.zeros((S, H, W), bool)
     d_cons = delta_e(labs[1:], cons)
     mv = (usable[1:] & (p_mover[1:] > 0.5) & (d_cons > tau)
