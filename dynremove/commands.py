@@ -339,10 +339,15 @@ def _run(args: argparse.Namespace, params: Params, out: Path) -> int:
         res = at_output_size(res, iset, args.output_size)
         bar("full-size output", 1.0)
         if any(re.search(r"\d px\b", str(n)) for n in res.warnings):
-            # (a trial read "2 px ... inpainted" against report.json's 18: two sizes)
+            # (a trial read "2 px ... inpainted" against report.json's 18: two sizes;
+            # another looked for a note's "x 428–635, y 1083–1237" in clean.png)
             H1, W1 = res.clean.shape[:2]
-            msg = (f"the notes count pixels of the {w}x{h} analysed copy; clean.png, "
-                   f"dynamic_mask.png and report.json's *_px are at {W1}x{H1}")
+            where = any(re.search(r"\bx \d+–\d+, y \d+–\d+", str(n)) for n in res.warnings)
+            msg = (f"the notes count pixels of the {w}x{h} analysed copy"
+                   + (f" and give their x, y in it (× {W1 / w:.3g} in clean.png, as "
+                      "inspect --pixel counts; --photo-pixel takes the photo's)"
+                      if where else "")
+                   + f"; clean.png, dynamic_mask.png and report.json's *_px are at {W1}x{H1}")
             _note(args, msg)
             res.warnings.append(msg)  # (and in report.json)
     if gt_full is not None:
@@ -662,14 +667,30 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(f"  PSNR inside the true mask:         {psnr:.2f} dB (input reference: {psnr_in:.2f} dB)")
     print(f"  time: {res.timings['total']:.1f} s  -> {out}/" + (f" and {record}" if record else ""))
     if not getattr(args, "quiet", False):  # (a trial: the demo said nothing of what next)
-        steps = ([(f"dynremove view {record}", "scrub the removal, step by step"),
-                  (f"dynremove inspect {record} --failures",
+        prog = _program_name()
+        steps = ([(f"{prog} view {record}", "scrub the removal, step by step"),
+                  (f"{prog} inspect {record} --failures",
                    "the worst misses against the truth, and why")] if record else [])
-        steps.append(("dynremove run YOUR_PHOTOS/ --out out/mine",
+        steps.append((f"{prog} run YOUR_PHOTOS/ --out out/mine",
                       "your own photos (README, Usage)"))
         width = max(len(c) for c, _ in steps)
         print("next:\n" + "\n".join(f"  {c.ljust(width)}   # {w}" for c, w in steps))
     return EXIT_OK
+
+
+def _program_name() -> str:
+    """How to call this program again from here: ``dynremove`` where that is what the
+    shell finds, else the path of the script that runs (``.venv/bin/dynremove`` after
+    ``make demo``, whose venv is not on the PATH: a trial typed the printed
+    ``dynremove view …`` and got "command not found")."""
+    me = sys.argv[0] if sys.argv and sys.argv[0] else ""
+    if os.path.basename(me) != "dynremove":  # (python -m dynremove, a notebook)
+        return "dynremove"
+    found = shutil.which("dynremove")
+    if found and os.path.realpath(found) == os.path.realpath(me):
+        return "dynremove"
+    rel = os.path.relpath(os.path.abspath(me))
+    return rel if not rel.startswith("..") else os.path.abspath(me)
 
 
 def cmd_bench(args: argparse.Namespace) -> int:

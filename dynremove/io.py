@@ -699,12 +699,23 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
                              "images")
         paths, notes = list_inputs(args)
         images, valids, per_file, depths = [], [], [], []
+        failed: list[str] = []
         for p in paths:
-            img, v, n, d = _read_image_depth(p)
+            try:
+                img, v, n, d = _read_image_depth(p)
+            except InputError as e:
+                # every unreadable input named at once (a trial fixed one cut-short
+                # JPEG, ran again, and only then learnt of the second)
+                failed.append(str(e))
+                continue
             images.append(img)
             valids.append(v)
             per_file.append(n)
             depths.append(d)
+        if failed:
+            raise InputError(failed[0] if len(failed) == 1 else
+                             f"{len(failed)} of the {len(paths)} inputs cannot be read: "
+                             + "; ".join(failed))
         deep = [d for d in depths if d]
         # one camera's photos share a bit depth: a darker 12-bit photo (no value
         # above 1023) is not 10-bit data. The set's depth is its most common one

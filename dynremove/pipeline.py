@@ -603,6 +603,10 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     ref = api_ref(ref, images, names, names_given=names_given, notes=auto_note)
     images, gray_note = gray_like_reference(images, ref)
     gray_apart, gray_apart_note = gray_beside_colour(images, ref, names)
+    # every photo black and white (a trial: the sanitizer set in gray, its bottle's cap
+    # removed and its body kept, with no word of why)
+    all_gray_note = (ALL_GRAY_NOTE if gray_note is None and is_gray(images[ref])
+                     and all(is_gray(im) for im in images) else None)
     sink = NullSink() if sink is None else sink
     missing = [m for m in ("enabled", "start", "scan_started", "chunk", "scan_finished",
                            "finish") if not hasattr(sink, m)]
@@ -628,7 +632,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     timings: dict[str, float] = {}
     t_all = time.perf_counter()
     clock = _Clock(timings, progress)
-    msgs: list[str] = set_notes + auto_note + [n for n in (gray_note, gray_apart_note) if n]
+    msgs: list[str] = set_notes + auto_note + [n for n in (gray_note, gray_apart_note,
+                                                           all_gray_note) if n]
     srcs = [i for i in range(len(images)) if i != ref]
     keep: list[np.ndarray] = []
 
@@ -1160,6 +1165,10 @@ def _in_gray(image: np.ndarray) -> np.ndarray:
     """A (H, W, 3) BGR image in gray, still 3 channels (OpenCV's weights)."""
     g = cv2.cvtColor(np.asarray(image), cv2.COLOR_BGR2GRAY)
     return cv2.cvtColor(g, cv2.COLOR_GRAY2BGR)
+
+
+ALL_GRAY_NOTE = ("every photo is black and white: without colour to go by, a mover in "
+                 "the scene's gray levels may be found only in part: look at the clean photo")
 
 
 def gray_like_reference(images: Sequence[np.ndarray], ref: int

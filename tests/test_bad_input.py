@@ -338,6 +338,14 @@ def test_a_jpeg_cut_short_is_named_as_cut_short(tmp_path, capsys, scene):
     rc, _, err = run_cli(capsys, *paths, bad, "--out", out, *FAST)
     msg = assert_input_error(rc, err, str(bad), "cut short", out=out)
     assert "truncated" in msg and "unsupported format" not in msg
+    # two bad inputs: both named in the one error (a trial fixed the first, ran
+    # again, and only then learnt of the second)
+    junk = tmp_path / "s" / "zz.jpg"
+    junk.write_bytes(b"not an image at all")
+    rc, _, err = run_cli(capsys, *paths, bad, junk, "--out", out, *FAST)
+    msg = assert_input_error(rc, err, str(bad), "cut short", out=out)
+    assert "2 of the 5 inputs cannot be read" in msg and str(junk) in msg \
+        and "not a readable image" in msg, msg
 
 
 def test_a_missing_gt_is_no_such_file(tmp_path, capsys, scene):

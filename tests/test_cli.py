@@ -840,6 +840,26 @@ def test_the_demo_scores_itself_and_says_what_to_try_next(tmp_path, capsys):
     assert main(["inspect", str(rec), "--failures"]) == 0  # the line it offers works
 
 
+def test_the_commands_offered_next_are_ones_the_shell_finds(tmp_path, monkeypatch):
+    """After `make demo` the venv is not on the PATH: the demo's "next:" lines name
+    the script that ran (a trial typed `dynremove view …` and got "command not
+    found"), and plain `dynremove` where the shell finds that same script."""
+    from dynremove import commands
+
+    script = tmp_path / ".venv" / "bin" / "dynremove"
+    script.parent.mkdir(parents=True)
+    script.write_text("#!/bin/sh\n")
+    script.chmod(0o755)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", [str(script), "demo"])
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    assert commands._program_name() == os.path.join(".venv", "bin", "dynremove")
+    monkeypatch.setenv("PATH", str(script.parent) + os.pathsep + "/usr/bin:/bin")
+    assert commands._program_name() == "dynremove"
+    monkeypatch.setattr(sys, "argv", ["/x/dynremove/__main__.py"])  # python -m dynremove
+    assert commands._program_name() == "dynremove"
+
+
 def test_a_users_viewer_py_shadowing_the_debugger_is_named(tmp_path, folder):
     """A ``viewer.py`` of the user's in the folder ``python -m dynremove`` runs from
     shadows the debugger's top-level package: "internal error: No module named

@@ -482,6 +482,12 @@ def test_a_black_and_white_reference_is_filled_in_gray():
     all_gray = remove_dynamic(gray, ref=ref)
     assert np.array_equal(r.dynamic, all_gray.dynamic)
     assert r.gray_sources and not all_gray.gray_sources
+    # every photo black and white: a note of its own (a trial's gray sanitizer set
+    # lost the bottle's cap only, and nothing said why); a colour set has none
+    from dynremove.pipeline import ALL_GRAY_NOTE
+    assert ALL_GRAY_NOTE in all_gray.warnings and ALL_GRAY_NOTE not in r.warnings
+    assert not any("black and white" in str(w) for w in remove_dynamic(sc.images,
+                                                                        ref=ref).warnings)
     # at full resolution the sources are used in gray as well
     from dynremove.pipeline import full_resolution_output
 

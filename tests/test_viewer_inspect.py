@@ -726,6 +726,19 @@ def test_a_region_kept_because_its_fill_did_not_fit_is_told_so():
     assert vd.outcome_line(h) == "kept (not in the final mask)"
 
 
+def test_a_relit_pixel_s_fill_line_says_it_was_relit_not_kept():
+    """A pixel of the faint shade beside a removed mover (``refine.shade``): the first
+    line says it was relit, and so does the fill line (a trial read "relit" above
+    and "fill: reference kept" below as a contradiction)."""
+    h = {"final_dynamic": False, "source_names": ["a.png", "b.png"], "replacements": [],
+         "gt": None, "x": 1, "y": 1, "t_r": 0.3, "decisions": [],
+         "selection": {"source": 0, "relit": 1, "relight_l": 6.5}}
+    assert vd.outcome_line(h).startswith("kept (not in the final mask), relit")
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")][0]
+    assert "relit" in fill and "+6.5 CIE L*" in fill and "reference kept" not in fill, fill
+    assert "changed by under --select-tau" in fill, fill
+
+
 def test_a_mover_kept_whole_because_only_part_of_it_could_go_is_told_so():
     """Code 4 of ``completed`` (``select.partial_movers``): the fill line, the static
     test line, the region's share and ``--failures`` say that the reference was kept

@@ -431,6 +431,16 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                          "does: the rest of a mover that no photo shows free, so the mover "
                          "is kept whole rather than left with holes (--select-keep-partial)"
                          + (f"; {region}" if region else ""))
+        elif sel.get("relit"):
+            # (a trial read "relit" on the first line and "reference kept" here as a
+            # contradiction: the reference's texture is kept, its light is not)
+            gain = sel.get("relight_l")
+            lines.append("fill: no source's value; the reference's own texture, relit to the "
+                         "other photos' light"
+                         + (f" ({gain:+.1f} CIE L*)" if gain is not None else "")
+                         + ": a faint shade beside the removed movers (--select-shade-de)"
+                         + (" (not in the final mask: changed by under --select-tau)"
+                            if not h.get("final_dynamic") else ""))
         else:
             lines.append("fill: reference kept" + (" (not in the final mask)"
                                                      if not h.get("final_dynamic") else ""))
