@@ -767,7 +767,8 @@ def format_table(report: dict) -> str:
                  "masks are resized to it")
     if any(summ[m]["own_mover"] is not None for m in methods):
         head += ("\n  own-mover fill %: of the pixels the fill replaced, those taken mostly "
-                 "from the other photos' own true movers (ghosts)")
+                 "from the other photos' own true movers (ghosts); the mean row here, "
+                 "each set's in --json (own_mover)")
     if "telea" in methods:  # (a trial read its column of '-' as a failure)
         head += ("\n  telea is given the true mask: it has no Jaccard ('-'); it scores "
                  "only the fill, where a background is known")
