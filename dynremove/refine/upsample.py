@@ -194,9 +194,10 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
         # 466 relit px outside the mask moved by ΔE 10–13.7)
         ly, lx = _relight(clean, selection)
         if len(ly):
-            was = np.zeros((Hf, Wf), bool)
-            was[cy, cx] = True
-            extra = ~was[ly, lx]
+            # (those not replaced: ``rep`` covers the replaced pixels' box)
+            extra = np.ones(len(ly), bool)
+            inb = (ly >= y0) & (ly < y1) & (lx >= x0) & (lx < x1)
+            extra[inb] = ~rep[ly[inb] - y0, lx[inb] - x0]
             cy, cx = np.concatenate([cy, ly[extra]]), np.concatenate([cx, lx[extra]])
     moved = delta_e(_lab(clean[cy, cx]), _lab(reference[cy, cx])) >= tau
     dyn_full[cy[moved], cx[moved]] = True
