@@ -117,6 +117,7 @@ class Params:
     select_beta: float = 0.3  # weight of the photomontage seam cost (ΔE)
     select_gamma: float = 20.0  # data cost (ΔE) of a candidate with mover colours, × P(mover)
     select_epipolar_px: float = 2.0  # a flow match explaining the reference is this near its line (analysis px)
+    select_line_px: float = 0.0  # in a 3-D set (see --select-parallax-px), a source's sample for the fill that lies farther than this (Sampson distance, analysis px) from the pixel's epipolar line in that source keeps a tenth of its vote in the fill's colour consensus where another source's sample lies on its line: the static scene behind a mover can only be seen on that line. Tested only in a source whose static flow matches lie within this of their lines at 90 % of their pixels (0 = off, the default: measured mixed, README session 72; 3 keeps a porch's pillar that a wide-baseline set's fill took from the wall beside it, but kept a cup whole in a 4-photo hand-held burst)
     select_cluster_median: bool = True  # a chosen source's pixel is the median of the free sources agreeing with it
     select_grow_px: int = 40  # L grows where the sources agree and the reference alone differs, this near it (analysis px; 0 = off)
     select_shade_de: float = 3.0  # a faint shade beside a removed mover (its soft cast shadow), darker than the light the other photos agree on by this much or more in CIE L* (at a 4 px scale) but under --select-shade-max-de, is relit to their light, keeping the reference's texture (0 = off)
@@ -195,6 +196,7 @@ class Params:
         for name in ("select_grow_px", "select_shade_de", "select_shade_px",
                      "select_shade_max_de",
                      "select_kappa", "select_ref_cost", "select_gamma", "select_epipolar_px",
+                     "select_line_px",
                      "select_parallax_px", "select_parallax_p95_px", "select_margin_px",
                      "select_search_de",
                      "select_search_support_de", "select_search_unique",

@@ -50,7 +50,13 @@ that the scan flagged with doubled content.
    showing its own mover (or a near-copy of the reference) carries no weight.
    Where the set is flat, a source whose candidate lands on the reference's
    mover as the flow followed it into that source (``_followed_mover``) carries
-   none either, and never fills where another source may.
+   none either, and never fills where another source may. With
+   ``select_line_px`` (off by default: measured mixed), where the set is 3-D, a
+   candidate sampled off the pixel's epipolar line in its source (the field
+   interpolated across L, or re-aligned, led it where the static scene cannot
+   be) carries only a tenth of its weight where another source's sample lies on
+   its line (in a source whose static flow matches lie that near their lines:
+   elsewhere the geometry's error is as large).
    The consensus at a pixel is the candidate with the most weighted support.
 4. **Graph cut** (``montage.expansion_labels``, photomontage). Labels: the
    reference and every source. The data cost is the distance to the
@@ -130,6 +136,13 @@ _EXPLAIN_CAP = 3
 # 10.1 / 11.6 % (19.1 without), J unchanged.
 _FOLLOWED_SHARE = 0.3
 _RING_OK = 0.6  # share of a lingering region's surroundings a witness sees as the reference
+# ``select_line_px``: what is left of the vote of a source's sample off the pixel's
+# epipolar line, where another source's sample lies on its line. None at all gave a
+# source's sample on its line the consensus also where that sample was the source's
+# own mover (seed-41 v4 entry-P10+dog_s3+drift-chicane: a white car pasted on the door,
+# -3.2 dB); a tenth kept the rule's gains there and lets several off-line samples still
+# outvote one on its line (README, session 72)
+_OFF_LINE_VOTE = 0.1
 # With two sources, one witness (``select_minority_one``): a lingering region must be
 # at least this share of the image and lie in L on at least this share of its area
 _ONE_WITNESS_FRAC = 0.002
@@ -231,7 +244,11 @@ REASONS = {0: "not considered", 1: "chosen",
            7: "still shows what the reference shows here: the mover that lingered, as "
               "the sources that saw past it say (static structure standing off the "
               "rest would look the same)",
-           8: "shows the reference's mover, moved here (the flow followed it)"}
+           8: "shows the reference's mover, moved here (the flow followed it)",
+           9: "disagrees with the fill's colour consensus, and its sample lies off "
+              "this pixel's epipolar line in it (farther than --select-line-px), where "
+              "the scene behind the mover cannot be: a tenth of a vote in that "
+              "consensus, as another source's sample lies on its line"}
 OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
 # ``Selection.completed``: the region rule's codes (1 replaced, 2 kept with its region
 # of L), ``misfit_regions``' (kept: its fill did not fit the photo around it) and
@@ -244,18 +261,19 @@ _PARTIAL_AGREE = 0.5
 OWN_MOVER, FOLLOWED = 3, 8  # the codes of a source showing a mover of its own: by colour,
 # or the reference's mover where the flow followed it
 DISAGREES = 5  # a source whose sample differs from the fill's colour consensus
+OFF_LINE = 9  # ... and off the pixel's epipolar line (no vote: ``select_line_px``)
 
 
 def unconfirmed_fill(sel: "Selection", replaced: npt.NDArray[np.bool_]
                      ) -> npt.NDArray[np.bool_]:
     """Pixels of ``replaced`` (H, W) bool filled from one source alone while another
     source that reaches them shows a mover of its own there or disagrees with the
-    fill (``reasons`` OWN_MOVER, FOLLOWED or DISAGREES): nothing confirms the fill
-    there. (H, W) bool; all False without the per-source reasons."""
+    fill (``reasons`` OWN_MOVER, FOLLOWED, DISAGREES or OFF_LINE): nothing confirms
+    the fill there. (H, W) bool; all False without the per-source reasons."""
     if sel.reasons is None or sel.members is None:
         return np.zeros(replaced.shape, bool)
     single = replaced & ~sel.no_source & (sel.label > 0) & (sel.members.sum(0) == 1)
-    against = np.isin(sel.reasons, (OWN_MOVER, FOLLOWED, DISAGREES)).any(0)
+    against = np.isin(sel.reasons, (OWN_MOVER, FOLLOWED, DISAGREES, OFF_LINE)).any(0)
     return single & against
 
 
@@ -1649,6 +1667,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
 
     # the visible pixels whose flow matches set the epipolar search's range (L and 4 px)
     off_l = ~dilate_disc(mask, 4) if mode == "parallax" and P.select_search_de > 0 else None
+    # each source's 90th percentile of its static flow's distance from the epipolar
+    # lines (px; inf: not measured), for ``select_line_px``
+    line_p90 = np.full(S, np.inf)
+    far_l = ~dilate_disc(mask, 8) if mode == "parallax" and P.select_line_px > 0 else None
 
     def match(k):
         v = views[k]
@@ -1668,9 +1690,16 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         lab_w = blurred_lab(warped, 1.0)
         geo = inside & within
         seen[k] = inside
-        if v.F is not None and P.select_epipolar_px > 0:
-            geo &= sampson_sq(v.F, grid, nf) <= P.select_epipolar_px ** 2
+        d_line = sampson_sq(v.F, grid, nf) if v.F is not None else None
+        if d_line is not None and P.select_epipolar_px > 0:
+            geo &= d_line <= P.select_epipolar_px ** 2
         near_w = inside & (delta_e(lab_w, lab_r) < tau)
+        if d_line is not None and far_l is not None:
+            # how near its epipolar lines this source's flow matches of the static
+            # scene lie (those that agree with the reference in colour, away from L)
+            static = inside & within & near_w & far_l
+            if static.sum() > 100:
+                line_p90[k] = math.sqrt(float(np.percentile(d_line[static], 90)))
         # exposure and white balance: the epipolar search compares the reference
         # with the source itself, not with its samples at matches that agree
         offsets[k] = _lab_offset(lab_r, lab_w, geo & ~mask)
@@ -1930,6 +1959,25 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             own[k] = _valid_at(followed[k], fields[k][roi]) & usable[k + 1] & in_mask
     weight[1:][own] = 0.0
     weight[1:][copies] = 0.0
+    # where the set is 3-D, a sample off the pixel's epipolar line in its source
+    # cannot show the static scene behind the mover (the fields are interpolated
+    # across L and re-aligned by flow: a pillar's fill taken from the wall beside
+    # it): where another source's sample lies on its line, its vote shrinks to
+    # ``_OFF_LINE_VOTE``. Only in a source whose geometry places its own static
+    # flow that near its lines (90 % of it): elsewhere (a hand-held desk, a lawn
+    # before the camera) "off the line" is the geometry's error as often as the
+    # sample's, and bursts/tim6 had a tube's copy, on its line by that margin,
+    # outvote three sources showing the table
+    off_line = np.zeros((S,) + reg.shape, bool)
+    if mode == "parallax" and P.select_line_px > 0:
+        for k in range(S):
+            if views[k].F is not None and line_p90[k] <= P.select_line_px:
+                off_line[k] = (sampson_sq(views[k].F, grid[roi], fields[k][roi])
+                               > P.select_line_px ** 2) & in_mask
+        # (a source that still shows a lingering mover, or the reference's mover
+        # followed into it, has no vote: its sample on the line is no witness)
+        off_line &= (~off_line & usable[1:] & (weight[1:] > 0)).any(0)[None]
+        weight[1:][off_line] *= _OFF_LINE_VOTE
     agree = (dist < tau) & usable[:, None] & usable[None]
     support = (agree * weight[None]).sum(1)
     v_roi = votes[:, y0:y1, x0:x1]
@@ -2130,6 +2178,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
     why = np.where(d_cons < tau, 6, 5).astype(np.uint8)
+    why[off_line & (d_cons >= tau)] = OFF_LINE
     why[members[:, y0:y1, x0:x1]] = 2
     why[mv] = OWN_MOVER
     why[own] = FOLLOWED
