@@ -261,7 +261,7 @@ _PARTIAL_AGREE = 0.5
 OWN_MOVER, FOLLOWED = 3, 8  # the codes of a source showing a mover of its own: by colour,
 # or the reference's mover where the flow followed it
 DISAGREES = 5  # a source whose sample differs from the fill's colour consensus
-OFF_LINE = 9  # ... and off the pixel's epipolar line (no vote: ``select_line_px``)
+OFF_LINE = 9  # ... and off the pixel's epipolar line (a tenth of a vote: ``select_line_px``)
 
 
 def unconfirmed_fill(sel: "Selection", replaced: npt.NDArray[np.bool_]
