@@ -606,7 +606,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     # every photo black and white (a trial: the sanitizer set in gray, its bottle's cap
     # removed and its body kept, with no word of why)
     all_gray_note = (ALL_GRAY_NOTE if gray_note is None and is_gray(images[ref])
-                     and all(is_gray(im) for im in images) else None)
+                     and all(is_gray(im) for i, im in enumerate(images) if i != ref)
+                     else None)
     sink = NullSink() if sink is None else sink
     missing = [m for m in ("enabled", "start", "scan_started", "chunk", "scan_finished",
                            "finish") if not hasattr(sink, m)]
