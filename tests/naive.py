@@ -241,6 +241,20 @@ def full_resolution(reference, sources, clean_working, dynamic, selection, tau=1
                        suspect=None if selection.mask is None else cv2.resize(
                            selection.mask.astype(np.uint8), size,
                            interpolation=cv2.INTER_NEAREST)[roi] > 0)
+    if selection.seam_offset is not None:
+        # per label, bilinear over that label's own working pixels (normalised)
+        corr = np.zeros(out.shape, np.float32)
+        for lbl in np.unique(chosen):
+            mine = (selection.label == lbl).astype(np.float32)
+            num = cv2.remap(selection.seam_offset * mine[..., None], wx, wy, cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_REPLICATE)
+            den = cv2.remap(mine, wx, wy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            at = rep_roi & (lab == lbl)
+            corr[at] = np.where((den[at] > 1e-6)[:, None],
+                                num[at] / np.maximum(den[at], 1e-6)[:, None], 0)
+        v = out.astype(np.float32) + corr
+        v += 0.5
+        out = np.where(rep_roi[..., None], np.clip(v, 0, 255).astype(np.uint8), out)
     no_src = cv2.resize(selection.no_source.astype(np.uint8), size,
                         interpolation=cv2.INTER_NEAREST)[roi] > 0
     if no_src.any():

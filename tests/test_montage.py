@@ -167,3 +167,44 @@ def test_light_like_keeps_light_and_drops_a_hue_carried_in_from_the_ring():
     mid = np.clip((s + LIGHT_FLOOR) * np.exp(lg) - LIGHT_FLOOR + 0.5, 0, 255).astype(np.uint8)
     half = np.ptp(gain(s, light_like(s, mid)), axis=1)
     assert 0.35 * np.ptp(gain(s, mid)) < half[0] < 0.65 * np.ptp(gain(s, mid)), half
+
+
+def _two_sources_meeting(step):
+    """A 100×140 scene of smooth texture; a replaced region (rows 20-79, columns
+    20-119) filled by source 1 on its left half and source 2 on its right, which
+    shows the same texture ``step`` B/G/R levels brighter (its light not matched)."""
+    rng = np.random.default_rng(5)
+    tex = cv2.GaussianBlur(rng.uniform(60, 190, (100, 140, 3)).astype(np.float32), (0, 0), 3)
+    region = np.zeros((100, 140), bool)
+    region[20:80, 20:120] = True
+    labels = np.zeros((100, 140), np.intp)
+    labels[region] = 1
+    labels[20:80, 70:120] = 2
+    raw = np.stack([tex, tex, tex + step]).clip(0, 255).astype(np.uint8)
+    out = raw[0].copy()
+    out[labels == 2] = raw[2][labels == 2]
+    return tex, raw, out, labels, region
+
+
+def test_seam_steps_remove_a_step_of_light_and_keep_a_step_of_content():
+    """``montage.seam_steps``: a seam where two sources differ by 20 levels of light is
+    blended away (the fill then follows the texture across it), nothing outside the
+    region changes, the correction fades to 0 at the region's edge; a step of 80
+    levels (over ``max_step`` 50) is content and is kept as it is."""
+    from dynremove.refine.montage import add_offset, seam_steps
+
+    tex, raw, out, labels, region = _two_sources_meeting(20.0)
+    corr = seam_steps(out, raw, labels, region, max_step=50.0)
+    assert not corr[~region].any()
+    fixed = out.copy()
+    fixed[region] = add_offset(out[region], corr[region])
+    truth_step = tex[20:80, 70] - tex[20:80, 69]
+    before = np.abs(out[20:80, 70].astype(float) - out[20:80, 69] - truth_step).mean()
+    after = np.abs(fixed[20:80, 70].astype(float) - fixed[20:80, 69] - truth_step).mean()
+    assert before > 19 and after < 2, (before, after)
+    # the correction is smooth: half the step each side at the seam, ~0 at the edge
+    assert 7 < -corr[50, 70].mean() < 13 and 7 < corr[50, 69].mean() < 13
+    assert np.abs(corr[50, [20, 119]]).max() < 2.5
+    # a step of 80 levels: content, kept
+    _, raw, out, labels, region = _two_sources_meeting(80.0)
+    assert not seam_steps(out, raw, labels, region, max_step=50.0).any()

@@ -666,6 +666,102 @@ def ring_fade(known: npt.NDArray[np.bool_], sel: npt.NDArray[np.bool_], plateau_
         return tuple(np.exp(-beyond / d).astype(np.float32) for d in decay_px)
     return np.exp(-beyond / decay_px).astype(np.float32)
 
-__all__ = ["add_offset", "band_around", "band_light", "component_offsets",
+
+# the seam blend's reach (px): farther from every seam, the blend's value is kept
+SEAM_BAND_PX = 64
+
+
+def seam_steps(out: npt.NDArray[np.uint8], raw: npt.NDArray[np.uint8],
+               labels: npt.NDArray[np.intp], region: npt.NDArray[np.bool_], *,
+               max_step: float, band_px: int = SEAM_BAND_PX) -> npt.NDArray[np.float32]:
+    """The correction that removes the steps of light the fill leaves at its seams.
+
+    Two sources that meet at a seam inside the replaced region were each brought
+    to the reference's level on the ring around the region (``offset_blend``);
+    where one of them barely reaches the ring, or the light changes across the
+    region, they still differ by some levels and the seam shows as an edge (on
+    ``bursts/tim6``, patches of table 10-30 levels apart where the tube was).
+    Poisson image editing (Pérez, Gangnet & Blake, *Poisson image editing*,
+    SIGGRAPH 2003), as Photomontage blends its seams (Agarwala et al. 2004), on
+    the pixels of ``region`` within ``band_px`` of a seam: the guidance is the
+    blended fill's own gradient, except across a seam, where it is the mean of
+    the two sources' own gradients there (``raw``). The region's edge and the
+    band's are held, so the correction fades to 0 there and nothing outside the
+    region changes. A step larger than ``max_step`` levels (any channel) is
+    kept: the two sources show different content there (the sky beside a roof),
+    which no light explains, and smoothing it would spread a haze. Solved by
+    conjugate gradients (``scipy.sparse.linalg.cg``).
+
+    Parameters
+    ----------
+    out : (H, W, 3) uint8 ndarray
+        The blended fill.
+    raw : (L, H, W, 3) uint8 ndarray
+        Each label's source as sampled, before any combination or offset.
+    labels : (H, W) int ndarray
+        The label of each pixel (a seam: two 4-neighbours of ``region`` with
+        different labels).
+    region : (H, W) bool ndarray
+        The pixels that may change: those a source filled.
+    max_step : float
+        B/G/R levels.
+    band_px : int
+
+    Returns
+    -------
+    (H, W, 3) float32 ndarray
+        To add to ``out`` (``add_offset``); 0 outside the band and the region.
+    """
+    import scipy.sparse as sp  # (scikit-learn's own dependency)
+    import scipy.sparse.linalg as spl
+
+    H, W = region.shape
+    corr = np.zeros((H, W, 3), np.float32)
+    b = np.zeros((H, W, 3), np.float64)
+    at_seam = np.zeros((H, W), bool)
+    for dy, dx in ((0, 1), (1, 0)):
+        p = (slice(0, H - dy), slice(0, W - dx))
+        q = (slice(dy, H), slice(dx, W))
+        ys, xs = np.nonzero(region[p] & region[q] & (labels[p] != labels[q]))
+        yq, xq = ys + dy, xs + dx
+        step = out[ys, xs].astype(np.float64) - out[yq, xq]
+        light = np.abs(step).max(1) <= max_step
+        ys, xs, yq, xq, step = ys[light], xs[light], yq[light], xq[light], step[light]
+        if not len(ys):
+            continue
+        lp, lq = labels[ys, xs], labels[yq, xq]
+        guide = 0.5 * ((raw[lp, ys, xs].astype(np.float64) - raw[lp, yq, xq])
+                       + (raw[lq, ys, xs].astype(np.float64) - raw[lq, yq, xq]))
+        d = guide - step  # what the difference across the edge must change by
+        np.add.at(b, (ys, xs), d)
+        np.add.at(b, (yq, xq), -d)
+        at_seam[ys, xs] = at_seam[yq, xq] = True
+    if not at_seam.any():
+        return corr
+    far = cv2.distanceTransform((~at_seam).view(np.uint8), cv2.DIST_L2, 3)
+    ys, xs = np.nonzero(region & (far <= band_px))
+    n = len(ys)
+    index = np.full((H, W), -1, np.int64)
+    index[ys, xs] = np.arange(n)
+    # the 5-point Laplacian on the band; a neighbour outside it is held (0)
+    diag = np.zeros(n)
+    rows, cols = [np.arange(n)], [np.arange(n)]
+    for dy, dx in ((0, 1), (1, 0), (0, -1), (-1, 0)):
+        yy, xx = ys + dy, xs + dx
+        inside = (yy >= 0) & (yy < H) & (xx >= 0) & (xx < W)
+        diag += inside
+        j = np.full(n, -1, np.int64)
+        j[inside] = index[yy[inside], xx[inside]]
+        rows.append(np.flatnonzero(j >= 0))
+        cols.append(j[j >= 0])
+    vals = np.concatenate([diag, -np.ones(sum(len(r) for r in rows[1:]))])
+    A = sp.csr_matrix((vals, (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    for c in range(3):
+        x, _ = spl.cg(A, b[ys, xs, c], rtol=1e-4, atol=1e-3, maxiter=8 * band_px)
+        corr[ys, xs, c] = x
+    return corr
+
+
+__all__ = ["SEAM_BAND_PX", "add_offset", "band_around", "band_light", "component_offsets",
            "consistent_departures", "expansion_labels", "gaussian_mean_at", "offset_blend",
-           "pairwise_distance", "ring_agrees", "ring_fade", "ring_offset"]
+           "pairwise_distance", "ring_agrees", "ring_fade", "ring_offset", "seam_steps"]

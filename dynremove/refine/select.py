@@ -107,8 +107,8 @@ from dynremove.refine.fields import (background_fields, blurred_lab, interpolate
 from dynremove.refine.fill import median_fill, realign_fields
 from dynremove.refine.parallax import (epipolar_search, fit_parallax, line_points,
                                        search_beyond, sweep_fields)
-from dynremove.refine.montage import (LIGHT_SIGMA_PX, expansion_labels, offset_blend,
-                                      pairwise_distance)
+from dynremove.refine.montage import (LIGHT_SIGMA_PX, add_offset, expansion_labels,
+                                      offset_blend, pairwise_distance, seam_steps)
 from dynremove.refine.morphology import dilate_disc, drop_small, fill_holes, grow_replaced
 
 _FORBIDDEN = 1e6  # data cost of a label that may not be used
@@ -219,6 +219,10 @@ class Selection:
     # region); NaN where no source filled the pixel (kept, or inpainted), but where
     # ``misfit_regions`` kept the reference (``completed`` 3): what it would have added
     offset: npt.NDArray[np.float32] | None = None
+    # (H, W, 3) float32, B/G/R levels: the part of ``offset`` that removed the steps of
+    # light at the seams between sources (``montage.seam_steps``; 0 elsewhere), which
+    # the full-size fill takes upsampled label by label; None: no step removed
+    seam_offset: npt.NDArray[np.float32] | None = None
     # (H, W) bool: L as the fill by selection last saw it (the scans' map grown by its
     # own steps); the blend's pixels that may show a mover (``offset_blend``'s
     # ``suspect``), at full size too (``upsample.full_resolution``)
@@ -2128,6 +2132,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     else:
         unseen[:] = False
     clean = reference.copy()
+    seam_offset = None
     members = np.zeros((S, H, W), bool)
     offset = np.full((H, W, 3), np.nan, np.float32)
     blur_sigma = np.zeros(S, np.float32)
@@ -2141,6 +2146,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                     cand_img[0], cand_img[k], scene & usable[k] & (dist[0, k] < tau))
         for k in np.flatnonzero(blur_sigma):
             cand_img[k + 1] = cv2.GaussianBlur(cand_img[k + 1], (0, 0), float(blur_sigma[k]))
+        # each label's source as sampled, for the seams' guidance (``seam_steps``)
+        raw_img = cand_img.copy() if P.select_seam_levels > 0 else None
         if P.select_cluster_median:
             # where the scan is trusted, every free source is a witness of the
             # hidden background, not only those agreeing with the chosen one
@@ -2174,6 +2181,19 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                 clean[roi][misfit] = reference[roi][misfit]
                 members[:, y0:y1, x0:x1] &= ~misfit[None]  # (``offset`` keeps what
                 # the blend would have added there: the debugger shows why)
+        if raw_img is not None:
+            # the steps of light left where two sources meet: blended in the
+            # gradient domain (bursts/tim6: the table where the tube was, patches
+            # 10-30 levels apart; README, session 73)
+            corr = seam_steps(clean[roi], raw_img, lab_b, rep_b & ~no_src,
+                              max_step=P.select_seam_levels)
+            if corr.any():
+                cy_, cx_ = np.nonzero(corr.any(-1))
+                clean[cy_ + y0, cx_ + x0] = add_offset(clean[cy_ + y0, cx_ + x0],
+                                                       corr[cy_, cx_])
+                offset[cy_ + y0, cx_ + x0] += corr[cy_, cx_]
+                seam_offset = np.zeros((H, W, 3), np.float32)
+                seam_offset[roi] = corr
     if no_src.any():
         sub = np.ascontiguousarray(clean[roi])
         clean[roi] = cv2.inpaint(sub, no_src.astype(np.uint8), 5, cv2.INPAINT_TELEA)
@@ -2233,7 +2253,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
                      followed=np.stack([np.zeros((H, W), bool) if f is None else f
                                         for f in followed]),
-                     offset=offset, mask=mask)
+                     offset=offset, mask=mask, seam_offset=seam_offset)
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "OUTSIDE", "OWN_MOVER",

@@ -182,6 +182,8 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
                                               ring_px=ring_px, max_de=_MAX_DE, **scaled):
             at = rep_index[cy, cx]
             out[at] = add_offset(cand[lbl, rep_i[at]], coff)
+    if selection.seam_offset is not None:  # the steps of light at the seams removed
+        out = add_offset(out, seam_offset_at(selection, qy + y0, qx + x0, chosen, size))
     no_src = _resize_nearest(selection.no_source.view(np.uint8), size)[y0:y1, x0:x1] > 0
     no_src &= rep
     if no_src.any():
@@ -202,6 +204,29 @@ def full_resolution(reference: npt.NDArray[np.uint8], sources: list[npt.NDArray[
     moved = delta_e(_lab(clean[cy, cx]), _lab(reference[cy, cx])) >= tau
     dyn_full[cy[moved], cx[moved]] = True
     return clean, dyn_full
+
+
+def seam_offset_at(selection: Selection, ys: npt.NDArray[np.intp], xs: npt.NDArray[np.intp],
+                   chosen: npt.NDArray[np.intp], size: tuple[int, int]
+                   ) -> npt.NDArray[np.float32]:
+    """``Selection.seam_offset`` at the full-size pixels (``ys``, ``xs``) whose labels
+    are ``chosen``: (N, 3) float32 B/G/R levels. Bilinear within each label
+    (normalised by the label's own working pixels under the kernel): the correction
+    steps at a seam, so a pixel takes none of the other label's side; 0 where no
+    working pixel of its label is under the kernel. ``size`` = (W, H) full size."""
+    Wf, Hf = size
+    h, w = selection.label.shape
+    mx = ((xs + 0.5) * w / Wf - 0.5).astype(np.float32)
+    my = ((ys + 0.5) * h / Hf - 0.5).astype(np.float32)
+    out = np.zeros((len(ys), 3), np.float32)
+    for lbl in np.unique(chosen):
+        at = np.flatnonzero(chosen == lbl)
+        mine = (selection.label == lbl).astype(np.float32)
+        num = remap_points(selection.seam_offset * mine[..., None], mx[at], my[at],
+                           borderMode=cv2.BORDER_REPLICATE)
+        den = remap_points(mine, mx[at], my[at], borderMode=cv2.BORDER_REPLICATE)
+        out[at] = np.where((den > 1e-6)[:, None], num / np.maximum(den, 1e-6)[:, None], 0)
+    return out
 
 
 def _relight(clean: np.ndarray, selection: Selection
