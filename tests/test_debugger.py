@@ -311,6 +311,25 @@ def test_the_blends_offset_is_recorded_and_told(method_run):
     assert (light in words) == (1 <= mag[y, x] < 40)
 
 
+def test_the_seam_blend_is_recorded_and_told(method_run):
+    """The part of the blend's offset that removed a step of light at a seam between
+    two sources (``Selection.seam_offset``): recorded to the level, and said by inspect
+    at the pixel where it is largest."""
+    run_sel = method_run["res"].selection
+    if run_sel is None or run_sel.seam_offset is None:
+        pytest.skip("no seam blended in this run")
+    rec = vi.read_selection(method_run["path"])
+    want = np.clip(np.round(run_sel.seam_offset), -128, 127).astype(np.int16)
+    np.testing.assert_array_equal(rec["seam_blend"], want)
+    off = np.clip(np.round(np.nan_to_num(run_sel.offset)), -128, 127).astype(np.int16)
+    mag = np.where(np.abs(off).max(-1) >= 1, np.abs(want).max(-1), -1)
+    y, x = np.unravel_index(int(np.argmax(mag)), mag.shape)
+    assert mag[y, x] >= 1
+    words = " ".join(vd.verdict_lines(vi.pixel_history(method_run["path"], int(x), int(y))))
+    told = ", of which " + "/".join(f"{int(c):+d}" for c in want[y, x]) + " blend the seam"
+    assert told in words and "--select-seam-levels" in words
+
+
 def test_a_lingering_mover_is_logged_and_told(tmp_path):
     """A mover that stands still in 3 of the 5 sources: the recording holds the
     lingering map, and inspect says which source filled a pixel of it and why the

@@ -2389,7 +2389,7 @@ def test_the_fill_s_seams_leave_no_step_of_light_on_a_real_burst():
     as a blotch with an edge. ``select_seam_levels`` (``montage.seam_steps``) blends
     those steps away. Against the background shot apart and registered onto tim4, the
     fill is nearer to the truth (mean CIE76 ΔE inside the replaced region 7.6 → 6.3,
-    pixels over ΔE 10: 19.6 → 8.4 %), and nothing outside the replaced region moves
+    pixels over ΔE 10: 19.6 → 8.2 %), and nothing outside the replaced region moves
     (but a faint shade beside it that the relighting judges beside the fill)."""
     from dynremove import io
 

@@ -85,7 +85,8 @@ def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
         # what the blend added to the chosen sources (grey: nothing; tinted: a colour
         # or light correction), over the clean photo
         rrb.Spatial2DView(name="blend offset", origin=p("result"),
-                          contents=[p(P.RESULT_CLEAN), p(P.RESULT_OFFSET)]),
+                          contents=[p(P.RESULT_CLEAN), p(P.RESULT_OFFSET),
+                                    p(P.RESULT_SEAM_BLEND)]),
         # inside L: which sources show the reference's content as static, and how
         # (green: they count; red: not found; hover a pixel for the words)
         rrb.Grid(*[rrb.Spatial2DView(

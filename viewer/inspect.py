@@ -594,7 +594,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     gained × DE_SCALE, DE_NONE elsewhere: ``shade.relight_shade``), ``followed`` (per source, in
     its own frame: where the flow followed the reference's mover into it), ``offset``
     ((H, W, 3) int16, B/G/R levels the blend added to the chosen source, 0 where it
-    added none or no source filled; ``paths.RESULT_OFFSET``), ``fill_x``, ``fill_y``
+    added none or no source filled; ``paths.RESULT_OFFSET``), ``seam_blend`` (the same, the
+    part that blended the steps of light at the seams between sources;
+    ``paths.RESULT_SEAM_BLEND``), ``fill_x``, ``fill_y``
     (uint16, where the chosen source was sampled, in its pixels × XY_SCALE, DE_NONE
     where no source filled; ``paths.RESULT_FILL_MATCH``); absent
     keys when the run had no selection step (or, for ``inpainted``, was recorded
@@ -653,9 +655,10 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
         rows = _image_rows(store, p(f"{P.RESULT_FILL_MATCH}/{axis}"), "DepthImage", index=None)
         if rows:
             out[f"fill_{axis}"] = rows[0][1]
-    rows = _image_rows(store, p(P.RESULT_OFFSET), "Image", index=None)
-    if rows and rows[0][1].ndim == 3:
-        out["offset"] = rows[0][1][..., ::-1].astype(np.int16) - P.OFFSET_ZERO  # RGB -> BGR
+    for key, path in (("offset", P.RESULT_OFFSET), ("seam_blend", P.RESULT_SEAM_BLEND)):
+        rows = _image_rows(store, p(path), "Image", index=None)
+        if rows and rows[0][1].ndim == 3:
+            out[key] = rows[0][1][..., ::-1].astype(np.int16) - P.OFFSET_ZERO  # RGB -> BGR
     return out
 
 
@@ -819,7 +822,7 @@ def pixel_history(path: str | Path, x: int, y: int, *, root: str = "") -> dict[s
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.DE_SCALE
         elif k in ("fill_x", "fill_y"):  # where the chosen source was sampled
             sel[k] = None if int(v[y, x]) == P.DE_NONE else float(v[y, x]) / P.XY_SCALE
-        elif k == "offset":  # B/G/R levels the blend added to the chosen source
+        elif k in ("offset", "seam_blend"):  # B/G/R levels the blend added (and its seams' part)
             sel[k] = [int(c) for c in v[y, x]]
         else:
             sel[k] = int(v[y, x])

@@ -143,6 +143,9 @@ RESULT_RELIGHT_L = "result/selection/relight_l"
 # OFFSET_ZERO + levels (clipped to 0..255): grey where it added nothing or no source filled
 RESULT_OFFSET = "result/selection/offset"
 OFFSET_ZERO = 128
+# the part of it that blended away the steps of light at the seams between two
+# sources (Selection.seam_offset, ``montage.seam_steps``), the same encoding
+RESULT_SEAM_BLEND = "result/selection/seam_blend"
 # where in the chosen source each replaced pixel was sampled (the source's field there),
 # in that source's pixels at the analysed size: fill_match/x and /y (uint16,
 # round(px · XY_SCALE), DE_NONE where the reference was kept, inpainted or off the frame)

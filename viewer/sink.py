@@ -530,6 +530,12 @@ class RerunSink(StepColumns):
                 self.rec.log(self.p(P.RESULT_OFFSET), rr.Image(
                     np.clip(np.round(off) + P.OFFSET_ZERO, 0, 255).astype(np.uint8)),
                     static=True)
+            if getattr(sel, "seam_offset", None) is not None:
+                # the part of it that blended the seams between sources
+                off = np.asarray(sel.seam_offset, np.float32)[..., ::-1]
+                self.rec.log(self.p(P.RESULT_SEAM_BLEND), rr.Image(
+                    np.clip(np.round(off) + P.OFFSET_ZERO, 0, 255).astype(np.uint8)),
+                    static=True)
             if getattr(sel, "fields", None) is not None and getattr(sel, "label", None) is not None:
                 for c, axis in enumerate("xy"):
                     self.rec.log(self.p(f"{P.RESULT_FILL_MATCH}/{axis}"), rr.DepthImage(

@@ -376,6 +376,10 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
                            # (a trial read the light as the cause where the ring was the
                            # rest of a cup the fill had left: both ask for an offset)
                            f" ({_LIGHT_OR_REST})"))
+                seam = sel.get("seam_blend")
+                if seam and max(abs(c) for c in seam) >= 1:
+                    why += (", of which " + levels_words(seam) + " blend the seam with the "
+                            "next photo's patch, whose light differed (--select-seam-levels)")
             fx, fy = sel.get("fill_x"), sel.get("fill_y")
             # (where the fill's field across L leads, not the flow's match that the
             # static 3-D test reads: a trial read the two as a contradiction)

@@ -669,11 +669,15 @@ def ring_fade(known: npt.NDArray[np.bool_], sel: npt.NDArray[np.bool_], plateau_
 
 # the seam blend's reach (px): farther from every seam, the blend's value is kept
 SEAM_BAND_PX = 64
+# ... and the σ (px) along a seam over which its steps are averaged: light is steady
+# along a seam, two sources' misalignment is not
+SEAM_ALONG_PX = 4.0
 
 
 def seam_steps(out: npt.NDArray[np.uint8], raw: npt.NDArray[np.uint8],
                labels: npt.NDArray[np.intp], region: npt.NDArray[np.bool_], *,
-               max_step: float, band_px: int = SEAM_BAND_PX) -> npt.NDArray[np.float32]:
+               max_step: float, band_px: int = SEAM_BAND_PX,
+               along_px: float = SEAM_ALONG_PX) -> npt.NDArray[np.float32]:
     """The correction that removes the steps of light the fill leaves at its seams.
 
     Two sources that meet at a seam inside the replaced region were each brought
@@ -689,8 +693,12 @@ def seam_steps(out: npt.NDArray[np.uint8], raw: npt.NDArray[np.uint8],
     band's are held, so the correction fades to 0 there and nothing outside the
     region changes. A step larger than ``max_step`` levels (any channel) is
     kept: the two sources show different content there (the sky beside a roof),
-    which no light explains, and smoothing it would spread a haze. Solved by
-    conjugate gradients (``scipy.sparse.linalg.cg``).
+    which no light explains, and smoothing it would spread a haze. What each
+    seam edge asks is averaged over the edges between the same two labels within
+    ``along_px`` (a normalised Gaussian of that σ along the seam): light is
+    steady along a seam, and the part of the step that is not, two sources'
+    texture a pixel or two apart, stays. Solved by conjugate gradients
+    (``scipy.sparse.linalg.cg``).
 
     Parameters
     ----------
@@ -706,6 +714,8 @@ def seam_steps(out: npt.NDArray[np.uint8], raw: npt.NDArray[np.uint8],
     max_step : float
         B/G/R levels.
     band_px : int
+    along_px : float
+        σ along the seam, px (0: each edge as it is).
 
     Returns
     -------
@@ -717,8 +727,7 @@ def seam_steps(out: npt.NDArray[np.uint8], raw: npt.NDArray[np.uint8],
 
     H, W = region.shape
     corr = np.zeros((H, W, 3), np.float32)
-    b = np.zeros((H, W, 3), np.float64)
-    at_seam = np.zeros((H, W), bool)
+    edges = []  # (ys, xs, yq, xq, d): d what the difference across edge p -> q must change by
     for dy, dx in ((0, 1), (1, 0)):
         p = (slice(0, H - dy), slice(0, W - dx))
         q = (slice(dy, H), slice(dx, W))
@@ -727,17 +736,37 @@ def seam_steps(out: npt.NDArray[np.uint8], raw: npt.NDArray[np.uint8],
         step = out[ys, xs].astype(np.float64) - out[yq, xq]
         light = np.abs(step).max(1) <= max_step
         ys, xs, yq, xq, step = ys[light], xs[light], yq[light], xq[light], step[light]
-        if not len(ys):
-            continue
         lp, lq = labels[ys, xs], labels[yq, xq]
         guide = 0.5 * ((raw[lp, ys, xs].astype(np.float64) - raw[lp, yq, xq])
                        + (raw[lq, ys, xs].astype(np.float64) - raw[lq, yq, xq]))
-        d = guide - step  # what the difference across the edge must change by
-        np.add.at(b, (ys, xs), d)
-        np.add.at(b, (yq, xq), -d)
-        at_seam[ys, xs] = at_seam[yq, xq] = True
-    if not at_seam.any():
+        edges.append((ys, xs, yq, xq, guide - step))
+    ys, xs, yq, xq, d = (np.concatenate([e[i] for e in edges]) for i in range(5))
+    if not len(ys):
         return corr
+    if along_px > 0:
+        # light changes slowly along a seam, a misalignment's steps do not: each edge
+        # takes the mean of d over the edges between the same two labels within
+        # ~along_px (normalised Gaussian), so that only the steady part is removed
+        lo = np.minimum(labels[ys, xs], labels[yq, xq])
+        hi = np.maximum(labels[ys, xs], labels[yq, xq])
+        sign = np.where(labels[ys, xs] == lo, 1.0, -1.0)[:, None]
+        pair = lo * (int(labels.max()) + 1) + hi
+        smooth = np.empty_like(d)
+        for k in np.unique(pair):
+            at = np.flatnonzero(pair == k)
+            num = np.zeros((H, W, 3), np.float32)
+            den = np.zeros((H, W), np.float32)
+            np.add.at(num, (ys[at], xs[at]), (d[at] * sign[at]).astype(np.float32))
+            np.add.at(den, (ys[at], xs[at]), 1.0)
+            num = cv2.GaussianBlur(num, (0, 0), along_px)
+            den = cv2.GaussianBlur(den, (0, 0), along_px)
+            smooth[at] = num[ys[at], xs[at]] / den[ys[at], xs[at], None] * sign[at]
+        d = smooth
+    b = np.zeros((H, W, 3), np.float64)
+    np.add.at(b, (ys, xs), d)
+    np.add.at(b, (yq, xq), -d)
+    at_seam = np.zeros((H, W), bool)
+    at_seam[ys, xs] = at_seam[yq, xq] = True
     far = cv2.distanceTransform((~at_seam).view(np.uint8), cv2.DIST_L2, 3)
     ys, xs = np.nonzero(region & (far <= band_px))
     n = len(ys)

@@ -84,8 +84,11 @@ that the scan flagged with doubled content.
    the blend had to shift by more than light does (``select_misfit_levels``),
    where the reference lacks the movers' colours, keeps the reference
    (``misfit_regions``): its fill shows other content than the scene there.
-   Pixels of L that no source shows free are inpainted (OpenCV Telea) and
-   reported.
+   Where two sources meet inside the region and their light still differs by
+   up to ``select_seam_levels``, the step is blended in the gradient domain
+   (``montage.seam_steps``: Poisson image editing within 64 px of the seam,
+   the region's edge held). Pixels of L that no source shows free are
+   inpainted (OpenCV Telea) and reported.
 """
 
 from __future__ import annotations
