@@ -85,8 +85,10 @@ def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
         # what the blend added to the chosen sources (grey: nothing; tinted: a colour
         # or light correction), over the clean photo
         rrb.Spatial2DView(name="blend offset", origin=p("result"),
-                          contents=[p(P.RESULT_CLEAN), p(P.RESULT_OFFSET),
-                                    p(P.RESULT_SEAM_BLEND)]),
+                          contents=[p(P.RESULT_CLEAN), p(P.RESULT_OFFSET)]),
+        # the part of it that blended the steps of light where two sources meet
+        rrb.Spatial2DView(name="seam blend", origin=p("result"),
+                          contents=[p(P.RESULT_CLEAN), p(P.RESULT_SEAM_BLEND)]),
         # inside L: which sources show the reference's content as static, and how
         # (green: they count; red: not found; hover a pixel for the words)
         rrb.Grid(*[rrb.Spatial2DView(
