@@ -524,18 +524,16 @@ class RerunSink(StepColumns):
                 self.rec.log(self.p(P.RESULT_RELIGHT_L), rr.DepthImage(
                     _quantised(gain, P.DE_SCALE), meter=float(P.DE_SCALE),
                     colormap="viridis", depth_range=(0.0, 15.0 * P.DE_SCALE)), static=True)
-            if getattr(sel, "offset", None) is not None:
-                # what the blend added to the chosen source, as RGB around grey
-                off = np.nan_to_num(np.asarray(sel.offset, np.float32)[..., ::-1], nan=0.0)
-                self.rec.log(self.p(P.RESULT_OFFSET), rr.Image(
-                    np.clip(np.round(off) + P.OFFSET_ZERO, 0, 255).astype(np.uint8)),
-                    static=True)
-            if getattr(sel, "seam_offset", None) is not None:
-                # the part of it that blended the seams between sources
-                off = np.asarray(sel.seam_offset, np.float32)[..., ::-1]
-                self.rec.log(self.p(P.RESULT_SEAM_BLEND), rr.Image(
-                    np.clip(np.round(off) + P.OFFSET_ZERO, 0, 255).astype(np.uint8)),
-                    static=True)
+            # what the blend added to the chosen source, and the part of it that
+            # blended the seams between sources: B/G/R levels as RGB around grey
+            for name, path in (("offset", P.RESULT_OFFSET),
+                               ("seam_offset", P.RESULT_SEAM_BLEND)):
+                if getattr(sel, name, None) is not None:
+                    off = np.nan_to_num(np.asarray(getattr(sel, name), np.float32)[..., ::-1],
+                                        nan=0.0)
+                    self.rec.log(self.p(path), rr.Image(
+                        np.clip(np.round(off) + P.OFFSET_ZERO, 0, 255).astype(np.uint8)),
+                        static=True)
             if getattr(sel, "fields", None) is not None and getattr(sel, "label", None) is not None:
                 for c, axis in enumerate("xy"):
                     self.rec.log(self.p(f"{P.RESULT_FILL_MATCH}/{axis}"), rr.DepthImage(

@@ -2149,8 +2149,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                     cand_img[0], cand_img[k], scene & usable[k] & (dist[0, k] < tau))
         for k in np.flatnonzero(blur_sigma):
             cand_img[k + 1] = cv2.GaussianBlur(cand_img[k + 1], (0, 0), float(blur_sigma[k]))
-        # each label's source as sampled, for the seams' guidance (``seam_steps``)
-        raw_img = cand_img.copy() if P.select_seam_levels > 0 else None
+        # each label's source as sampled, for the seams' guidance (``seam_steps``;
+        # ``_cluster_median`` returns a new array, and nothing writes into this one)
+        raw_img = cand_img if P.select_seam_levels > 0 else None
         if P.select_cluster_median:
             # where the scan is trusted, every free source is a witness of the
             # hidden background, not only those agreeing with the chosen one
