@@ -140,6 +140,7 @@ class Params:
     select_fill_pieces: bool = True  # an island of the reference that the replaced region encloses takes the source filling around it where that source is free on all of it and differs from the reference on half of it or more, and no source seen free around it shows the island in place: a piece of a mover (its lettering, a lid's rim) that only photos showing the mover in place vouched for (off: kept, and a note names such pieces)
     select_halo_px: int = 2  # the replaced region also takes a rim this wide (analysis px) of kept pixels next to it where the chosen source is free and within --select-tau of the reference and the nearest replaced pixel has the movers' colours: a mover's blurred edge, which the cut keeps as close enough to the scene, left its outline (0 = off)
     select_misfit_levels: float = 20.0  # a replaced region whose fill the blend had to shift by more than this (B/G/R levels: the median over the region of its largest channel's offset) to meet the photo around it, while the reference there lacks the movers' colours (mean P under 0.6), keeps the reference: the fill shows other content than the scene there, a static part flagged in error (0 = off)
+    select_misplaced_de: float = 20.0  # a piece of the fill (one source's connected part, 30 analysis px or more) whose source differs from the reference on the photo kept around it by more than this (median CIE76 ΔE over a 3 px ring) shows content misplaced there (a match tens of px off): inpainted instead (OpenCV Telea) and reported (0 = off)
     select_seam_levels: float = 50.0  # steps of light at the fill's seams (where two sources meet inside the replaced region, each brought to the reference's level on the ring around it) up to this many B/G/R levels (any channel) are removed by a Poisson solve within 64 px of the seam, the region's edge held (Pérez et al. 2003); a larger step is content and kept (0 = off)
     select_sweep: bool = False  # in a 3-D set (see --select-parallax-px), matches across L by a plane + parallax sweep (refine.parallax), not a membrane (measured mixed: off)
 
@@ -204,7 +205,7 @@ class Params:
                      "select_search_beyond_px",
                      "select_search_against_de", "select_complete_px",
                      "select_halo_px",
-                     "select_misfit_levels", "select_seam_levels"):
+                     "select_misfit_levels", "select_misplaced_de", "select_seam_levels"):
             if getattr(self, name) < 0:
                 raise InputError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.fuse_combine not in ("median", "medoid"):

@@ -886,10 +886,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
     # fill's stage)
     if selection is not None:
         cov = _selection_coverage(cov, dyn, selection)
-        n_ns = int((dyn & selection.no_source).sum())
+        mis = (dyn & selection.misplaced if selection.misplaced is not None
+               else np.zeros_like(dyn))
+        n_ns = int((dyn & selection.no_source & ~mis).sum())
         if n_ns:
             share = 100 * n_ns / max(1, dyn.sum())
-            ns = dyn & selection.no_source
+            ns = dyn & selection.no_source & ~mis
             # of them, where every source that reaches the pixel shows the mover, moved
             # (a slow mover that overlaps itself from photo to photo)
             n_fw = 0
@@ -905,6 +907,16 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
             msgs.append(f"{n_ns} px ({'under 0.1' if share < 0.1 else f'{share:.1f}'} % of "
                         "the replaced region) were seen free by no source: inpainted "
                         f"(OpenCV Telea){why}")
+            warnings.warn(msgs[-1], Note, stacklevel=2)
+        n_mp = int(mis.sum())
+        if n_mp:
+            used = [k - 1 for k in np.unique(selection.label[mis]) if k >= 1]
+            msgs.append(f"{n_mp} px of the fill ({100 * n_mp / max(1, dyn.sum()):.1f} % of the "
+                        f"replaced region; {_where(mis)}) would have come from "
+                        f"{_names([names[srcs[k]] for k in used])}, whose view there does "
+                        "not continue the photo kept around it (its match misplaced there, "
+                        "as by a near scene's depth): inpainted instead (OpenCV Telea); "
+                        "--select-misplaced-de 0 keeps that view")
             warnings.warn(msgs[-1], Note, stacklevel=2)
         n_lg = int((dyn & selection.lingering).sum()) if selection.lingering is not None else 0
         if n_lg >= 5e-4 * dyn.size:  # (a few stray pixels of a mover are no such case)

@@ -1041,6 +1041,92 @@ def _entry_p10_composite(tmp_path, davis_set, seed, *, static_set="entry-P10", n
     return iset.images, ri, r, truth > 127, cv2.imread(str(tmp_path / "background.png"))
 
 
+def test_misplaced_pieces_judges_a_piece_by_the_kept_photo_around_it():
+    """``misplaced_pieces``: a piece of the fill (one source's connected part) whose
+    source differs from the reference on the kept pixels around it, by a median ΔE
+    over the bound, is misplaced. Kept pixels in L (they may show the mover), outside
+    the source's frame, or fewer than 15 of them, decide nothing; pieces under 30 px
+    are not judged by their own ring, but one that misplaced pieces enclose goes with
+    them."""
+    from dynremove.refine.select import misplaced_pieces
+
+    h, w = 20, 60
+    lab = np.zeros((h, w), np.intp)
+    lab[5:13, 3:11] = 1  # fits: ΔE 4 on the kept photo around it
+    lab[5:13, 18:26] = 1  # misplaced: ΔE 35 around it
+    lab[5:13, 33:41] = 2  # source 2, ΔE 35 around it, but all of that lies in L
+    lab[5:10, 48:53] = 1  # 25 px: too small to judge, ΔE 35 around it
+    lab[8:10, 21:23] = 2  # a speck of source 2 inside the second piece
+    d = np.full((3, h, w), 4.0, np.float32)
+    d[0] = 0.0
+    d[1, :, 15:] = 35.0
+    d[2] = 35.0
+    usable = np.ones((3, h, w), bool)
+    L = np.zeros((h, w), bool)
+    L[2:16, 30:44] = True
+    none = np.zeros((h, w), bool)
+    bad = misplaced_pieces(lab, lab > 0, d, usable, L, 20.0)
+    assert bad[5:13, 18:26].all() and bad.sum() == 64
+    # without L the third piece is judged too; the small one never is
+    bad = misplaced_pieces(lab, lab > 0, d, usable, none, 20.0)
+    assert bad[5:13, 33:41].all() and bad.sum() == 128
+    # the bound: a median of 35 is not over 35
+    assert not misplaced_pieces(lab, lab > 0, d, usable, none, 35.0).any()
+    # the source's frame does not reach the second piece's surroundings: nothing known
+    usable[1, :, 14:30] = False
+    usable[1, 5:13, 18:26] = True
+    bad = misplaced_pieces(lab, lab > 0, d, usable, none, 20.0)
+    assert not bad[:, 14:30].any() and bad[5:13, 33:41].all()  # (the speck with it)
+    # only the replaced pixels form pieces (a label where nothing was replaced: none)
+    assert not misplaced_pieces(lab, np.zeros((h, w), bool), d, usable, none, 20.0).any()
+
+
+def test_a_fill_misplaced_by_the_near_ground_s_depth_is_inpainted(tmp_path):
+    """The seed-21 suite's SceauxCastle with DAVIS goat, 4 views (README, session 74):
+    the goat's leg stands on the gravel near the camera, whose parallax no source's
+    field follows, and every source's view there shows the lawn. Without
+    ``select_misplaced_de`` a lawn-green patch was pasted on the gravel; with it, the
+    pieces whose source does not continue the gravel around them are inpainted from
+    it, and the note, the reasons and the no-source map say so."""
+    from dynremove.refine.select import MISPLACED
+
+    images, ri, r, truth, bg = _entry_p10_composite(tmp_path, "goat", 492631748,
+                                                    static_set="SceauxCastle", n_views=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        off = remove_dynamic(images, ref=ri, params=preset("default").replace(
+            select_misplaced_de=0))
+    sel = r.selection
+    mis = sel.misplaced
+    assert off.selection.misplaced is None
+    assert mis is not None and mis.sum() > 2000
+    assert sel.no_source[mis].all() and r.dynamic[mis].mean() > 0.9
+    assert (sel.reasons == MISPLACED).any(0)[mis].all()  # the chosen source says why
+    assert any("does not continue the photo kept around it" in w for w in r.warnings)
+
+    def lab(x):
+        return cv2.cvtColor(cv2.GaussianBlur(x, (0, 0), 1).astype(np.float32) / 255,
+                            cv2.COLOR_BGR2Lab)
+
+    lab_bg = lab(bg)
+    for res, most_wrong, greener in ((off, 0.7, -10.0), (r, None, None)):
+        lab_out = lab(res.clean)
+        wrong = (np.linalg.norm(lab_out - lab_bg, axis=2) > 10)[mis]
+        green = float(lab_out[..., 1][mis].mean() - lab_bg[..., 1][mis].mean())  # CIE a*
+        if most_wrong is not None:  # the lawn pasted: mostly wrong, green
+            assert wrong.mean() > most_wrong and green < greener, (wrong.mean(), green)
+            off_wrong = wrong.mean()
+        else:  # the gravel inpainted: wrong on half as much, hardly green
+            assert wrong.mean() < 0.6 * off_wrong and green > -8.0, (wrong.mean(), green)
+    # elsewhere (beyond the Telea radius) only the seams' blend of the rest of the fill
+    # moves, by a few levels (it no longer reads the pieces), and the kept photo's
+    # relit shade beside it by a level at most
+    far = ~dilate_disc(mis, 8)
+    moved = np.abs(r.clean.astype(np.int16) - off.clean).max(-1)
+    assert moved[far].max() <= 5
+    assert moved[far & (r.selection.label < 1)].max() <= 1
+
+
 def test_a_fill_that_does_not_fit_around_its_region_keeps_the_reference():
     """``misfit_regions``: a replaced region whose fill the blend shifted by more
     than ``max_levels`` keeps the reference, unless the reference there has the

@@ -671,6 +671,29 @@ def test_an_inpainted_pixel_is_not_called_filled_from_a_source():
     assert vd.outcome_line(h) == "removed (in the final mask), filled from b.png"
 
 
+def test_a_pixel_inpainted_because_its_source_was_misplaced_says_so():
+    """A piece of the fill whose source did not continue the photo around it
+    (``select.misplaced_pieces``) is inpainted although that source showed the pixel
+    free: the verdict names the source and why, not "no source shows the
+    background"; the reason is not repeated among the other sources'."""
+    from dynremove.refine.select import MISPLACED, REASONS
+
+    h = {"final_dynamic": True, "source_names": ["a.png", "b.png"], "x": 1, "y": 1,
+         "t_r": 0.3, "decisions": [], "replacements": [], "gt": None,
+         "selection": {"source": 2, "inpainted": 1,
+                       "reasons": {"a.png": REASONS[5], "b.png": REASONS[MISPLACED]}}}
+    assert vd.outcome_line(h) == ("removed (in the final mask), inpainted: b.png's view "
+                                  "of it was misplaced")
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")]
+    assert len(fill) == 1 and "b.png's view, chosen here, does not continue" in fill[0]
+    assert "no source shows" not in fill[0] and "a.png: disagrees" in fill[0]
+    assert fill[0].count("misplaced-de") == 1, fill
+    plain = vd.plain_words({**h, "decisions": [{"dynamic": True}]})  # scanned dynamic
+    assert plain and "b.png shows this spot free, but its view of it does not line up" in plain
+    h["selection"]["reasons"]["b.png"] = REASONS[5]  # no source free: as before
+    assert "no source shows the background" in vd.outcome_line(h)
+
+
 def test_a_margin_pixel_written_from_a_source_is_not_called_kept():
     """The fill may write the pixels within --select-margin-px of L; where its value
     stays within --select-tau of the reference's, the pixel is not in the final mask.

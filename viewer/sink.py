@@ -56,7 +56,7 @@ from viewer.verdict import after_scan_message, before_scans_message, more_scans
 _REASON_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 120),
                    3: (230, 40, 40, 160), 4: (120, 120, 120, 120), 5: (240, 150, 30, 140),
                    6: (60, 120, 230, 120), 7: (200, 40, 200, 160), 8: (250, 110, 40, 160),
-                   9: (90, 210, 190, 150)}
+                   9: (90, 210, 190, 150), 10: (240, 200, 40, 160)}
 
 # the static 3-D structure test (EVIDENCE): green where a source counts for "static"
 _EVIDENCE_COLOURS = {0: (0, 0, 0, 0), 1: (40, 200, 60, 160), 2: (150, 230, 150, 140),

@@ -15,7 +15,7 @@ from dynremove.events import CASE_BOTH_IN_CLUSTER, CASE_GEOMETRY, CASE_ONE_IN_CL
 from dynremove.refine.colour import delta_e
 from dynremove.refine.fields import blurred_lab
 from dynremove.refine.parallax import SEARCH_CAP_DE as _LINE_CAP
-from dynremove.refine.select import MISFIT_MOVER_P
+from dynremove.refine.select import MISFIT_MOVER_P, MISPLACED, REASONS
 
 # a blend offset from this many levels up (any channel) is told as more than light
 _LARGE_OFFSET = 40
@@ -346,10 +346,13 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
     if "source" in sel:
         k = sel["source"]
         others = "; ".join(f"{n}: {why}" for n, why in (sel.get("reasons") or {}).items()
-                           if why != "chosen")
+                           if why not in ("chosen", REASONS[MISPLACED]))
         if sel.get("inpainted") and h.get("final_dynamic"):
-            lines.append("fill: inpainted (OpenCV Telea): no source shows the background "
-                         "here" + (f" ({others})" if others else ""))
+            lines.append("fill: inpainted (OpenCV Telea): " + (
+                f"{mp}'s view, chosen here, does not continue the photo kept around its "
+                "part of the fill (--select-misplaced-de)" if (mp := _misplaced(sel))
+                else "no source shows the background here")
+                + (f" ({others})" if others else ""))
         elif k > 0:
             why = (" — a mover that lingered, or its cast shadow: the reference and most "
                    "sources show it, the sources that saw the background filled it"
@@ -498,6 +501,13 @@ def _lab_de(a: list[int], b: list[int]) -> float:
     return float(delta_e(lab[0], lab[1]))
 
 
+def _misplaced(sel: dict[str, Any]) -> str | None:
+    """The photo whose view of an inpainted pixel did not fit around its part of the
+    fill (``select.misplaced_pieces``), or None: no source showed the pixel free."""
+    return next((n for n, why in (sel.get("reasons") or {}).items()
+                 if why == REASONS[MISPLACED]), None)
+
+
 def _brought_back(h: dict[str, Any]) -> str:
     """Where the blend's offset took a filled pixel back near the input reference (a
     trial read "removed, filled from tim1" on a pixel still the cup's red: the ring
@@ -534,6 +544,9 @@ def outcome_line(h: dict[str, Any]) -> str:
                     "close to the reference's colour (the fill's margin around L)")
         return "kept (not in the final mask)"
     if sel.get("inpainted"):
+        if mp := _misplaced(sel):
+            return (f"removed (in the final mask), inpainted: {mp}'s view of it was "
+                    "misplaced")
         return "removed (in the final mask), inpainted: no source shows the background there"
     if k > 0:
         return f"removed (in the final mask), filled from {_src_name(h, k - 1)}" + _brought_back(h)
@@ -807,6 +820,10 @@ def plain_words(h: dict[str, Any]) -> str | None:
                "the scans did not flag it, but " + (adders[-1] if adders else "a later step")
                + " added it to what was found moving (see 'after the scans' below)")
         if sel.get("inpainted"):
+            if mp := _misplaced(sel):
+                return (f"{why}; {mp} shows this spot free, but its view of it does not "
+                        "line up with the photo around it, so the clean photo paints it in "
+                        "from around it")
             return (f"{why}; no other photo shows this spot free of moving things, so the "
                     "clean photo paints it in from around it")
         if k > 0:

@@ -87,8 +87,10 @@ that the scan flagged with doubled content.
    Where two sources meet inside the region and their light still differs by
    up to ``select_seam_levels``, the step is blended in the gradient domain
    (``montage.seam_steps``: Poisson image editing within 64 px of the seam,
-   the region's edge held). Pixels of L that no source shows free are
-   inpainted (OpenCV Telea) and reported.
+   the region's edge held). A piece of the fill whose source differs from
+   the reference on the kept photo around it (``select_misplaced_de``) shows
+   content misplaced there (``misplaced_pieces``). It is inpainted (OpenCV
+   Telea), as are the pixels of L that no source shows free; both reported.
 """
 
 from __future__ import annotations
@@ -236,6 +238,9 @@ class Selection:
     # offset added there (0 elsewhere). None: nothing relit
     relit: npt.NDArray[np.bool_] | None = None
     relight: npt.NDArray[np.float32] | None = None
+    # (H, W) bool: the pieces of the fill whose source did not continue the photo kept
+    # around them (``misplaced_pieces``): inpainted (also in ``no_source``); None: none
+    misplaced: npt.NDArray[np.bool_] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen",
@@ -255,7 +260,10 @@ REASONS = {0: "not considered", 1: "chosen",
            9: "disagrees with the fill's colour consensus, and its sample lies off "
               "this pixel's epipolar line in it (farther than --select-line-px), where "
               "the scene behind the mover cannot be: a tenth of a vote in that "
-              "consensus, as another source's sample lies on its line"}
+              "consensus, as another source's sample lies on its line",
+           10: "chosen, but its view of this part of the fill is misplaced: on the photo "
+               "kept around that part it differs from the reference by more than "
+               "--select-misplaced-de, so the part is inpainted instead"}
 OUTSIDE, STILL_LINGERING = 4, 7  # the codes that say a source saw nothing of the region
 # ``Selection.completed``: the region rule's codes (1 replaced, 2 kept with its region
 # of L), ``misfit_regions``' (kept: its fill did not fit the photo around it) and
@@ -269,6 +277,12 @@ OWN_MOVER, FOLLOWED = 3, 8  # the codes of a source showing a mover of its own: 
 # or the reference's mover where the flow followed it
 DISAGREES = 5  # a source whose sample differs from the fill's colour consensus
 OFF_LINE = 9  # ... and off the pixel's epipolar line (a tenth of a vote: ``select_line_px``)
+MISPLACED = 10  # the chosen source, whose part of the fill did not fit around it: inpainted
+# ``misplaced_pieces``: the pieces judged (at least this many px), the ring of kept
+# photo around each (this wide, at least this many px of it)
+_MISPLACED_MIN_PX = 30
+_MISPLACED_RING_PX = 3
+_MISPLACED_MIN_RING_PX = 15
 
 
 def unconfirmed_fill(sel: "Selection", replaced: npt.NDArray[np.bool_]
@@ -1187,6 +1201,101 @@ def grow_into_rim(lab: npt.NDArray[np.intp], allowed: npt.NDArray[np.bool_],
         return lab
     out = lab.copy()
     out[ys[ok], xs[ok]] = k[ok]
+    return out
+
+
+def misplaced_pieces(label: npt.NDArray[np.intp], replaced: npt.NDArray[np.bool_],
+                     d_ref: npt.NDArray[np.float32], usable: npt.NDArray[np.bool_],
+                     suspect: npt.NDArray[np.bool_], max_de: float, *,
+                     min_px: int = _MISPLACED_MIN_PX, ring_px: int = _MISPLACED_RING_PX,
+                     min_ring_px: int = _MISPLACED_MIN_RING_PX) -> npt.NDArray[np.bool_]:
+    """The pieces of the fill whose source shows content misplaced there.
+
+    A piece is one source's 8-connected part of the replaced region. Where the
+    piece borders the photo that the fill kept (the reference, outside L), its
+    source must continue that photo: the fill's seam with the kept photo is
+    there. A source whose match is tens of pixels off (the near ground of a
+    wide-baseline set, whose parallax no field follows: a lawn matched to the
+    gravel in front of it) differs from the reference all along that border.
+    The piece is judged by the median CIE76 ΔE between its source and the
+    reference over the kept pixels within ``ring_px`` of it (outside L, inside
+    the source's frame): over ``max_de``, misplaced. The blend cannot mend it
+    (``montage.offset_blend`` leaves such ring pixels out as content, not
+    light), and the graph cut's seam cost is one term among others. Not in
+    the paper; the test is Photomontage's seam cost (Agarwala et al., SIGGRAPH
+    2004) read on a finished fill.
+
+    Parameters
+    ----------
+    label : (h, w) int ndarray
+        The fill's labels (0 the reference, k ≥ 1 source k − 1).
+    replaced : (h, w) bool ndarray
+        The pixels taken from a source (the pieces are judged there).
+    d_ref : (S + 1, h, w) float32 ndarray
+        CIE76 ΔE between the reference and each label's candidate (blurred Lab;
+        index 0 the reference itself).
+    usable : (S + 1, h, w) bool ndarray
+        Where each label's candidate lies inside its frame.
+    suspect : (h, w) bool ndarray
+        L: kept pixels there may show a mover, no evidence of the scene.
+    max_de : float
+        > 0.
+    min_px, ring_px, min_ring_px : int
+        Pieces under ``min_px`` pixels, or with fewer than ``min_ring_px``
+        kept pixels around them, are not judged by their own ring; one whose
+        outline lies on misplaced pieces for half of it or more goes with them
+        (repeated while they grow).
+
+    Returns
+    -------
+    misplaced : (h, w) bool ndarray
+        The pixels of the misplaced pieces.
+
+    Examples
+    --------
+    Two pieces of source 1 beside a kept photo: the first continues it (ΔE 4
+    on its ring), the second does not (ΔE 35):
+
+    >>> import numpy as np
+    >>> lab = np.zeros((12, 30), np.intp); lab[3:9, 2:8] = lab[3:9, 18:24] = 1
+    >>> d = np.zeros((2, 12, 30), np.float32); d[1] = 4.0; d[1, :, 15:] = 35.0
+    >>> usable = np.ones((2, 12, 30), bool)
+    >>> bad = misplaced_pieces(lab, lab > 0, d, usable, np.zeros((12, 30), bool), 20.0)
+    >>> int(bad[:, :15].sum()), int(bad[:, 15:].sum())
+    (0, 36)
+    """
+    out = np.zeros(replaced.shape, bool)
+    h, w = replaced.shape
+    kept = ~replaced & (label == 0) & ~suspect
+    unjudged = []  # (box, piece) of the pieces without enough kept photo around them
+    for k in np.unique(label[replaced]):
+        if k < 1:
+            continue
+        n, comp, stats, _ = cv2.connectedComponentsWithStats(
+            (replaced & (label == k)).view(np.uint8), connectivity=8)
+        for c in range(1, n):
+            bx, by, bw, bh, area = stats[c]
+            ya, yb = max(by - ring_px - 1, 0), min(by + bh + ring_px + 1, h)
+            xa, xb = max(bx - ring_px - 1, 0), min(bx + bw + ring_px + 1, w)
+            piece = comp[ya:yb, xa:xb] == c
+            ring = dilate_disc(piece, ring_px) & kept[ya:yb, xa:xb] & usable[k, ya:yb, xa:xb]
+            if area < min_px or ring.sum() < min_ring_px:
+                unjudged.append(((ya, yb, xa, xb), piece))
+            elif np.median(d_ref[k, ya:yb, xa:xb][ring]) > max_de:
+                out[ya:yb, xa:xb] |= piece
+    # a piece that the misplaced ones enclose (half of its outline or more) lies
+    # where the fields are misplaced: it goes with them (a speck of lawn left amid
+    # the gravel inpainted around it), in turn as the misplaced region grows
+    changed = out.any()
+    while changed:
+        changed = False
+        for (ya, yb, xa, xb), piece in unjudged:
+            if out[ya:yb, xa:xb][piece].any():
+                continue
+            edge = dilate_disc(piece, 1) & ~piece
+            if edge.any() and out[ya:yb, xa:xb][edge].mean() >= 0.5:
+                out[ya:yb, xa:xb] |= piece
+                changed = True
     return out
 
 
@@ -2136,6 +2245,7 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
         unseen[:] = False
     clean = reference.copy()
     seam_offset = None
+    misplaced = np.zeros(reg.shape, bool)
     members = np.zeros((S, H, W), bool)
     offset = np.full((H, W, 3), np.nan, np.float32)
     blur_sigma = np.zeros(S, np.float32)
@@ -2185,6 +2295,18 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                 clean[roi][misfit] = reference[roi][misfit]
                 members[:, y0:y1, x0:x1] &= ~misfit[None]  # (``offset`` keeps what
                 # the blend would have added there: the debugger shows why)
+        if P.select_misplaced_de > 0:
+            # a source whose part of the fill does not continue the photo kept around
+            # it shows content misplaced there: inpainted instead (SceauxCastle+goat
+            # in 4 views: a lawn pasted on the gravel under the goat's leg; README,
+            # session 74)
+            misplaced = misplaced_pieces(lab_b, rep_b & ~no_src, dist[0], usable, in_mask,
+                                         P.select_misplaced_de)
+            if misplaced.any():
+                no_src |= misplaced
+                members[:, y0:y1, x0:x1] &= ~misplaced[None]
+                my_, mx_ = np.nonzero(misplaced)
+                offset[my_ + y0, mx_ + x0] = np.nan
         if raw_img is not None:
             # the steps of light left where two sources meet: blended in the
             # gradient domain (bursts/tim6: the table where the tube was, patches
@@ -2209,7 +2331,9 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     why[copies] = STILL_LINGERING
     why[~usable[1:]] = OUTSIDE
     # (an inpainted pixel has no chosen source)
-    why[(lab_b[None] == np.arange(1, S + 1)[:, None, None]) & ~no_src[None]] = 1
+    chosen_k = lab_b[None] == np.arange(1, S + 1)[:, None, None]
+    why[chosen_k & ~no_src[None]] = 1
+    why[chosen_k & misplaced[None]] = MISPLACED
     reasons = np.zeros((S, H, W), np.uint8)
     reasons[:, y0:y1, x0:x1] = np.where(reg[None], why, 0)
     # a lingering mover: witnessed against the reference where the reference and
@@ -2244,6 +2368,10 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     replaced[roi] |= rep & (delta_e(lab_out, lab_in) >= tau)
     nos = np.zeros((H, W), bool)
     nos[roi] = no_src
+    mis = None
+    if misplaced.any():
+        mis = np.zeros((H, W), bool)
+        mis[roi] = misplaced
     return Selection(clean=clean, replaced=replaced, label=label, explained=explained,
                      movers=movers, no_source=nos, seams=seams, parallax_px=par,
                      parallax_p95_px=par95,
@@ -2257,16 +2385,18 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
                      followed=np.stack([np.zeros((H, W), bool) if f is None else f
                                         for f in followed]),
-                     offset=offset, mask=mask, seam_offset=seam_offset)
+                     offset=offset, mask=mask, seam_offset=seam_offset, misplaced=mis)
 
 
-__all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "OUTSIDE", "OWN_MOVER",
+__all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "MISPLACED", "OUTSIDE",
+           "OWN_MOVER",
            "PARTIAL_KEPT", "REASONS", "STILL_LINGERING",
            "Selection", "attach_shadow", "capped_growth", "complete_regions", "darker",
            "fill_kept_pieces", "kept_pieces",
            "grow_into_rim",
            "median_parallax_px", "treated_as_3d", "member_median", "min_witnesses", "smooth_gain",
            "to_the_border", "unseen_part_of_replaced",
-           "misfit_regions", "mixture_detail", "partial_movers", "reference_cost",
+           "misfit_regions", "misplaced_pieces", "mixture_detail", "partial_movers",
+           "reference_cost",
            "region_shares",
            "select_fill"]
