@@ -49,7 +49,7 @@ from dynremove.errors import InputError, interruption
 from dynremove.evaluation.metrics import jaccard
 from dynremove.params import Params
 from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_restarts
-from dynremove.pipeline import full_resolution_output, relit_px, remove_dynamic
+from dynremove.pipeline import full_resolution_output, misplaced_px, relit_px, remove_dynamic
 from dynremove.video import (auto_reference, blurry_reference_note, blurry_sources_note,
                              parse_span, relative_sharpness)
 
@@ -195,6 +195,10 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
         "relit_px": relit[0],
         # ... and inside it, where the shade runs into the fill
         "relit_in_mask_px": relit[1],
+        # the fill's pieces whose source did not continue the photo around them,
+        # inpainted instead (at the analysis size, as the run's note counts them; also
+        # in uncovered_dynamic_px and 0 in coverage.png: no source's value there)
+        "misplaced_px": misplaced_px(getattr(res, "selection", None)),
         # coverage.png holds count × 255 / sources (uint8, truncated)
         "coverage_png": {"sources": n_src, "value_per_source": round(255.0 / n_src, 4)},
         "geometry": res.geometry,

@@ -1134,6 +1134,13 @@ def relit_px(selection: Selection | None, dynamic: np.ndarray | None = None
     return int((relit & ~dyn).sum()), int((relit & dyn).sum())
 
 
+def misplaced_px(selection: Selection | None) -> int:
+    """The replaced pixels of the fill's misplaced pieces (``select.misplaced_pieces``:
+    inpainted instead), at the analysis size; 0 without any."""
+    mis = getattr(selection, "misplaced", None)
+    return 0 if mis is None else int((mis & selection.replaced).sum())
+
+
 def _where(mask: np.ndarray, n: int = 3) -> str:
     """Where ``mask`` (H, W) bool lies, in words: the boxes of its ``n`` largest parts
     (8-connected after a 5 px closing; x then y, in the analysed image's pixels, as

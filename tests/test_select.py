@@ -1102,7 +1102,11 @@ def test_a_fill_misplaced_by_the_near_ground_s_depth_is_inpainted(tmp_path):
     assert mis is not None and mis.sum() > 2000
     assert sel.no_source[mis].all() and r.dynamic[mis].mean() > 0.9
     assert (sel.reasons == MISPLACED).any(0)[mis].all()  # the chosen source says why
-    assert any("does not continue the photo kept around it" in w for w in r.warnings)
+    # the note counts what report.json's misplaced_px does
+    from dynremove.pipeline import misplaced_px
+
+    note = next(w for w in r.warnings if "does not continue the photo kept around it" in w)
+    assert int(note.split(" px")[0]) == misplaced_px(sel) > 2000, note
 
     def lab(x):
         return cv2.cvtColor(cv2.GaussianBlur(x, (0, 0), 1).astype(np.float32) / 255,
