@@ -1047,7 +1047,8 @@ def test_misplaced_pieces_judges_a_piece_by_the_kept_photo_around_it():
     over the bound, is misplaced. Kept pixels in L (they may show the mover), outside
     the source's frame, or fewer than 15 of them, decide nothing; pieces under 30 px
     are not judged by their own ring, but one that misplaced pieces enclose goes with
-    them."""
+    them. Where the misplaced pieces would take over 25 % of the fill, none is
+    returned (the kept photo is then more likely wrong: a mover L missed in part)."""
     from dynremove.refine.select import misplaced_pieces
 
     h, w = 20, 60
@@ -1065,17 +1066,23 @@ def test_misplaced_pieces_judges_a_piece_by_the_kept_photo_around_it():
     L = np.zeros((h, w), bool)
     L[2:16, 30:44] = True
     none = np.zeros((h, w), bool)
+    lab[14:20, 0:60] = 3  # a wide piece of source 3 that fits (the fill's bulk)
+    d = np.concatenate([d, np.full((1, h, w), 4.0, np.float32)])
+    usable = np.ones((4, h, w), bool)
+    n_fill = int((lab > 0).sum())  # 577 px
     bad = misplaced_pieces(lab, lab > 0, d, usable, L, 20.0)
-    assert bad[5:13, 18:26].all() and bad.sum() == 64
-    # without L the third piece is judged too; the small one never is
+    assert bad[5:13, 18:26].all() and bad.sum() == 64  # 11 % of the fill
+    # without L the third piece is judged too (the small one never is): 22 % of the fill
     bad = misplaced_pieces(lab, lab > 0, d, usable, none, 20.0)
-    assert bad[5:13, 33:41].all() and bad.sum() == 128
+    assert bad[5:13, 33:41].all() and bad.sum() == 128 and 128 / n_fill < 0.25
+    # ... but over a quarter of it is too much to blame on the fill: none
+    assert not misplaced_pieces(lab, lab > 0, d, usable, none, 20.0, max_share=0.2).any()
     # the bound: a median of 35 is not over 35
-    assert not misplaced_pieces(lab, lab > 0, d, usable, none, 35.0).any()
+    assert not misplaced_pieces(lab, lab > 0, d, usable, none, 35.0, max_share=1.0).any()
     # the source's frame does not reach the second piece's surroundings: nothing known
     usable[1, :, 14:30] = False
     usable[1, 5:13, 18:26] = True
-    bad = misplaced_pieces(lab, lab > 0, d, usable, none, 20.0)
+    bad = misplaced_pieces(lab, lab > 0, d, usable, none, 20.0, max_share=1.0)
     assert not bad[:, 14:30].any() and bad[5:13, 33:41].all()  # (the speck with it)
     # only the replaced pixels form pieces (a label where nothing was replaced: none)
     assert not misplaced_pieces(lab, np.zeros((h, w), bool), d, usable, none, 20.0).any()
