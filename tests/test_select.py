@@ -1127,8 +1127,8 @@ def test_a_fill_misplaced_by_the_near_ground_s_depth_is_inpainted(tmp_path):
         if most_wrong is not None:  # the lawn pasted: mostly wrong, green
             assert wrong.mean() > most_wrong and green < greener, (wrong.mean(), green)
             off_wrong = wrong.mean()
-        else:  # the gravel inpainted: wrong on half as much, hardly green
-            assert wrong.mean() < 0.6 * off_wrong and green > -8.0, (wrong.mean(), green)
+        else:  # the gravel inpainted: wrong on a quarter as much at most, not green
+            assert wrong.mean() < 0.25 * off_wrong and green > -3.0, (wrong.mean(), green)
     # elsewhere (beyond the Telea radius) only the seams' blend of the rest of the fill
     # moves, by a few levels (it no longer reads the pieces), and the kept photo's
     # relit shade beside it by a level at most
