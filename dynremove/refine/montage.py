@@ -754,13 +754,8 @@ def seam_steps(out: npt.NDArray[np.uint8], raw: npt.NDArray[np.uint8],
         smooth = np.empty_like(d)
         for k in np.unique(pair):
             at = np.flatnonzero(pair == k)
-            num = np.zeros((H, W, 3), np.float32)
-            den = np.zeros((H, W), np.float32)
-            np.add.at(num, (ys[at], xs[at]), (d[at] * sign[at]).astype(np.float32))
-            np.add.at(den, (ys[at], xs[at]), 1.0)
-            num = cv2.GaussianBlur(num, (0, 0), along_px)
-            den = cv2.GaussianBlur(den, (0, 0), along_px)
-            smooth[at] = num[ys[at], xs[at]] / den[ys[at], xs[at], None] * sign[at]
+            smooth[at] = gaussian_mean_at(ys[at], xs[at], (d[at] * sign[at]).astype(np.float32),
+                                          ys[at], xs[at], along_px) * sign[at]
         d = smooth
     b = np.zeros((H, W, 3), np.float64)
     np.add.at(b, (ys, xs), d)
