@@ -979,6 +979,9 @@ def prepare_out_dir(out: str | os.PathLike, inputs: Sequence[str | os.PathLike] 
     is one of the ``inputs`` folders (the outputs would be read as photos by the
     next run there), or if an output (``RUN_OUTPUTS``, report.json) would
     overwrite one of the ``inputs`` files."""
+    if not str(out).strip():
+        # (a trial's --out '' wrote the outputs into the current folder, silently)
+        raise InputError("--out is empty: give the folder to write into (e.g. --out out/run)")
     p = Path(out)
     if p.exists() and not p.is_dir():
         raise InputError(f"--out {p}: exists and is not a folder")

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
 import os
 import platform
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -905,7 +906,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    "standing off the rest, whose parallax the flow followed: look at it)"
                    if n_fw >= 0.5 * n_ns else "")
             msgs.append(f"{n_ns} px ({'under 0.1' if share < 0.1 else f'{share:.1f}'} % of "
-                        "the replaced region) were seen free by no source: inpainted "
+                        f"the replaced region) {'was' if n_ns == 1 else 'were'} seen free by "
+                        "no source: inpainted "
                         f"(OpenCV Telea){why}")
             warnings.warn(msgs[-1], Note, stacklevel=2)
         n_mp = int(mis.sum())
@@ -1414,7 +1416,7 @@ def _knee_note(views: list[geometry.TwoView], params: Params) -> str:
     p90 = median_parallax_px(views)
     p95 = median_parallax_px(views, "parallax_p95_px")
     if not p90 <= limit < p95:
-        return ""
+        return _near_limit_note(p90, p95, limit, far)
     if treated_as_3d(views, params):
         return (f"the set was treated as 3-D: 5 % of the matches depart from one plane by "
                 f"{p95:.0f} px or more (over the {far:g} px of --select-parallax-p95-px), "
@@ -1427,6 +1429,37 @@ def _knee_note(views: list[geometry.TwoView], params: Params) -> str:
             f"one plane by {p95:.0f} px or more (3-D structure in front of the scene, or "
             "matches on a mover): if the clean photo lost static structure or kept part of "
             "the mover, --select-parallax-px 0 treats the set as 3-D")
+
+
+# a median parallax within this factor of --select-parallax-px is near it: the set
+# would have gone the other way had its photos been shot a little otherwise
+NEAR_LIMIT = 1.25
+
+
+def _near_limit_note(p90: float, p95: float, limit: float, far: float) -> str:
+    """The note of a set whose median parallax ``p90`` (px) decided alone, and within
+    ``NEAR_LIMIT`` of ``limit`` (``select_parallax_px``), which way it went ('' where
+    it did not, or not near it; ``far``: ``select_parallax_p95_px``). A fresh-user
+    trial found ``bursts/shaky_desk6`` with its last photo as the reference treated
+    as 3-D at 8.2 px, and the same six phone photos flat or 3-D as they were stored
+    (4.8 px or 7.3 px with 153 px far out), and nothing said so; the two ways clean
+    L and decide its fill differently (README, "Fill by selection"). The note names
+    the value of ``--select-parallax-px`` that takes the set the other way."""
+    if not (limit > 0 and np.isfinite(p90) and limit / NEAR_LIMIT < p90 <= limit * NEAR_LIMIT):
+        return ""
+    if far > 0 and p95 > far:
+        return ""  # (3-D by the far matches too: the median parallax does not decide it)
+    if p90 > limit:
+        other = math.ceil(p90 * 2.0) / 2.0  # the next half pixel at or above it
+        return (f"the set was treated as 3-D by a narrow margin: its median parallax, "
+                f"{p90:.1f} px, is just over the {limit:g} px of --select-parallax-px (the "
+                "photos were shot from nearly one place): if the clean photo kept part of "
+                f"the mover, --select-parallax-px {other:g} treats the set as flat")
+    other = math.floor(p90 * 2.0 - 1e-9) / 2.0  # the last half pixel under it
+    return (f"the set was treated as flat by a narrow margin: its median parallax, "
+            f"{p90:.1f} px, is just under the {limit:g} px of --select-parallax-px (3-D "
+            "above it): if the clean photo lost static structure standing off the scene, "
+            f"or kept part of the mover, --select-parallax-px {other:g} treats the set as 3-D")
 
 
 STRAYS_NOTE = "left out, no homography with the reference"  # how _strays_note begins

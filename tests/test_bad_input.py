@@ -1052,6 +1052,19 @@ def test_out_is_a_file(tmp_path, capsys, scene):
     assert f.read_text() == "keep me"
 
 
+def test_an_empty_out_is_refused(tmp_path, capsys, scene, monkeypatch):
+    """A fresh-user trial's --out '' wrote clean.png, the masks and report.json into
+    the current folder without a word: it is a one-line error, nothing written."""
+    write_set(tmp_path / "s", scene.images[:3])
+    here = tmp_path / "here"
+    here.mkdir()
+    monkeypatch.chdir(here)
+    for out in ("", "  "):
+        rc, _, err = run_cli(capsys, tmp_path / "s", "--out", out)
+        assert_input_error(rc, err, "--out is empty")
+    assert not any(here.iterdir())
+
+
 def test_a_folder_in_the_place_of_an_output_is_refused_before_the_run(tmp_path, capsys,
                                                                       scene):
     """A fresh-user trial: a folder named report.json in --out failed after the whole

@@ -250,6 +250,35 @@ def test_small_3d_structure_in_a_flat_set_is_told():
     assert _knee_note([], P) == ""
 
 
+def test_a_set_near_the_parallax_limit_is_told_which_way_it_went():
+    """A median parallax within 25 % of --select-parallax-px (8 px) that decided alone
+    gets a note naming the value that takes the set the other way, and that value
+    does (a trial's shaky_desk6 with its last photo as the reference: 3-D at 8.2 px,
+    nothing said). Far from the limit, or 3-D by the far matches as well, no note."""
+    from dynremove.method.geometry import TwoView
+    from dynremove.pipeline import _knee_note
+    from dynremove.refine.select import treated_as_3d
+
+    def tv(p90, p95):
+        return TwoView(F=np.eye(3), H=np.eye(3), n_matches=800, n_inliers_F=700,
+                       n_inliers_H=500, parallax_px=p90, parallax_p95_px=p95)
+
+    P = DEFAULT
+    for p90, way, other in ((8.16, "3-D", "flat"), (9.9, "3-D", "flat"), (7.3, "flat", "3-D"),
+                            (7.0, "flat", "3-D"), (6.5, "flat", "3-D")):
+        views = [tv(p90, 14.7 if way == "3-D" else 7.9)] * 3  # (flat, 95th over 8 px: above)
+        assert treated_as_3d(views, P) == (way == "3-D")
+        note = _knee_note(views, P)
+        assert note.startswith(f"the set was treated as {way} by a narrow margin: its median "
+                               f"parallax, {p90:.1f} px, is just ")
+        value = float(re.search(r"--select-parallax-px ([0-9.]+) treats the set as", note)[1])
+        assert note.endswith(f"--select-parallax-px {value:g} treats the set as {other}")
+        assert treated_as_3d(views, P.replace(select_parallax_px=value)) == (other == "3-D")
+    for views in ([tv(6.3, 7.0)] * 3, [tv(10.1, 14.7)] * 3, [tv(8.5, 200.0)] * 3):
+        assert _knee_note(views, P) == ""
+    assert _knee_note([tv(8.5, 14.7)] * 3, P.replace(select_parallax_px=0.0)) == ""
+
+
 def test_a_weak_reference_is_named_as_the_cause():
     """The sanitizer burst with its reference re-saved as a JPEG of quality 15: every
     source matches it poorly (17-45 matches), one is not aligned, and the note on that
