@@ -741,7 +741,9 @@ def load_image_set(args: Sequence[str | os.PathLike], *, max_side: int | None = 
         op = conform_op(im.shape[:2], (H0, W0))
         if op is None:
             raise InputError(f"{p}: is {im.shape[1]}x{im.shape[0]} but {first.name} is "
-                             f"{W0}x{H0}; all images must have the same size"
+                             f"{W0}x{H0}; all images must show the same frame (the same "
+                             "size, a few pixels off, or the same shape at another "
+                             "resolution)"
                              + size_hint(im.shape[:2], (H0, W0)))
         conform_notes.append(_conform_note(p.name, im.shape[:2], (H0, W0), op))
         images[i], valids[i] = conform(im, valids[i], op, (H0, W0))
