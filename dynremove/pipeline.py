@@ -1403,7 +1403,7 @@ def _off_plane(views: list[geometry.TwoView], params: Params) -> str:
 def _knee_note(views: list[geometry.TwoView], params: Params) -> str:
     """The note of a set whose 3-D structure is small: the median over the sources of
     the 90th percentile of the parallax is at most ``select_parallax_px``, of the
-    95th over it ('' otherwise). Columns in front of a façade hold 8-16 % of
+    95th over it (otherwise ``_near_limit_note``'s, or ''). Columns in front of a façade hold 8-16 % of
     entry-P10's matches: treated as flat, a 4-view composite of it refilled one
     (damage 2.8 % of the photo, 1.0 % as 3-D), and DAVIS drift-straight_s3 kept part
     of its car (J 0.54, 0.83 as 3-D). The far matches may also lie on a mover that
@@ -1445,7 +1445,7 @@ def _near_limit_note(p90: float, p95: float, limit: float, far: float) -> str:
     (4.8 px or 7.3 px with 153 px far out), and nothing said so; the two ways clean
     L and decide its fill differently (README, "Fill by selection"). The note names
     the value of ``--select-parallax-px`` that takes the set the other way."""
-    if not (limit > 0 and np.isfinite(p90) and limit / NEAR_LIMIT < p90 <= limit * NEAR_LIMIT):
+    if not limit / NEAR_LIMIT < p90 <= limit * NEAR_LIMIT:  # (also limit 0, NaN, inf)
         return ""
     if far > 0 and p95 > far:
         return ""  # (3-D by the far matches too: the median parallax does not decide it)

@@ -1275,10 +1275,10 @@ def misplaced_pieces(label: npt.NDArray[np.intp], replaced: npt.NDArray[np.bool_
     (0, 36)
     """
     out = np.zeros(replaced.shape, bool)
-    h, w = replaced.shape
-    kept = ~replaced & (label == 0) & ~suspect
     if not replaced.any():
         return out
+    h, w = replaced.shape
+    kept = ~replaced & (label == 0) & ~suspect
     unjudged = []  # (box, piece) of the pieces without enough kept photo around them
     for k in np.unique(label[replaced]):
         if k < 1:
