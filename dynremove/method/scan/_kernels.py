@@ -678,7 +678,7 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
         w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
         for c in range(3):
             fhat_c[c] += w * fc_s[cs[i], cy[i], cx[i], c]
-        # read in place, by uint64 indices (see ``_sift_d2_rs``): the loop vectorises
+        # read in place, by uint64 indices (the note before ``_lab_d2_rs``): it vectorises
         si, yi, xi = np.uint64(cs[i]), np.uint64(cy[i]), np.uint64(cx[i])
         for j in range(np.uint64(G)):
             fhat_g[j] += w * (fg_s[si, yi, xi, j] * u)
@@ -975,18 +975,34 @@ def _work_arrays(K, G):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, ndx0, ndy0, ndx1,
-              ndy1, as_set, work, Mmap, Bmap, Kmap):
-    """``_candidates`` → ``_cluster`` → ``_decide`` at (x, y); writes M, b_m and
-    (|P|, k, |A_m|, sources of A_m) into Mmap, Bmap, Kmap at (y, x). g_in, g_out
-    from ``_edge_bounds(pf)``.
+def _scan_neighbours(direction):
+    """(ndx0, ndy0, ndx1, ndy1): the offsets of the two scan neighbours of a pixel
+    (left and up for direction +1, right and down for −1)."""
+    if direction > 0:
+        return -1, 0, 0, -1
+    return 1, 0, 0, 1
 
-    Returns (n, nn, k, m, b_m, M, ‖f_g(x_r) − f̂_g‖²); m = −1 and M = NaN when no
-    cluster formed. The candidates, labels and f̂ stay in ``work``.
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction,
+              cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
+              nx_, ny_, ox_, oy_):
+    """``_candidates`` → ``_cluster`` → ``_decide`` at (x, y), in a scan of
+    ``direction``; g_in, g_out from ``_edge_bounds(pf)``; the work arrays of
+    ``_work_arrays``, one by one.
+
+    Returns (n, nn, k, m, b_m, M, ‖f_g(x_r) − f̂_g‖², |A_m|, the bitmask of
+    A_m's sources); m = −1 and M = NaN when no cluster formed. The candidates,
+    labels and f̂ stay in the work arrays; ``_store_decision`` writes the maps.
+
+    The work arrays come one by one, not as the tuple that ``_work_arrays``
+    returns: inlined, unpacking the tuple at every pixel took a reference
+    count on each array, 11 atomic pairs a pixel (the note before ``_lab_d2_rs``); and no more
+    than 30 arguments, or CPython passes them as ``*args``, which numba does
+    not inline.
     """
-    (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
-     nx_, ny_, ox_, oy_) = work
-    n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, as_set, cs, cx, cy,
+    ndx0, ndy0, ndx1, ndy1 = _scan_neighbours(direction)
+    n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, pi[CAND_SET] != 0, cs, cx, cy,
                         cB, slot, nx_, ny_, ox_, oy_)
     k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, labels, is_core, stack)
     M = np.nan
@@ -1002,13 +1018,19 @@ def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, ndx0, ndy
         if k > 0 and labels[i] == m:
             wsize += 1
             wsrc |= 1 << cs[i]
+    return n, nn, k, m, bm, M, cdist, wsize, wsrc
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _store_decision(Mmap, Bmap, Kmap, x, y, M, bm, n, k, wsize, wsrc):
+    """A decision's M, b_m and (|P|, k, |A_m|, sources of A_m) into Mmap (H, W),
+    Bmap (H, W) and Kmap (H, W, 4) at (y, x)."""
     Mmap[y, x] = M
     Bmap[y, x] = bm
     Kmap[y, x, 0] = n
     Kmap[y, x, 1] = k
     Kmap[y, x, 2] = wsize
     Kmap[y, x, 3] = wsrc
-    return n, nn, k, m, bm, M, cdist
 
 
 # --- the decisions of a scan, precomputed on all cores (exact) ----------------------
@@ -1028,17 +1050,16 @@ def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, pre
     """
     S, H, W = N.shape[0], N.shape[1], N.shape[2]
     K = 2 * S
-    as_set = pi[CAND_SET] != 0
-    if direction > 0:
-        ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
-    else:
-        ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
     g_in, g_out = _edge_bounds(pf)
     for y in numba.prange(H):
-        work = _work_arrays(K, fg_r.shape[2])
+        (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
+         nx_, ny_, ox_, oy_) = _work_arrays(K, fg_r.shape[2])
         for x in range(W):
-            _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, ndx0, ndy0,
-                      ndx1, ndy1, as_set, work, preM, preB, preK)
+            n, _, k, _, bm, M, _, wsize, wsrc = _decision(
+                N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction, cs, cx,
+                cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g, nx_, ny_, ox_,
+                oy_)
+            _store_decision(preM, preB, preK, x, y, M, bm, n, k, wsize, wsrc)
 
 
 # --- Algorithm 1: one chunk of rows of a scan ------------------------------------------
@@ -1077,16 +1098,12 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     S = N.shape[0]
     K = 2 * S
     nb = pi[HOG_BINS]
-    as_set = pi[CAND_SET] != 0
     half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
     work, score, gc0, gc1, gh0, gh1, chg, pbufs = scratch
     (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
      nx_, ny_, ox_, oy_) = work
     # the two scan neighbours (x + dx, y + dy): left/up, or right/down
-    if direction > 0:
-        ndx0, ndy0, ndx1, ndy1 = -1, 0, 0, -1
-    else:
-        ndx0, ndy0, ndx1, ndy1 = 1, 0, 0, 1
+    ndx0, ndy0, ndx1, ndy1 = _scan_neighbours(direction)
     y = vi if direction > 0 else H - 1 - vi
     wait = R >= 0
     lim = W if (not wait or row == 0) else -1  # columns below lim may be visited
@@ -1131,9 +1148,10 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
                     stats[2] += 1
                 continue
         # ---- decision (Sec. 3.2.1) --------------------------------------------
-        n, nn, k, m, bm, M, cdist = _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in,
-                                              g_out, x, y, ndx0, ndy0, ndx1, ndy1, as_set,
-                                              work, Mmap, Bmap, Kmap)
+        n, nn, k, m, bm, M, cdist, wsize, wsrc = _decision(
+            N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction, cs, cx, cy,
+            cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g, nx_, ny_, ox_, oy_)
+        _store_decision(Mmap, Bmap, Kmap, x, y, M, bm, n, k, wsize, wsrc)
         dynamic = k > 0 and M <= pf[T_R]
         if k == 0:
             stats[2] += 1
