@@ -253,3 +253,38 @@ def test_the_pipeline_s_most_skewed_order_leaves_the_sequential_state(
         np.testing.assert_array_equal(a, b)
     short = run(_skewed_scan(too_short))
     assert any(not np.array_equal(a, b) for a, b in zip(seq, short))
+
+
+def test_perf_map_names_the_compiled_functions(tmp_path):
+    """examples/perf_kernels.py maps numba's compiled code for ``perf``: each
+    function of a module, at the address numba runs it from."""
+    import importlib.util
+    import pathlib
+    import types
+
+    import numba
+
+    spec = importlib.util.spec_from_file_location(
+        "perf_kernels", pathlib.Path(__file__).parents[1] / "examples" / "perf_kernels.py")
+    perf_kernels = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(perf_kernels)
+    mod = types.ModuleType("perf_map_probe")
+
+    def triple_sum(a):
+        return 3 * a.sum()
+
+    mod.triple_sum = numba.njit(triple_sum)  # compiled here, not loaded from a cache
+    assert mod.triple_sum(np.arange(4)) == 18
+    path = tmp_path / "perf.map"
+    n = perf_kernels.write_perf_map([mod], str(path))
+    rows = [line.split(" ", 2) for line in path.read_text().splitlines()]
+    assert n == len(rows) >= 1
+    starts = [int(a, 16) for a, _, _ in rows]
+    assert starts == sorted(starts) and all(int(s, 16) > 0 for _, s, _ in rows)
+    named = [r for r in rows if "triple_sum" in r[2]]
+    assert named, [r[2] for r in rows]
+    lib = next(iter(mod.triple_sum.overloads.values())).library
+    fn = next(f.name for f in lib._final_module.functions
+              if not f.is_declaration and "triple_sum" in f.name and "cpython" not in f.name)
+    assert int(next(a for a, _, name in rows if name == fn), 16) == \
+        lib._codegen._engine.get_function_address(fn)
