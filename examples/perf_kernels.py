@@ -15,9 +15,11 @@ Session 76 found this way that numba's reference counting (``NRT_incref``,
 ``NRT_decref``) took a quarter of the scan's decisions (README, Speed). Functions
 that numba inlines (``inline="always"``) have no symbol of their own: their time
 is their caller's. A function loaded from numba's on-disk cache has no module to
-read names from, so the script compiles into a fresh cache folder of its own
-(``NUMBA_CACHE_DIR``, unless set; about 20 s; removed at exit). It reads numba's internals (``_final_module``,
-the code generator's engine), which may change between numba versions.
+read names from, so the script compiles into a fresh cache folder of its own,
+removed at exit (about 20 s; with ``NUMBA_CACHE_DIR`` set, that folder is used and
+what it already holds is not mapped). It reads numba's internals
+(``_final_module``, the code generator's engine), which may change between numba
+versions.
 """
 
 from __future__ import annotations
