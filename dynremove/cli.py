@@ -313,10 +313,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reference photo (default: the middle one; the run names it): "
                         "an index (0-based, in input order; negative counts from the end, "
                         "-1 = the last), a file name or "
-                        "stem, a path, or 'auto' (the sharpest with the most keypoint "
-                        "matches). Digits are the file they name (0002 is 0002.jpg); "
+                        "stem (any case), a path, or 'auto' (the sharpest with the most "
+                        "keypoint matches). Digits are the file they name (0002 is "
+                        "0002.jpg) or the photo's number (0003 or 3 is IMG_0003.JPG); "
                         "where they name one file and index another, the run stops and "
-                        "says how to give either")
+                        "says how to give either; with leading zeros they are no index")
     r.add_argument("--out", default=None,
                    help="output folder (default: out/<the input's name>: out/tim6 for "
                         "tim6/frames, so that runs on other scenes keep theirs)")

@@ -803,9 +803,33 @@ def is_path_ref(ref: object) -> bool:
 
 
 def _named(ref: str, names: Sequence[str]) -> list[int]:
-    """The indices of the inputs named ``ref``: by exact name, else by stem."""
+    """The indices of the inputs named ``ref``: by exact name, else by stem, else
+    either without regard to case (``img_0003.jpg`` or ``IMG_0003`` for a phone's
+    ``IMG_0003.JPG``)."""
+    low = ref.casefold()
     return ([i for i, n in enumerate(names) if n == ref]
-            or [i for i, n in enumerate(names) if Path(n).stem == ref])
+            or [i for i, n in enumerate(names) if Path(n).stem == ref]
+            or [i for i, n in enumerate(names) if n.casefold() == low]
+            or [i for i, n in enumerate(names) if Path(n).stem.casefold() == low])
+
+
+_PHOTO_NUMBER = re.compile(r"^(.*\D)(\d+)$")
+
+
+def _numbered(digits: str, names: Sequence[str]) -> list[int]:
+    """The indices of the inputs whose stem is a prefix and then the number ``digits``
+    (``3`` or ``0003`` for ``IMG_0003.JPG``, ``DSC_0003.jpg``, ``frame3.png``): the
+    photo's number as a camera writes it. Stems of digits alone are names, matched
+    by ``_named``, so that ``2`` stays an index among ``0001.jpg``, ``0002.jpg``... A
+    video's frames are numbered by ``#`` (``resolve_ref``)."""
+    out = []
+    for i, n in enumerate(names):
+        if "#" in n:  # a video's frame (clip.mp4#16): its number is the frame's
+            continue
+        m = _PHOTO_NUMBER.match(Path(n).stem)
+        if m and int(m.group(2)) == int(digits):
+            out.append(i)
+    return out
 
 
 def resolve_ref(ref: str | int | None, names: Sequence[str],
@@ -819,8 +843,11 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     digits is a name where an input has that name or stem (frames 0001.jpg, 0002.jpg:
     ``--ref 0002`` is 0002.jpg, not index 2) and, written without leading zeros, an
     index too: where the two pick different images, it is an error saying how to
-    give either. ``label`` names the value in the errors (default ``--ref REF``; the
-    API gives ``ref='REF'``).
+    give either. Digits are also a photo's number where no input has them as its
+    name or stem: ``0003`` or ``3`` is ``IMG_0003.JPG`` (the same rule against the
+    index); digits with leading zeros are never an index. A name matches without
+    regard to case where none matches exactly. ``label`` names the value in the
+    errors (default ``--ref REF``; the API gives ``ref='REF'``).
     """
     if ref is None or ref == "":
         return len(names) // 2
@@ -828,6 +855,17 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     if isinstance(ref, str) and ref.lstrip("-").isdigit():
         named = _named(ref, names)
         as_index = not (len(ref.lstrip("-")) > 1 and ref.lstrip("-").startswith("0"))
+        number = []
+        if not named and not ref.startswith("-"):
+            # a phone's photo number: --ref 0003 for IMG_0003.JPG (a trial's took
+            # IMG_0004.JPG, index 3, with only a note to say so)
+            number = _numbered(ref, names)
+            if len(number) > 1:
+                raise InputError(
+                    f"{what}: {len(number)} input images have this number: "
+                    + ", ".join(f"{names[i]} (index {i})" for i in number)
+                    + "; give the file's name")
+            named = number
         clips = {n.rpartition("#")[0] for n in names if "#" in n}
         if (not named and not ref.startswith("-") and len(clips) == 1
                 and all("#" in n for n in names) and label is None):
@@ -857,9 +895,16 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
                     how = (f"give a path to {names[j]} (with a '/', e.g. ./{names[j]}) for "
                            f"that file, or {k - len(names)} (counted from the end) for "
                            f"{names[k]}")
-                raise InputError(f"{what}: both the index of {names[k]} and the name of "
-                                 f"{names[j]} (index {j}): {how}")
+                raise InputError(f"{what}: both the index of {names[k]} and the "
+                                 f"{'number' if number else 'name'} of {names[j]} "
+                                 f"(index {j}): {how}")
             return named[0]
+    if isinstance(ref, str) and ref.lstrip("-").isdigit() and not as_index:
+        # digits with leading zeros are a name, never an index (0003 is no way to
+        # write 3): a name that no input has
+        raise InputError(f"{what}: names no input image (have {', '.join(names[:8])}"
+                         + (" …" if len(names) > 8 else "") + "); an index is written "
+                         "without leading zeros")
     if isinstance(ref, int) or (isinstance(ref, str) and ref.lstrip("-").isdigit()):
         i = int(ref)
         if not -len(names) <= i < len(names):

@@ -661,6 +661,39 @@ def test_a_clip_that_fades_in_from_black_is_read_from_its_first_picture(tmp_path
         video.read_video(dark)
 
 
+def test_a_phones_photo_number_or_name_in_any_case_names_the_photo():
+    """A trial's ``--ref 0003`` on IMG_0001.JPG … IMG_0006.JPG took IMG_0004.JPG (index
+    3) with only a note, and ``--ref img_0003.jpg`` was refused: the photo's number
+    names it (with leading zeros, never an index), a name matches in any case, and
+    digits that are one photo's number and another's index stop the run."""
+    phone = [f"IMG_000{i}.JPG" for i in range(1, 7)]
+    assert io.resolve_ref("0003", phone) == 2 and io.resolve_ref("03", phone) == 2
+    assert io.resolve_ref("img_0003.jpg", phone) == 2 == io.resolve_ref("IMG_0003", phone)
+    assert io.resolve_ref("-1", phone) == 5 and io.resolve_ref("6", phone) == 5  # both
+    with pytest.raises(InputError, match=r"^--ref 3: both the index of IMG_0004.JPG and the "
+                                         r"number of IMG_0003.JPG \(index 2\): give "
+                                         r"IMG_0003.JPG for that file, or -3 "):
+        io.resolve_ref("3", phone)
+    with pytest.raises(InputError, match=r"^--ref 0009: names no input image .*an index is "
+                                         r"written without leading zeros$"):
+        io.resolve_ref("0009", phone)
+    with pytest.raises(InputError, match=r"^--ref 3: 2 input images have this number: "
+                                         r"IMG_0003.JPG \(index 0\), DSC_0003.jpg "):
+        io.resolve_ref("3", ["IMG_0003.JPG", "DSC_0003.jpg", "a.jpg", "b.jpg"])
+    bursts = [f"tim{i}.jpg" for i in range(1, 7)]
+    assert io.resolve_ref("TIM2.JPG", bursts) == 1 and io.resolve_ref("tim2", bursts) == 1
+    with pytest.raises(InputError, match=r"both the index of tim3.jpg and the number of "
+                                         r"tim2.jpg"):
+        io.resolve_ref("2", bursts)
+    # frames named by digits alone keep their rule: "2" an index, "0002" the file
+    frames = ["0001.jpg", "0002.jpg", "0003.jpg"]
+    assert io.resolve_ref("2", frames) == 2 and io.resolve_ref("0002", frames) == 1
+    # the API's int is always an index
+    assert io.resolve_ref(3, phone, label="ref=3") == 3
+    with pytest.raises(InputError, match="2 input images have this name"):
+        io.resolve_ref("a.jpg", ["A.jpg", "a.JPG", "b.jpg"])
+
+
 def test_digits_that_are_a_taken_frames_number_and_another_frames_index_stop(tmp_path):
     """A trial's ``--ref 3`` on a clip took the 4th frame taken (#16) while frame #3 was
     taken too: as for photos named by digits, the run stops and says how to give
