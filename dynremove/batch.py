@@ -227,22 +227,25 @@ def write_outputs(out: Path, res: Any, *, iset: Any, ref: int, preset_name: str,
 
 
 def load_for_reference(inputs: Sequence[str | os.PathLike], ref: str | int | None, *,
-                       on_loaded: Callable[[io.ImageSet], None] | None = None, **load
+                       on_loaded: Callable[[io.ImageSet], None] | None = None,
+                       numbers: bool = True, **load
                        ) -> tuple[io.ImageSet, int, dict, list[str]]:
     """``io.load_image_set(inputs, **load)`` and ``choose_reference(ref, ...)``; when the
     reference is a photo that was brought to the set's size (a phone's crop), the set
     is read again at the reference's own size, so that its clean photo has that size
     and no border it lacks. ``on_loaded(iset)`` is called after each read (the CLI
-    keeps the set for an interruption). Returns (iset, ref, ref_info, ref_notes)."""
+    keeps the set for an interruption). ``numbers``: digits in ``ref`` may be a photo's
+    number (``io.resolve_ref``; not for ``batch``, whose ``--ref`` is every set's).
+    Returns (iset, ref, ref_info, ref_notes)."""
     iset = io.load_image_set(list(inputs), **load)
     if on_loaded is not None:
         on_loaded(iset)
-    i, info, notes = choose_reference(ref, iset)
+    i, info, notes = choose_reference(ref, iset, numbers=numbers)
     if iset.conformed and iset.conformed[i] is not None:
         iset = io.load_image_set(list(inputs), size_of=i, **load)
         if on_loaded is not None:
             on_loaded(iset)
-        i, info, notes = choose_reference(ref, iset)
+        i, info, notes = choose_reference(ref, iset, numbers=numbers)
     return iset, i, info, notes
 
 
@@ -259,19 +262,20 @@ def distinct_images(images: Sequence[np.ndarray]) -> list[int]:
     return out
 
 
-def choose_reference(ref: str | int | None, iset: io.ImageSet) -> tuple[int, dict, list[str]]:
+def choose_reference(ref: str | int | None, iset: io.ImageSet, *, numbers: bool = True
+                     ) -> tuple[int, dict, list[str]]:
     """The reference index, how it was chosen (for the report) and notes.
 
     ``ref`` is an index, a file name, a path (exactly that input), ``"auto"``
     (:func:`~dynremove.video.auto_reference`) or None (the middle one of the distinct
     images, ``distinct_images``; a note suggests ``--ref auto`` when it is much
-    blurrier than the others).
+    blurrier than the others). ``numbers`` as in ``io.resolve_ref``.
     """
     valid = getattr(iset, "valid", None)
     if isinstance(ref, str) and ref.strip().lower() == "auto":
         i, note, info = auto_reference(iset.images, iset.names, valid)
         return i, {"chosen_by": "auto", **info}, [note]
-    i = io.resolve_ref(ref, iset.names, paths=getattr(iset, "paths", None))
+    i = io.resolve_ref(ref, iset.names, paths=getattr(iset, "paths", None), numbers=numbers)
     if ref is None or ref == "":
         # the middle of the distinct photos: a file given twice (under two names)
         # does not move it (a fresh-user trial: desk6.jpg and DESK6.JPG made desk5
@@ -521,7 +525,7 @@ def run_set(bs: BatchSet, out_root: Path, options: dict, *, single_thread: bool 
         # --frames and --span are for the video sets (a folder of photos has its own)
         video = len(bs.inputs) == 1 and io.is_video_file(Path(bs.inputs[0]))
         iset, ref, ref_info, notes = load_for_reference(
-            bs.inputs, options.get("ref"), max_side=options.get("max_side"),
+            bs.inputs, options.get("ref"), numbers=False, max_side=options.get("max_side"),
             frames=options.get("frames") if video else None,
             span=options.get("span") if video else None,
             pick=options.get("pick") or "sharpest")

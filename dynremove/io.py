@@ -834,7 +834,7 @@ def _numbered(digits: str, names: Sequence[str]) -> list[int]:
 
 def resolve_ref(ref: str | int | None, names: Sequence[str],
                 paths: Sequence[str | os.PathLike] | None = None, *,
-                label: str | None = None) -> int:
+                label: str | None = None, numbers: bool = True) -> int:
     """Reference by index (negative counts from the end), by file name or stem, or (with
     ``paths``, the inputs' paths) by path; default: the middle image.
 
@@ -847,7 +847,9 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     name or stem: ``0003`` or ``3`` is ``IMG_0003.JPG`` (the same rule against the
     index); digits with leading zeros are never an index. A name matches without
     regard to case where none matches exactly. ``label`` names the value in the
-    errors (default ``--ref REF``; the API gives ``ref='REF'``).
+    errors (default ``--ref REF``; the API gives ``ref='REF'``). ``numbers=False``
+    (``batch`` and ``eval``, whose ``--ref`` is the same for every set) reads no
+    photo numbers: digits there are a name or an index, as before.
     """
     if ref is None or ref == "":
         return len(names) // 2
@@ -856,7 +858,7 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
         named = _named(ref, names)
         as_index = not (len(ref.lstrip("-")) > 1 and ref.lstrip("-").startswith("0"))
         number = []
-        if not named and not ref.startswith("-"):
+        if numbers and not named and not ref.startswith("-"):
             # a phone's photo number: --ref 0003 for IMG_0003.JPG (a trial's took
             # IMG_0004.JPG, index 3, with only a note to say so)
             number = _numbered(ref, names)
@@ -899,7 +901,7 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
                                  f"{'number' if number else 'name'} of {names[j]} "
                                  f"(index {j}): {how}")
             return named[0]
-    if isinstance(ref, str) and ref.lstrip("-").isdigit() and not as_index:
+    if numbers and isinstance(ref, str) and ref.lstrip("-").isdigit() and not as_index:
         # digits with leading zeros are a name, never an index (0003 is no way to
         # write 3): a name that no input has
         raise InputError(f"{what}: names no input image (have {', '.join(names[:8])}"

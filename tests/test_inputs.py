@@ -688,8 +688,11 @@ def test_a_phones_photo_number_or_name_in_any_case_names_the_photo():
     # frames named by digits alone keep their rule: "2" an index, "0002" the file
     frames = ["0001.jpg", "0002.jpg", "0003.jpg"]
     assert io.resolve_ref("2", frames) == 2 and io.resolve_ref("0002", frames) == 1
-    # the API's int is always an index
+    # the API's int is always an index; batch and eval (one --ref for every set) read
+    # no photo numbers: digits are a name or an index there, as they were
     assert io.resolve_ref(3, phone, label="ref=3") == 3
+    assert io.resolve_ref("2", bursts, numbers=False) == 2
+    assert io.resolve_ref("0003", phone, numbers=False) == 3
     with pytest.raises(InputError, match="2 input images have this name"):
         io.resolve_ref("a.jpg", ["A.jpg", "a.JPG", "b.jpg"])
 

@@ -252,7 +252,7 @@ def load_set(es: EvalSet, *, max_side: int | None = None, ref: str | int | None 
 
         r, _, _ = auto_reference(iset.images, iset.names)
     else:
-        r = io.resolve_ref(ref, iset.names)
+        r = io.resolve_ref(ref, iset.names, numbers=False)
     H, W = iset.images[0].shape[:2]
     # the truth files must have the frames' own size (as ``run --gt`` requires): one of
     # another size or shape is another set's, and was resized into place and scored
@@ -551,7 +551,7 @@ def _check_ref_fits_some(ref: str | int | None, found: Sequence[EvalSet]) -> Non
     errors = []
     for es in found:
         try:
-            io.resolve_ref(ref, [Path(f).name for f in es.frames])
+            io.resolve_ref(ref, [Path(f).name for f in es.frames], numbers=False)
             return
         except InputError as e:
             errors.append(str(e))
