@@ -813,7 +813,13 @@ def _named(ref: str, names: Sequence[str]) -> list[int]:
             or [i for i, n in enumerate(names) if Path(n).stem.casefold() == low])
 
 
-_PHOTO_NUMBER = re.compile(r"^(.*\D)(\d+)$")
+_PHOTO_NUMBER = re.compile(r"\D(\d+)$")
+
+
+def _names_nothing(what: str, names: Sequence[str], why: str = "") -> InputError:
+    """The error of a ``--ref`` that names no input, listing the first inputs."""
+    return InputError(f"{what}: names no input image (have {', '.join(names[:8])}"
+                      + (" …" if len(names) > 8 else "") + f"){why}")
 
 
 def _numbered(digits: str, names: Sequence[str]) -> list[int]:
@@ -826,8 +832,8 @@ def _numbered(digits: str, names: Sequence[str]) -> list[int]:
     for i, n in enumerate(names):
         if "#" in n:  # a video's frame (clip.mp4#16): its number is the frame's
             continue
-        m = _PHOTO_NUMBER.match(Path(n).stem)
-        if m and int(m.group(2)) == int(digits):
+        m = _PHOTO_NUMBER.search(Path(n).stem)
+        if m and int(m.group(1)) == int(digits):
             out.append(i)
     return out
 
@@ -904,9 +910,7 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
     if numbers and isinstance(ref, str) and ref.lstrip("-").isdigit() and not as_index:
         # digits with leading zeros are a name, never an index (0003 is no way to
         # write 3): a name that no input has
-        raise InputError(f"{what}: names no input image (have {', '.join(names[:8])}"
-                         + (" …" if len(names) > 8 else "") + "); an index is written "
-                         "without leading zeros")
+        raise _names_nothing(what, names, "; an index is written without leading zeros")
     if isinstance(ref, int) or (isinstance(ref, str) and ref.lstrip("-").isdigit()):
         i = int(ref)
         if not -len(names) <= i < len(names):
@@ -939,8 +943,7 @@ def resolve_ref(ref: str | int | None, names: Sequence[str],
         return matches[0]
     matches = _named(ref, names)
     if not matches:
-        raise InputError(f"{what}: names no input image (have {', '.join(names[:8])}"
-                         + (" …" if len(names) > 8 else "") + ")")
+        raise _names_nothing(what, names)
     if len(matches) > 1:
         which = ", ".join(f"{paths[i] if paths is not None else names[i]} (index {i})"
                           for i in matches)
