@@ -964,3 +964,39 @@ def test_a_missing_package_is_not_read_as_a_cut_recording():
             raise ValueError("no such entity")
 
     assert _arrow(Empty(), "/result/clean") is None  # absent: None, as before
+
+
+def test_the_planes_of_the_fields_across_L_are_recorded_and_told(method_run):
+    """Which field each pixel of the hole was sampled through (``Selection.planes``,
+    ``--select-planes``): the membrane, or a plane of the ring around its region. The
+    recording holds it as computed (none where no plane was chosen), and inspect names
+    the plane at a filled pixel that took one."""
+    sel, path = method_run["res"].selection, method_run["path"]
+    rec = vi.read_selection(path)
+    if sel.planes is None:
+        assert "planes" not in rec
+        return
+    want = np.clip(sel.planes.astype(np.int32) + 1, 0, 255).astype(np.uint8)
+    np.testing.assert_array_equal(rec["planes"], want)
+    ys, xs = np.nonzero((sel.planes > 0) & (sel.label > 0) & ~sel.no_source
+                        & method_run["res"].dynamic)
+    if len(ys):
+        y, x = int(ys[len(ys) // 2]), int(xs[len(xs) // 2])
+        words = " ".join(vd.verdict_lines(vi.pixel_history(path, x, y)))
+        assert f"plane {int(sel.planes[y, x])} of the ring around its region" in words, words
+
+
+def test_the_fill_line_names_the_plane_only_where_one_was_chosen():
+    """The fill line says which plane of the ring gave the field at the pixel (the
+    recorded map holds 1 + the plane, 1 for the membrane, 0 outside the hole)."""
+    h = {"final_dynamic": True, "source_names": ["a.png", "b.png"], "x": 1, "y": 1,
+         "t_r": 0.3, "decisions": [], "replacements": [], "gt": None,
+         "selection": {"source": 2, "inpainted": 0, "fill_x": 10.0, "fill_y": 20.0,
+                       "planes": 3}}
+    fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")]
+    assert len(fill) == 1 and "at (10.0, 20.0) in it" in fill[0], fill
+    assert "plane 2 of the ring around its region" in fill[0] and "--select-planes" in fill[0]
+    for membrane in (1, 0):
+        h["selection"]["planes"] = membrane
+        fill = [ln for ln in vd.verdict_lines(h) if ln.startswith("fill:")]
+        assert "at (10.0, 20.0) in it" in fill[0] and "plane" not in fill[0], fill

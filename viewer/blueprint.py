@@ -113,7 +113,8 @@ def _more(p: P.Paths, names: Sequence[str] = ()) -> rrb.Tabs:
                                      ("lingering mover", P.RESULT_LINGERING),
                                      ("inpainted", P.RESULT_INPAINTED),
                                      ("faint shade relit", P.RESULT_RELIT),
-                                     ("decided with its region", P.RESULT_COMPLETED))],
+                                     ("decided with its region", P.RESULT_COMPLETED),
+                                     ("field across L: planes", P.RESULT_PLANES))],
                  grid_columns=2, name="fill decisions"),
         name="more maps",
     )

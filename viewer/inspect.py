@@ -589,7 +589,9 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     best ΔE × DE_SCALE and where it lies in the source × XY_SCALE, DE_NONE where not
     searched), ``data_cost`` and ``support`` (dicts of uint16 maps × DE_SCALE: what the graph
     cut weighed, ``Selection.data_cost`` and ``Selection.support``),
-    ``inpainted`` (no source free there: OpenCV Telea), ``relit`` and ``relight_l`` (a
+    ``inpainted`` (no source free there: OpenCV Telea), ``planes`` (the field across L
+    each pixel was sampled through: 1 the membrane, 1 + k plane k of the ring around its
+    region, 0 outside the hole; ``paths.RESULT_PLANES``), ``relit`` and ``relight_l`` (a
     faint shade beside the movers relit to the other photos' light, and the L* it
     gained × DE_SCALE, DE_NONE elsewhere: ``shade.relight_shade``), ``followed`` (per source, in
     its own frame: where the flow followed the reference's mover into it), ``offset``
@@ -606,7 +608,7 @@ def read_selection(path: str | Path, *, root: str = "") -> dict[str, np.ndarray]
     for key, rel in (("source", P.RESULT_SOURCE), ("explained", P.RESULT_EXPLAINED),
                      ("seams", P.RESULT_SEAMS), ("lingering", P.RESULT_LINGERING),
                      ("completed", P.RESULT_COMPLETED), ("inpainted", P.RESULT_INPAINTED),
-                     ("relit", P.RESULT_RELIT)):
+                     ("relit", P.RESULT_RELIT), ("planes", P.RESULT_PLANES)):
         rows = _image_rows(store, p(rel), "SegmentationImage", index=None)
         if rows:
             out[key] = rows[0][1]

@@ -118,6 +118,9 @@ RESULT_DYNAMIC = "result/dynamic"
 RESULT_STAGES = "result/stages"  # L after each post-scan step: result/stages/<name>
 RESULT_SOURCE = "result/selection/source"  # which image filled each pixel (0 = reference)
 RESULT_SEAMS = "result/selection/seams"  # boundaries between the chosen images
+# the field across L each pixel of the hole was sampled through (uint8): 1 the
+# membrane, 1 + k plane k of the ring around its region (--select-planes), 0 outside
+RESULT_PLANES = "result/selection/planes"
 RESULT_MOVERS = "result/selection/movers"  # per source: where it shows a mover (rejected)
 RESULT_REASONS = "result/selection/reasons"  # per source: why it did or did not fill
 RESULT_EXPLAINED = "result/selection/explained"  # L kept: static 3-D structure

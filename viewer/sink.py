@@ -465,6 +465,17 @@ class RerunSink(StepColumns):
                 np.clip(np.asarray(sel.label, np.int32), 0, 255).astype(np.uint8)), static=True)
             self.rec.log(self.p(P.RESULT_SEAMS), rr.SegmentationImage(
                 np.asarray(sel.seams, np.uint8)), static=True)
+            if getattr(sel, "planes", None) is not None:
+                pl = np.clip(np.asarray(sel.planes, np.int32) + 1, 0, 255).astype(np.uint8)
+                self.rec.log(self.p(P.RESULT_PLANES), rr.AnnotationContext(
+                    [(0, "", (0, 0, 0, 0)),
+                     (1, "the field across L: the membrane, interpolated from around it",
+                      (128, 128, 128, 60))]
+                    + [(1 + k, f"the field across L: plane {k} of the ring around its "
+                        "region, where the sources agree best", tuple(int(v) for v in
+                        cluster_colors(np.array([k + 8]))[0]) + (150,))
+                       for k in range(1, int(pl.max()))]),
+                    rr.SegmentationImage(pl), static=True)
             # each with its own classes, 0 see-through (under the root's classes their
             # 1 read as "dynamic", and a view of them over the clean photo showed nothing
             # to tell them by: seen in a headless viewer, session 65)

@@ -386,8 +386,11 @@ def verdict_lines(h: dict[str, Any]) -> list[str]:
             fx, fy = sel.get("fill_x"), sel.get("fill_y")
             # (where the fill's field across L leads, not the flow's match that the
             # static 3-D test reads: a trial read the two as a contradiction)
-            at = (f" at ({fx:.1f}, {fy:.1f}) in it (where the fill's field across L leads)"
-                  if fx is not None and fy is not None else "")
+            plane = int(sel.get("planes") or 0) - 1
+            at = (f" at ({fx:.1f}, {fy:.1f}) in it (where the fill's field across L leads"
+                  + (f": plane {plane} of the ring around its region, the one on which "
+                     "the sources agree best here, --select-planes" if plane > 0 else "")
+                  + ")" if fx is not None and fy is not None else "")
             # a source in the scan's winning cluster that the fill turned down as
             # showing a mover: the scan's candidate and the fill's sample are two places
             # in it (a trial read them as a contradiction)

@@ -37,7 +37,11 @@ that the scan flagged with doubled content.
    scene where the other still shows the reference's content completes a
    mover that the scans found in part: L takes the rest of it.
 2. **Background candidates.** Every source is sampled through its field,
-   re-interpolated across the rest of L (``fields.background_field``); where
+   re-interpolated across the rest of L (``fields.background_field``), and
+   re-chosen, pixel by pixel, among the planes that the ring around each region
+   shows, where the sources agree at one of them clearly better than through the
+   membrane (``planes.plane_fields``, ``select_planes``: a table's edge or a
+   balcony hidden by a mover comes out in place, not blended); where
    the set has parallax, found instead by a plane + parallax sweep for the
    depth at which the sources agree (``parallax.sweep_fields``); then
    re-aligned by flow from the filled reference (``fill.realign_fields``; up
@@ -115,6 +119,7 @@ from dynremove.refine.parallax import (epipolar_search, fit_parallax, line_point
 from dynremove.refine.montage import (LIGHT_SIGMA_PX, add_offset, expansion_labels,
                                       offset_blend, pairwise_distance, seam_steps)
 from dynremove.refine.morphology import dilate_disc, drop_small, fill_holes, grow_replaced
+from dynremove.refine.planes import plane_fields
 
 _FORBIDDEN = 1e6  # data cost of a label that may not be used
 _UNSEEN_PX = 12  # pixels no source sees, this near a replaced mover, are inpainted with it
@@ -241,6 +246,10 @@ class Selection:
     # (H, W) bool: the pieces of the fill whose source did not continue the photo kept
     # around them (``misplaced_pieces``): inpainted (also in ``no_source``); None: none
     misplaced: npt.NDArray[np.bool_] | None = None
+    # (H, W) int16: the plane of the ring around its region of the hole that each
+    # pixel's fields were taken from (``planes.plane_fields``; numbered per region from
+    # 1), 0 where the membrane was kept, -1 outside the hole; None: no plane chosen
+    planes: npt.NDArray[np.int16] | None = None
 
 
 REASONS = {0: "not considered", 1: "chosen",
@@ -2027,6 +2036,19 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     hole = cv2.dilate(dilate_disc(core, 2).astype(np.uint8), np.ones((7, 7), np.uint8)
                       ).astype(bool)
     fields = background_fields(base, hole)
+    planes = np.full((H, W), -1, np.int16)
+    if P.select_planes and core.any():
+        # hidden edges between depths: the planes around each region of the hole,
+        # where the sources agree (a source showing a mover of its own is no witness,
+        # a sample in the movers' colours a weak one)
+        shows = minority[None] & ~wit_map
+        for k in range(S):
+            if followed[k] is not None:
+                shows[k] |= _valid_at(followed[k], fields[k])
+        fields, planes = plane_fields(
+            [lab_s[k] if lab_s[k] is not None else blurred_lab(sources[k], 1.0) + offsets[k]
+             for k in range(S)], base, fields, hole, ~dilate_disc(mask, 4), shows,
+            static=matched, seed=P.seed, mover_p=lambda v: _mover_probability(colours, v))
     if P.select_sweep and mode == "parallax" and core.any():
         # hidden 3-D structure: the depth at which the sources agree, not a membrane
         model = fit_parallax(base, views, ~dilate_disc(mask, 4), seed=P.seed)
@@ -2405,7 +2427,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                      ref_mover_p=np.where(mask, p_ref, np.nan).astype(np.float32),
                      followed=np.stack([np.zeros((H, W), bool) if f is None else f
                                         for f in followed]),
-                     offset=offset, mask=mask, seam_offset=seam_offset, misplaced=mis)
+                     offset=offset, mask=mask, seam_offset=seam_offset, misplaced=mis,
+                     planes=planes if (planes > 0).any() else None)
 
 
 __all__ = ["EVIDENCE", "FOLLOWED", "MISFIT_KEPT", "MISFIT_MOVER_P", "MISPLACED", "OUTSIDE",
