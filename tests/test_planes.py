@@ -92,3 +92,28 @@ def test_a_source_showing_its_own_mover_is_no_witness():
     fields, _ = plane_fields(labs, truth, membrane, hole, ~hole, exclude)
     err = np.stack([np.abs(f - t)[..., 0][hole] for f, t in zip(fields[1:], truth[1:])])
     assert (err < 0.5).mean() > 0.9
+
+
+def test_a_plane_that_a_source_does_not_fit_leaves_no_trace_of_it():
+    # source 0's matches below the edge are not static evidence: the lower plane has
+    # no homography in it; that source then takes no part in that hypothesis' costs
+    # (its unsampled values once entered them as 0 × NaN, and two runs differed)
+    ref, sources, truth = _scene()
+    hole = np.zeros((H, W), bool)
+    hole[HOLE] = True
+    membrane = [background_field(t, hole) for t in truth]
+    labs = [blurred_lab(s, 1.0) for s in sources]
+    static = np.ones((len(sources), H, W), bool)
+    static[0, EDGE:] = False
+    runs = [plane_fields(labs, truth, membrane, hole, ~hole,
+                         np.zeros((len(sources), H, W), bool), static=static)
+            for _ in range(3)]
+    for fields, label in runs[1:]:
+        assert np.array_equal(label, runs[0][1])
+        assert all(np.array_equal(f, g) for f, g in zip(fields, runs[0][0]))
+    fields, label = runs[0]
+    assert all(np.isfinite(f).all() for f in fields)
+    # the two other sources still put the lower half on its plane
+    err = np.stack([np.abs(f - t)[..., 0][EDGE + 4:84, 60:112] for f, t in
+                    zip(fields[1:], truth[1:])])
+    assert (err < 0.5).mean() > 0.9

@@ -254,7 +254,7 @@ def plane_fields(src_labs: list[np.ndarray], base: list[np.ndarray],
                      np.clip(np.rint(CX).astype(np.intp), 0, W - 1)]
         agg, have = [], np.ones((hh, ww), bool)
         for hyp in range(len(planes) + 1):
-            labs = np.empty((S, hh, ww, 3), np.float32)
+            labs = np.zeros((S, hh, ww, 3), np.float32)
             ok = np.zeros((S, hh, ww), bool)
             wt = np.ones((S, hh, ww), np.float32)
             for k in range(S):
@@ -274,8 +274,10 @@ def plane_fields(src_labs: list[np.ndarray], base: list[np.ndarray],
             cnt = np.zeros((hh, ww), np.float32)
             for a in range(S):
                 for b in range(a + 1, S):
-                    both = np.where(ok[a] & ok[b], wt[a] * wt[b], 0.0)
-                    num += both * np.minimum(delta_e(labs[a], labs[b]), _CAP)
+                    pair = ok[a] & ok[b]
+                    both = np.where(pair, wt[a] * wt[b], 0.0)
+                    num += np.where(pair, both * np.minimum(delta_e(labs[a], labs[b]), _CAP),
+                                    0.0)
                     cnt += both
             # a pixel is decided where every hypothesis has a pair of witnesses; its
             # cost: the mean over the window of the pairs' ΔE
