@@ -12,11 +12,11 @@ on the whole ring one after the other (sequential RANSAC, Vincent & Laganière,
 *Detecting planar homographies in an image pair*, ISPA 2001); proposals shared
 by most of their pixels are merged, and each plane is refitted in every source
 as a homography on its ring pixels (multi-model fitting from proposals, in the
-spirit of J-linkage, Toldo & Fusiello, ECCV 2008). Inside the region each pixel takes the plane at
-which the sources that see the background there agree best (the plane sweep's
-photo-consistency, Collins, *A space-sweep approach to true multi-image
-matching*, CVPR 1996, over these few planes only), and keeps the membrane
-unless a plane is clearly better. No global depth model is fitted: the
+spirit of J-linkage, Toldo & Fusiello, ECCV 2008). Inside the region each pixel
+takes the plane at which the sources that see the background there agree best
+(the plane sweep's photo-consistency, Collins, *A space-sweep approach to true
+multi-image matching*, CVPR 1996, over these few planes only), and keeps the
+membrane unless a plane is clearly better. No global depth model is fitted: the
 parallax sweep that needs one (``parallax.sweep_fields``) was measured worse,
 its model fitted badly (README, session 77).
 """
@@ -213,7 +213,8 @@ def plane_fields(src_labs: list[np.ndarray], base: list[np.ndarray],
         (0: the membrane kept; -1 outside the hole).
 
     A region whose ring shows one surface only keeps its membrane, which
-    continues that surface.
+    continues that surface. Where a plane is chosen, a source that fits no
+    homography for it keeps its membrane field there.
     """
     H, W = hole.shape
     S = len(base)
@@ -280,7 +281,7 @@ def plane_fields(src_labs: list[np.ndarray], base: list[np.ndarray],
                                     0.0)
                     cnt += both
             # a pixel is decided where every hypothesis has a pair of witnesses; its
-            # cost: the mean over the window of the pairs' ΔE
+            # cost: the pairs' ΔE over the window, a mean weighted by the pairs' weights
             have &= cnt > _HAVE_MIN
             agg.append(cv2.boxFilter(num, -1, (box, box), normalize=False)
                        / np.maximum(cv2.boxFilter(cnt, -1, (box, box), normalize=False), 1e-6))
