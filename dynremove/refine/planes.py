@@ -116,7 +116,7 @@ def ring_planes(base: list[np.ndarray], pr: np.ndarray, trusted: np.ndarray,
     smaller) with a larger one is the same plane; the ``max_planes`` largest are
     kept, each refitted in every source on its trusted pixels (a homography,
     RANSAC): None for a source with fewer than ``min_inliers``; a plane that fewer
-    than two sources fit is dropped.
+    than two sources fit is dropped. Fewer than two proposals: no plane (empty).
     """
     S = len(base)
     iy = np.rint(pr[:, 1]).astype(np.intp)
@@ -132,6 +132,8 @@ def ring_planes(base: list[np.ndarray], pr: np.ndarray, trusted: np.ndarray,
             segs.append(m)
         if len(segs) == max_planes:
             break
+    if len(segs) < 2:
+        return []  # one surface or none: the caller keeps the membrane (no refit needed)
     planes = []
     for m in segs:
         Hs: list[np.ndarray | None] = []
