@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
+from dynremove.method.geometry import apply_homography, project_homography
 from dynremove.refine.colour import delta_e
 from dynremove.refine.morphology import dilate_disc
 
@@ -36,14 +37,6 @@ from dynremove.refine.morphology import dilate_disc
 # pair of witnesses weighs (1 - P(mover)) of each: 0.1, two of P 0.68)
 _HAVE_MIN = 0.1
 _CAP = 30.0  # CIE76 ΔE: a pair of samples disagreeing by more counts this much
-
-
-def _project(Hm: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(x, y) → Hm (x, y, 1), dehomogenised (arrays of any one shape)."""
-    d = Hm[2, 0] * x + Hm[2, 1] * y + Hm[2, 2]
-    d = np.where(np.abs(d) < 1e-9, 1e-9, d)
-    return ((Hm[0, 0] * x + Hm[0, 1] * y + Hm[0, 2]) / d,
-            (Hm[1, 0] * x + Hm[1, 1] * y + Hm[1, 2]) / d)
 
 
 def _sector_proposals(base: list[np.ndarray], pr: np.ndarray, iy: np.ndarray, ix: np.ndarray,
@@ -267,7 +260,7 @@ def plane_fields(src_labs: list[np.ndarray], base: list[np.ndarray],
                 elif planes[hyp - 1][k] is None:
                     continue
                 else:
-                    fx, fy = (a.astype(np.float32) for a in _project(planes[hyp - 1][k], CX, CY))
+                    fx, fy = apply_homography(planes[hyp - 1][k], CX, CY)
                 labs[k] = cv2.remap(src_labs[k], fx, fy, cv2.INTER_LINEAR,
                                     borderMode=cv2.BORDER_REPLICATE)
                 ok[k] = (fx >= 0) & (fx <= W - 1) & (fy >= 0) & (fy <= H - 1) & ~ex[k]
@@ -303,7 +296,7 @@ def plane_fields(src_labs: list[np.ndarray], base: list[np.ndarray],
                 continue
             for k in range(S):
                 if planes[hyp - 1][k] is not None:
-                    fx, fy = _project(planes[hyp - 1][k], gx[sel], gy[sel])
+                    fx, fy, _ = project_homography(planes[hyp - 1][k], gx[sel], gy[sel])
                     out[k][y:y + h, x:x + w, 0][sel] = fx
                     out[k][y:y + h, x:x + w, 1][sel] = fy
     return out, label

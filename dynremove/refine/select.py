@@ -1903,15 +1903,19 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     # least 200 px on its long side, 3×3 cells
     veto_scale = min(0.5, max(0.25, 200 / max(H, W)))
 
+    def source_lab(k):
+        """Source k's blurred Lab, exposure matched (computed once)."""
+        if lab_s[k] is None:
+            lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
+        return lab_s[k]
+
     def found(k, region):
         """Where source k shows the reference's content of ``region`` somewhere on its
         epipolar line (the veto of the weaker evidence below; L as it stands then)."""
         if views[k].F is None:
             return np.zeros(region.shape, bool)
         nf = flows[k] if flows is not None else base[k]
-        if lab_s[k] is None:
-            lab_s[k] = blurred_lab(sources[k], 1.0) + offsets[k]
-        cost, _ = epipolar_search(lab_r, lab_s[k], views[k], nf,
+        cost, _ = epipolar_search(lab_r, source_lab(k), views[k], nf,
                                   ~dilate_disc(mask | region, 4), region,
                                   scale=veto_scale, box=3)
         return cost < max(P.select_search_de, 1e-6)
@@ -2036,19 +2040,25 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     hole = cv2.dilate(dilate_disc(core, 2).astype(np.uint8), np.ones((7, 7), np.uint8)
                       ).astype(bool)
     fields = background_fields(base, hole)
+
+    def showing_movers(fields):
+        """(S, H, W): where each source, sampled through ``fields``, shows a mover
+        of its own (a lingering mover's copy, the reference's mover followed into it)."""
+        shows = minority[None] & ~wit_map
+        for k in range(S):
+            if followed[k] is not None:
+                shows[k] |= _valid_at(followed[k], fields[k])
+        return shows
+
     planes = np.full((H, W), -1, np.int16)
     if P.select_planes and core.any():
         # hidden edges between depths: the planes around each region of the hole,
         # where the sources agree (a source showing a mover of its own is no witness,
         # a sample in the movers' colours a weak one)
-        shows = minority[None] & ~wit_map
-        for k in range(S):
-            if followed[k] is not None:
-                shows[k] |= _valid_at(followed[k], fields[k])
         fields, planes = plane_fields(
-            [lab_s[k] if lab_s[k] is not None else blurred_lab(sources[k], 1.0) + offsets[k]
-             for k in range(S)], base, fields, hole, ~dilate_disc(mask, 4), shows,
-            static=matched, seed=P.seed, mover_p=lambda v: _mover_probability(colours, v))
+            [source_lab(k) for k in range(S)], base, fields, hole, ~dilate_disc(mask, 4),
+            showing_movers(fields), static=matched, seed=P.seed,
+            mover_p=lambda v: _mover_probability(colours, v))
     if P.select_sweep and mode == "parallax" and core.any():
         # hidden 3-D structure: the depth at which the sources agree, not a membrane
         model = fit_parallax(base, views, ~dilate_disc(mask, 4), seed=P.seed)
@@ -2061,12 +2071,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             # shows a mover (a lingering mover's copies, a mover the flow followed);
             # with them in it, a flow that may move 32 px pulled the witnesses'
             # matches onto the copies
-            shows = minority[None] & ~wit_map
-            for k in range(S):
-                if followed[k] is not None:
-                    shows[k] |= _valid_at(followed[k], fields[k])
             first, _ = median_fill(reference, sources, fields, dilate_disc(core, 2),
-                                   exclude=shows)
+                                   exclude=showing_movers(fields))
             fields = realign_fields(first, src_gray, fields, hole, [v.H for v in views],
                                     P.flow_preset, P.fuse_realign_max_px)
 
