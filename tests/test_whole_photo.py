@@ -26,8 +26,8 @@ from dynremove.evaluation import composite, synth
 from dynremove.evaluation.evaluate import SCORE_KEYS, find_sets, format_table, run_eval
 from dynremove.evaluation.metrics import psnr_in_mask, ssim_in_mask
 from dynremove.evaluation.whole_photo import (damage_percent, delta_e76, leftover_percent,
-                                              leftover_split, own_mover_fill_percent, psnr,
-                                              ssim)
+                                              leftover_split, misplaced_fill_percent,
+                                              own_mover_fill_percent, psnr, ssim)
 
 N = 200
 BG = (120, 130, 140)
@@ -149,6 +149,60 @@ def test_leftover_split_tells_a_missed_mover_from_a_wrong_fill(case, sigma):
     with pytest.raises(ValueError):
         leftover_split(out, ref[:10], bg, mask)
 
+
+@pytest.mark.parametrize("sigma", [0.0, 1.0])
+def test_misplaced_fill_is_the_right_content_a_few_pixels_off(sigma):
+    """A background of columns in 16 random colours (seeded); three 20 x 20 fills of a
+    mover, each scored alone: the background 2 px to the side (the right content,
+    misplaced: every wrong pixel of it is found within the 2 px tried), 6 px to the
+    side (beyond them: few of its wrong pixels match a column within 2 px by chance)
+    and a flat grey (other content: none)."""
+    rng = np.random.default_rng(0)
+    palette = rng.integers(0, 256, (16, 3)).astype(np.uint8)
+    bg = np.ascontiguousarray(np.broadcast_to(palette[np.arange(120) % 16], (60, 120, 3)))
+    boxes = [(slice(20, 40), slice(10, 30)), (slice(20, 40), slice(50, 70)),
+             (slice(20, 40), slice(90, 110))]
+    mask = np.zeros((60, 120), bool)
+    for b in boxes:
+        mask[b] = True
+    ref = bg.copy()
+    ref[mask] = MOVER
+    out = bg.copy()
+    out[boxes[0]] = bg[20:40, 12:32]
+    out[boxes[1]] = bg[20:40, 56:76]
+    out[boxes[2]] = 128
+
+    def scores(b):
+        m = np.zeros_like(mask)
+        m[b] = True
+        kept, refilled = leftover_split(out, ref, bg, m, blur_sigma=sigma)
+        return kept, refilled, misplaced_fill_percent(out, ref, bg, m, blur_sigma=sigma)
+
+    kept, refilled, mis = scores(boxes[0])
+    assert kept == 0.0 and refilled > 50
+    if sigma == 0:
+        assert mis == pytest.approx(refilled)
+    else:  # blurred, the box's rim mixes the fill with the photo around it, which no
+        # shift of the background shows (a 1 px rim: 76 of its 400 px)
+        assert refilled - 100 * 76 / 400 <= mis < refilled
+    kept, refilled, mis = scores(boxes[1])
+    assert kept == 0.0 and refilled > 50 and mis < 0.5 * refilled
+    kept, refilled, mis = scores(boxes[2])
+    # (blurred, only its rim, grey mixed with the photo around it, may happen to match)
+    assert kept == 0.0 and refilled > 50 and mis <= (0.0 if sigma == 0 else 100 * 76 / 400)
+    # over the whole mask: never more than the wrong fill; nothing with no shift tried
+    # or with the output as the input (nothing refilled)
+    _, refilled = leftover_split(out, ref, bg, mask, blur_sigma=sigma)
+    assert 0.0 < misplaced_fill_percent(out, ref, bg, mask, blur_sigma=sigma) < refilled
+    assert misplaced_fill_percent(out, ref, bg, mask, shift_px=0, blur_sigma=sigma) == 0.0
+    assert misplaced_fill_percent(ref, ref, bg, mask, blur_sigma=sigma) == 0.0
+    # the leftover's recoverable map: nothing recoverable, undefined
+    assert misplaced_fill_percent(out, ref, bg, mask, np.zeros_like(mask)) is None
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError):
+            misplaced_fill_percent(out, ref, bg, mask, shift_px=bad)
+    with pytest.raises(ValueError):
+        misplaced_fill_percent(out, ref[:10], bg, mask)
 
 @pytest.mark.parametrize("sigma", [0.0, 1.0])
 def test_planted_bugs(case, sigma):

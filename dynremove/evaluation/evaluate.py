@@ -39,7 +39,10 @@ percent of the true mask that no other view saw free (``null`` without
 ``free.png``); ``leftover_kept`` + ``leftover_refilled`` = ``leftover``, split
 into the pixels the output left as the input showed them (a missed detection)
 and those it changed into something still wrong (a wrong fill)
-(:func:`~dynremove.evaluation.whole_photo.leftover_split`).
+(:func:`~dynremove.evaluation.whole_photo.leftover_split`); of the wrong fill,
+``leftover_misplaced`` is the part that shows the true background shifted by at most
+2 px (the right content, misplaced:
+:func:`~dynremove.evaluation.whole_photo.misplaced_fill_percent`).
 
 Parallelism and clusters
 ------------------------
@@ -91,6 +94,7 @@ from dynremove.errors import InputError
 from dynremove.evaluation import baselines
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask, ssim_in_mask
 from dynremove.evaluation.whole_photo import (damage_percent, leftover_percent, leftover_split,
+                                              misplaced_fill_percent,
                                               own_mover_fill_percent, psnr, ssim)
 from dynremove.params import Params, preset
 from dynremove.pipeline import Result, remove_dynamic
@@ -100,7 +104,8 @@ METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan"
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
 #: Figures of a row (``null`` where they do not apply).
 SCORE_KEYS = ("jaccard", "psnr", "ssim", "psnr_whole", "ssim_whole", "damage", "leftover",
-              "leftover_kept", "leftover_refilled", "unrecoverable", "own_mover")
+              "leftover_kept", "leftover_refilled", "leftover_misplaced", "unrecoverable",
+              "own_mover")
 
 # Variants of the base preset for ``--ablation`` (field -> value). A variant whose
 # fields are not all Params fields, or whose values Params rejects, is skipped with
@@ -314,6 +319,8 @@ def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None,
         left, unrec = leftover_percent(clean, ls.background, ls.gt, ls.free)
         out["leftover"], out["unrecoverable"] = left, unrec
         out["leftover_kept"], out["leftover_refilled"] = leftover_split(
+            clean, ls.images[ls.ref], ls.background, ls.gt, ls.free)
+        out["leftover_misplaced"] = misplaced_fill_percent(
             clean, ls.images[ls.ref], ls.background, ls.gt, ls.free)
     return out
 
@@ -688,6 +695,7 @@ def run_ablation(data_dir: str | Path, *, base: Any, names: Sequence[str] | None
               "mean_leftover": summ[n]["leftover"],
               "mean_leftover_kept": summ[n]["leftover_kept"],
               "mean_leftover_refilled": summ[n]["leftover_refilled"],
+              "mean_leftover_misplaced": summ[n]["leftover_misplaced"],
               "mean_seconds": summ[n]["seconds"], "n_sets": summ[n]["n_jaccard"]}
              for n, ch, _ in variants]
     return {"ablation": table, "sets": rows, "set_info": [res["info"] for res in results],
@@ -812,13 +820,16 @@ def _format_whole(report: dict, methods: Sequence[str], by: dict, info: dict,
                  + [_fmt(summ[m]["leftover_kept"], ".1f") for m in methods])
     table.append(["  refilled wrong %", ""]
                  + [_fmt(summ[m]["leftover_refilled"], ".1f") for m in methods])
+    table.append(["    of it misplaced <= 2 px %", ""]
+                 + [_fmt(summ[m]["leftover_misplaced"], ".1f") for m in methods])
     # the only figure of the unrec% column: a row of its own, the methods' cells blank
     table.append(["mean unrec %", _fmt(mean_unrec, ".1f")] + [""] * len(methods))
     head = ["whole photo, cells: PSNR(dB) SSIM damage% leftover%",
             "  damage%: of all pixels, outside the true mask + 5 px: right in the input, "
             "wrong in the output (CIE76 dE > 10, 1 px blur)",
             "  leftover%: of the recoverable true mask, still wrong (kept as input: the "
-            "output still shows the input there; refilled wrong: changed, still wrong)",
+            "output still shows the input there; refilled wrong: changed, still wrong; "
+            "of it misplaced: the true background within 2 px matches it)",
             "  unrec%: of the true mask, seen free by no other view"]
     return head + _render(table, len(bg_sets), n_left=1)
 

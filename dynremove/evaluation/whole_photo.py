@@ -27,6 +27,7 @@ __all__ = [
     "damage_percent",
     "leftover_percent",
     "leftover_split",
+    "misplaced_fill_percent",
     "own_mover_fill_percent",
     "DAMAGE_DILATE_PX",
     "DE_MAX",
@@ -39,6 +40,9 @@ DAMAGE_DILATE_PX: int = 5
 DE_MAX: float = 10.0
 #: Gaussian blur (pixels) applied to both images before the colour comparison.
 DE_BLUR_SIGMA: float = 1.0
+#: Shift (pixels, each axis) within which :func:`misplaced_fill_percent` finds the
+#: true background again: a wrong fill that is the right content, a little misplaced.
+MISPLACED_SHIFT_PX: int = 2
 def psnr(img: npt.ArrayLike, ref: npt.ArrayLike, *, data_range: float = 255) -> float:
     """Peak signal-to-noise ratio over the whole image.
 
@@ -440,6 +444,86 @@ def leftover_split(
     kept = 100.0 * int(np.count_nonzero(wrong & as_input & count)) / n
     refilled = 100.0 * int(np.count_nonzero(wrong & ~as_input & count)) / n
     return kept, refilled
+
+
+def misplaced_fill_percent(
+    output: npt.ArrayLike,
+    reference: npt.ArrayLike,
+    background: npt.ArrayLike,
+    true_mask: npt.ArrayLike,
+    recoverable: npt.ArrayLike | None = None,
+    *,
+    shift_px: int = MISPLACED_SHIFT_PX,
+    de_max: float = DE_MAX,
+    blur_sigma: float = DE_BLUR_SIGMA,
+) -> float | None:
+    """The part of :func:`leftover_split`'s *refilled* that is the right content misplaced.
+
+    A refilled pixel (wrong in the output, changed from the input) counts as
+    *misplaced* where the true background, shifted by at most ``shift_px`` pixels
+    along each axis, matches the output there (CIE76 ΔE ≤ ``de_max``, both blurred
+    as in :func:`leftover_percent`; the background's border replicated). Such a
+    fill shows the hidden scene a pixel or two off (its geometry), which a viewer
+    who never saw the truth does not see; the rest of *refilled* is other content
+    (a ghost, a smear, inpainting). Percent of the same recoverable true mask, so
+    ``misplaced <= refilled``.
+
+    Parameters
+    ----------
+    output, reference, background, true_mask, recoverable, de_max, blur_sigma
+        As in :func:`leftover_split`.
+    shift_px : int
+        The largest shift tried along each axis (>= 0; 0 counts nothing).
+
+    Returns
+    -------
+    float or None
+        Percent in ``[0, 100]``; ``None`` where :func:`leftover_percent` gives ``None``.
+
+    Raises
+    ------
+    ValueError
+        As :func:`leftover_split`, and for a negative ``shift_px``.
+
+    Examples
+    --------
+    A striped 6x6 patch filled one pixel to the right (misplaced), and a second
+    patch filled with a flat grey (other content):
+
+    >>> import numpy as np
+    >>> bg = np.zeros((12, 24, 3), np.uint8); bg[:, ::2] = 255
+    >>> mask = np.zeros((12, 24), bool); mask[3:9, 3:9] = mask[3:9, 15:21] = True
+    >>> ref = bg.copy(); ref[mask] = (0, 0, 255)
+    >>> out = bg.copy(); out[3:9, 3:9] = bg[3:9, 4:10]; out[3:9, 15:21] = 128
+    >>> leftover_split(out, ref, bg, mask, blur_sigma=0)
+    (0.0, 100.0)
+    >>> misplaced_fill_percent(out, ref, bg, mask, blur_sigma=0)
+    50.0
+    """
+    if isinstance(shift_px, bool) or not isinstance(shift_px, (int, np.integer)) or shift_px < 0:
+        raise ValueError(f"shift_px must be an integer >= 0, got {shift_px!r}")
+    count, _, wrong, lab_out = _leftover_pixels(output, background, true_mask, recoverable,
+                                                de_max, blur_sigma)
+    if wrong is None:
+        return None
+    sigma = _check_sigma(blur_sigma)
+    ref_ = _bgr(reference, "reference")
+    _check_same_shape(lab_out, ref_, "output", "reference")
+    refilled = wrong & count & (np.linalg.norm(lab_out - _lab(ref_, sigma), axis=2)
+                                > float(de_max))
+    ys, xs = np.nonzero(refilled)
+    n = int(np.count_nonzero(count))
+    if shift_px == 0 or not len(ys):
+        return 0.0
+    s = int(shift_px)
+    lab_bg = np.pad(_lab(_bgr(background, "background"), sigma), ((s, s), (s, s), (0, 0)),
+                    mode="edge")
+    v = lab_out[ys, xs]
+    near = np.zeros(len(ys), bool)
+    for dy in range(-s, s + 1):
+        for dx in range(-s, s + 1):
+            near |= np.linalg.norm(v - lab_bg[ys + s + dy, xs + s + dx], axis=1) <= float(de_max)
+    return 100.0 * int(np.count_nonzero(near)) / n
 
 
 def own_mover_fill_percent(
