@@ -32,6 +32,7 @@ __all__ = [
     "DAMAGE_DILATE_PX",
     "DE_MAX",
     "DE_BLUR_SIGMA",
+    "MISPLACED_SHIFT_PX",
 ]
 
 #: Guard band (pixels) around the true mask excluded from :func:`damage_percent`.
@@ -43,6 +44,8 @@ DE_BLUR_SIGMA: float = 1.0
 #: Shift (pixels, each axis) within which :func:`misplaced_fill_percent` finds the
 #: true background again: a wrong fill that is the right content, a little misplaced.
 MISPLACED_SHIFT_PX: int = 2
+
+
 def psnr(img: npt.ArrayLike, ref: npt.ArrayLike, *, data_range: float = 255) -> float:
     """Peak signal-to-noise ratio over the whole image.
 
@@ -465,8 +468,9 @@ def misplaced_fill_percent(
     as in :func:`leftover_percent`; the background's border replicated). Such a
     fill shows the hidden scene a pixel or two off (its geometry), which a viewer
     who never saw the truth does not see; the rest of *refilled* is other content
-    (a ghost, a smear, inpainting). Percent of the same recoverable true mask, so
-    ``misplaced <= refilled``.
+    (a ghost, a blob of inpainting). An edge smeared across a pixel or two also
+    counts (its mixed colours match the edge a little to the side). Percent of the
+    same recoverable true mask, so ``misplaced <= refilled``.
 
     Parameters
     ----------
