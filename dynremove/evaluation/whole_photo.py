@@ -383,6 +383,17 @@ def _leftover_pixels(output, background, true_mask, recoverable, de_max, blur_si
     return count, unrec, wrong, lab_out
 
 
+def _as_input(lab_out: np.ndarray, reference: npt.ArrayLike, de_max: float,
+              blur_sigma: float) -> np.ndarray:
+    """(H, W) bool: where the output (its blurred Lab ``lab_out``) still matches the
+    input reference (ΔE <= ``de_max``, the reference blurred alike): what
+    :func:`leftover_split` counts as kept. ValueError when the shapes differ."""
+    ref_ = _bgr(reference, "reference")
+    _check_same_shape(lab_out, ref_, "output", "reference")
+    return (np.linalg.norm(lab_out - _lab(ref_, _check_sigma(blur_sigma)), axis=2)
+            <= float(de_max))
+
+
 def leftover_split(
     output: npt.ArrayLike,
     reference: npt.ArrayLike,
@@ -439,10 +450,7 @@ def leftover_split(
                                                 de_max, blur_sigma)
     if wrong is None:
         return None, None
-    ref_ = _bgr(reference, "reference")
-    _check_same_shape(lab_out, ref_, "output", "reference")
-    as_input = (np.linalg.norm(lab_out - _lab(ref_, _check_sigma(blur_sigma)), axis=2)
-                <= float(de_max))
+    as_input = _as_input(lab_out, reference, de_max, blur_sigma)
     n = int(np.count_nonzero(count))
     kept = 100.0 * int(np.count_nonzero(wrong & as_input & count)) / n
     refilled = 100.0 * int(np.count_nonzero(wrong & ~as_input & count)) / n
@@ -511,10 +519,7 @@ def misplaced_fill_percent(
     if wrong is None:
         return None
     sigma = _check_sigma(blur_sigma)
-    ref_ = _bgr(reference, "reference")
-    _check_same_shape(lab_out, ref_, "output", "reference")
-    refilled = wrong & count & (np.linalg.norm(lab_out - _lab(ref_, sigma), axis=2)
-                                > float(de_max))
+    refilled = wrong & count & ~_as_input(lab_out, reference, de_max, blur_sigma)
     ys, xs = np.nonzero(refilled)
     n = int(np.count_nonzero(count))
     if shift_px == 0 or not len(ys):
