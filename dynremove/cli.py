@@ -30,7 +30,7 @@ from dynremove.commands import (EXIT_INPUT, EXIT_INTERNAL, SAMPLE_STATIC, clear_
 from dynremove.errors import InputError, Terminated, interruption
 from dynremove.io import MIN_MAX_SIDE
 from dynremove.evaluation.composite import MAX_SIDE as COMPOSITE_MAX_SIDE
-from dynremove.evaluation.evaluate import ABLATIONS, METHODS
+from dynremove.evaluation.evaluate import ABLATIONS, DIAGNOSTICS, METHODS
 from dynremove.params import DEFAULT, FIELD_CHOICES, PAPER, PRESETS, Params, field_docs
 
 
@@ -465,7 +465,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"comma-separated subset of {','.join(METHODS)} (default: all of "
                         "them; a set of 7 photos of 854x480 takes about 10 s for the "
                         "default preset, 8 s for the paper's, 1-4 s for each median stack "
-                        "and under 1 s for telea, on 2 cores with --jobs 2)")
+                        "and under 1 s for telea, on 2 cores with --jobs 2); also "
+                        f"{','.join(DIAGNOSTICS)}, only where named: the default whose fill "
+                        "samples the other photos across the mask through the true "
+                        "background's own matches (background.png), an upper bound for "
+                        "better fields")
     e.add_argument("--ablation", action="store_true",
                    help="instead of the methods: variants of the preset, each one setting "
                         "changed (listed under --variants); prints mean J / PSNR per variant")

@@ -732,12 +732,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
         io.check_out_file(args.json, "--json")
     base = preset(args.preset).to_dict()
     changed = {k: v for k, v in params.to_dict().items() if v != base[k]}
-    if not args.ablation and (changed or args.preset != "default") and "dynremove" not in methods:
+    if (not args.ablation and (changed or args.preset != "default")
+            and not {"dynremove", "true-fields"} & set(methods)):
         # (a trial's --t-r 0.5 with --methods paper,median changed nothing, silently)
         _note(args, "the method flags (--preset " + args.preset + "".join(
             f", --{k.replace('_', '-')} {v}" for k, v in changed.items()) + ") apply to the "
-            "'dynremove' method only, which --methods does not list: not used ('paper' and "
-            "'single-scan' are the paper's method as written)")
+            "'dynremove' and 'true-fields' methods only, which --methods does not list: not "
+            "used ('paper' and 'single-scan' are the paper's method as written)")
     progress = not args.quiet
     if args.ablation or any(m not in ("median", "median-flow", "telea") for m in methods):
         _note_compile(args)  # (each set's seconds leave the compilation out)

@@ -472,7 +472,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                    names: Sequence[str] | None = None, preset_name: str = "custom",
                    kernel: str = "numba", chunk_rows: int | None = None,
                    progress: Progress | None = None,
-                   valid_masks: Sequence[np.ndarray] | None = None) -> Result:
+                   valid_masks: Sequence[np.ndarray] | None = None,
+                   true_background: np.ndarray | None = None) -> Result:
     """Detect the moving objects in the reference and replace them (Algorithm 1).
 
     The images are analysed at the size given (the command line analyses photos
@@ -525,6 +526,11 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         Per image, where it has content (False: transparent or empty border of a
         pre-aligned frame). Never flagged in the reference (the input is kept
         there), never used as fill from a source.
+    true_background : (H, W, 3) uint8 ndarray, optional
+        For evaluation only: the reference without its movers. The fill by
+        selection then samples the sources across L through this image's own
+        matches in them, not through the fields it estimates (``select_fill``'s
+        ``true_background``; ``dynremove eval --methods true-fields``).
 
     Returns
     -------
@@ -555,7 +561,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         ``valid_masks`` not one (H, W) mask per image; an unknown ``kernel``; images
         whose analysis would need more memory than the machine has (``check_memory``);
         ``params`` of another type; a ``progress`` that is not callable, a ``sink``
-        without the EventSink methods.
+        without the EventSink methods; a ``true_background`` that is not an
+        (H, W, 3) uint8 array of the images' size.
     RuntimeError
         In a process forked from one that had already run dynremove on numba's
         OpenMP layer (``refine.concurrency.check_fork_safe``): use the "spawn" or
@@ -629,6 +636,12 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
         raise InputError(f"chunk_rows={chunk_rows!r}: give an int of 1 or more (or None)")
     if valid_masks is not None:
         valid_masks = _api_valid_masks(valid_masks, len(images), W, H)
+    if true_background is not None:
+        tb = np.asarray(true_background)
+        if tb.dtype != np.uint8 or tb.shape != (H, W, 3):
+            raise InputError(f"true_background: shape {tb.shape} {tb.dtype}, the images are "
+                             f"{W}x{H}: give an ({H}, {W}, 3) uint8 array")
+        true_background = tb
     if sink.enabled and hasattr(type(sink), "begin"):  # optional hook (RerunSink): open
         sink.begin(names, (H, W), images=images, ref=ref)  # the recording before features
     timings: dict[str, float] = {}
@@ -856,7 +869,8 @@ def remove_dynamic(images: Sequence[np.ndarray], *, ref: int | str | None = None
                         valid_src = np.ones((len(srcs),) + clip.shape, bool)
                     valid_src[k] &= ~clip
         selection = select_fill(ref_img, st.src_img, views, dyn, params, valid=valid_src,
-                                flows=st.Nf_flow, no_fill=gray_apart[srcs])
+                                flows=st.Nf_flow, no_fill=gray_apart[srcs],
+                                true_background=true_background)
         shade = relight_shade(selection.clean, st.src_img, selection.fields,
                               selection.replaced, reach_px=params.select_shade_px,
                               min_dl=params.select_shade_de,

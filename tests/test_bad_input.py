@@ -625,11 +625,16 @@ def test_api_arguments_are_checked_before_the_run(scene, monkeypatch):
      rf"^valid_masks\[0\]: shape \(10, 10\), the images are {W}x{H}"),
     ({"valid_masks": [np.ones((H, W), bool)] * 2}, r"^valid_masks: 2 given for 3 images"),
     ({"valid_masks": 5}, r"^valid_masks: give one .* got int"),
+    ({"true_background": np.zeros((10, 10, 3), np.uint8)},
+     rf"^true_background: shape \(10, 10, 3\) uint8, the images are {W}x{H}: give an"),
+    ({"true_background": np.zeros((H, W, 3), np.float32)},
+     rf"^true_background: shape \({H}, {W}, 3\) float32, the images are {W}x{H}"),
     ({"ref": "2", "names": ["2", "1", "0"]},
      r"^ref='2': both the index of 0 and the name of 2 \(index 0\): give the int 0 for "
      r"'2', or the int 2 for '0'$"),
 ], ids=["float probe", "triple", "bare int", "outside", "sample 2", "sample -1", "chunk 0",
-        "chunk float", "mask size", "mask count", "masks int", "ref both"])
+        "chunk float", "mask size", "mask count", "masks int", "background size",
+        "background float", "ref both"])
 def test_api_probes_fractions_and_masks_are_checked_before_the_run(scene, monkeypatch, kw,
                                                                    words):
     """Each a one-line InputError before any work (a trial's probes, valid_masks and

@@ -22,6 +22,16 @@ Methods, run on each set with the same inputs (see :data:`METHODS`):
 ``telea``        OpenCV Telea inpainting of the reference given the TRUE mask
                  (no detection: its Jaccard is null)
 
+and, only where ``--methods`` names it (:data:`DIAGNOSTICS`):
+
+``true-fields``  ``dynremove`` whose fill samples the sources across L through
+                 the TRUE background's own matches in them (``background.png``,
+                 homography + DIS flow), not through the fields it estimates:
+                 the whole-photo figures the fill would reach with the hidden
+                 background's geometry right (an upper bound for better fields;
+                 the detection, consensus and selection are the method's). Sets
+                 without a background get no figures.
+
 Figures: Jaccard of the reference's detected mask with its true mask (after
 the method's own clean-up); PSNR and SSIM of the cleaned reference against
 ``background.png`` inside the true mask (only where both exist; PSNR is capped
@@ -101,6 +111,8 @@ from dynremove.pipeline import Result, remove_dynamic
 from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_restarts
 
 METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
+#: Methods run only when ``--methods`` names them (not part of the default list).
+DIAGNOSTICS = ("true-fields",)
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
 #: Figures of a row (``null`` where they do not apply).
 SCORE_KEYS = ("jaccard", "psnr", "ssim", "psnr_whole", "ssim_whole", "damage", "leftover",
@@ -350,6 +362,16 @@ def run_method(method: str, ls: LoadedSet, params: Any | None = None, *,
         if method in ("median", "median-flow"):
             align = "homography" if method == "median" else "homography+flow"
             clean, dyn = baselines.median_baseline(ls.images, ls.ref, align=align)
+        elif method == "true-fields":
+            if ls.background is None:
+                clean, dyn = None, None
+                notes.append("true-fields: no background.png")
+            else:
+                res = remove_dynamic(ls.images, ref=ls.ref, params=params, names=ls.names,
+                                     true_background=ls.background)
+                clean, dyn = res.clean, res.dynamic
+                if detail is not None:
+                    detail["result"] = res
         elif method == "telea":
             if ls.gt is None:
                 clean, dyn = None, None
@@ -381,8 +403,9 @@ def _make_params(d: dict) -> Any:
 
 
 def method_params(method: str, chosen: Any) -> Any | None:
-    """Params of a pipeline method (``dynremove`` = ``chosen``); None for baselines."""
-    if method == "dynremove":
+    """Params of a pipeline method (``dynremove`` and ``true-fields`` = ``chosen``); None
+    for baselines."""
+    if method in ("dynremove", "true-fields"):
         return chosen
     if method == "paper":
         return preset("paper")
@@ -454,7 +477,9 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
             warm_up(pd)
     done: dict[Any, tuple] = {}  # identical params run once
     for method, pd in variants:
-        base = "pipeline" if pd is not None else method
+        # (the pipeline's presets run as "pipeline", and identical ones once; a
+        # diagnostic with the same params is another run)
+        base = "pipeline" if pd is not None and method not in DIAGNOSTICS else method
         key = (base, tuple(sorted(pd.items())) if pd else None)
         row: dict[str, Any] = {"set": es.name, "method": method}
         try:
@@ -464,8 +489,7 @@ def eval_set(es: EvalSet, variants: Sequence[tuple[str, dict | None]], *,
                 t = time.perf_counter()
                 params = _make_params(pd) if pd is not None else None
                 detail: dict = {}
-                clean, dyn, n = run_method(method if pd is None else "pipeline", ls, params,
-                                           detail=detail, label=method)
+                clean, dyn, n = run_method(base, ls, params, detail=detail, label=method)
                 secs = time.perf_counter() - t
                 # each note once, under the method that gave it (a trial found the same
                 # note three times, and the paper preset's "stopped at --max-scans 4"
@@ -585,9 +609,10 @@ def run_eval(data_dir: str | Path, *, sets: str | None = None, params: Any | Non
              jobs: int = 1, max_side: int | None = None, ref: str | int | None = None,
              progress: bool = True) -> dict:
     """Evaluate ``methods`` on every set below ``data_dir``; returns the JSON report."""
-    bad = [m for m in methods if m not in METHODS]
+    bad = [m for m in methods if m not in METHODS + DIAGNOSTICS]
     if bad:
-        raise InputError(f"unknown method(s) {', '.join(bad)}; choose from {', '.join(METHODS)}")
+        raise InputError(f"unknown method(s) {', '.join(bad)}; choose from "
+                         f"{', '.join(METHODS + DIAGNOSTICS)}")
     chosen = preset(preset_name) if params is None else params
     found = find_sets(data_dir, sets)
     if not found:
@@ -862,7 +887,7 @@ def format_ablation(report: dict) -> str:
     return "\n".join(lines + [legend] + [f"note: {n}" for n in report.get("skipped", [])])
 
 
-__all__ = ["METHODS", "ABLATIONS", "SCORE_KEYS", "EvalSet", "LoadedSet", "find_sets", "load_set",
-           "score", "run_method", "eval_set", "run_eval", "run_ablation",
+__all__ = ["METHODS", "DIAGNOSTICS", "ABLATIONS", "SCORE_KEYS", "EvalSet", "LoadedSet",
+           "find_sets", "load_set", "score", "run_method", "eval_set", "run_eval", "run_ablation",
            "ablation_variants", "summarize", "format_table", "format_ablation",
            "image_files"]

@@ -1715,7 +1715,8 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
                 views: list[TwoView], mask: npt.NDArray[np.bool_], params: Params, *,
                 valid: npt.NDArray[np.bool_] | None = None,
                 flows: npt.NDArray[np.float32] | None = None,
-                no_fill: npt.NDArray[np.bool_] | None = None) -> Selection:
+                no_fill: npt.NDArray[np.bool_] | None = None,
+                true_background: npt.NDArray[np.uint8] | None = None) -> Selection:
     """Fill ``mask`` by selecting, per region, one source that is free there.
 
     Parameters
@@ -1740,6 +1741,14 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
     no_fill : (S,) bool ndarray, optional
         Sources whose evidence counts but whose pixels never fill (a black-and-white
         photo beside colour ones).
+    true_background : (H, W, 3) uint8 ndarray, optional
+        For evaluation only (``dynremove eval --methods true-fields``): the
+        reference without its movers (a composite's ``background.png``). The fields
+        across L are then its own matches in each source (``dense_correspondence``
+        of its gray image, homography + flow), not the ones the method estimates
+        from around L: the fill as it would be with the hidden background's
+        geometry right, an upper bound on what better fields can give. Everything
+        else (L, the consensus, the selection, the blend) is the method's.
 
     Returns
     -------
@@ -2076,6 +2085,16 @@ def select_fill(reference: npt.NDArray[np.uint8], sources: npt.NDArray[np.uint8]
             fields = realign_fields(first, src_gray, fields, hole, [v.H for v in views],
                                     P.flow_preset, P.fuse_realign_max_px)
 
+    if true_background is not None and core.any():
+        # (evaluation only: the hidden background's own matches across the hole)
+        g_true = cv2.cvtColor(np.ascontiguousarray(true_background), cv2.COLOR_BGR2GRAY)
+
+        def true_field(k):
+            nf = dense_correspondence(g_true, src_gray[k], views[k].H,
+                                      method="homography+flow", flow_preset=P.flow_preset)
+            return np.where(hole[..., None], nf, fields[k]).astype(np.float32)
+
+        fields = for_each_source(true_field, S)
     ys, xs = np.nonzero(region)
     y0, y1 = max(ys.min() - 2, 0), min(ys.max() + 3, H)
     x0, x1 = max(xs.min() - 2, 0), min(xs.max() + 3, W)
