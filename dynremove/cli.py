@@ -443,9 +443,16 @@ def build_parser() -> argparse.ArgumentParser:
                     "matches it), each a percent of the recoverable true mask (JSON: "
                     "leftover_kept, leftover_refilled, leftover_misplaced). "
                     "--preset and the method flags set the 'dynremove' column (its head "
-                    "stays 'dynremove'); 'paper' is always the paper preset as written, "
-                    "and 'single-scan' the paper's with one scan and no update of the "
-                    "matches (Sec. 3.2.3).")
+                    "stays 'dynremove') and the 'true-fields' one; 'paper' is always the "
+                    "paper preset as written, and 'single-scan' the paper's with one scan "
+                    "and no update of the matches (Sec. 3.2.3). 'true-fields' (run only "
+                    "where --methods names it; sets with a background.png) is a "
+                    "diagnostic, not a method a user can run: the 'dynremove' column's "
+                    "run whose fill samples the other photos across the mask through the "
+                    "true background's own matches in them instead of the fields it "
+                    "estimates, so its figures against 'dynremove' tell how much of the "
+                    "wrong fill better fields could take away (mostly the refilled-wrong "
+                    "part; its J moves too, as the dynamic map is what the fill replaced).")
     e.add_argument("data_dir", metavar="DATA_DIR",
                    help="a folder whose sets (<set>/frames/, below it at any depth) are "
                         "scored: ../shared/data/davis, or what 'dynremove composite' wrote")
@@ -466,10 +473,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "them; a set of 7 photos of 854x480 takes about 10 s for the "
                         "default preset, 8 s for the paper's, 1-4 s for each median stack "
                         "and under 1 s for telea, on 2 cores with --jobs 2); also "
-                        f"{','.join(DIAGNOSTICS)}, only where named: the default whose fill "
-                        "samples the other photos across the mask through the true "
-                        "background's own matches (background.png), an upper bound for "
-                        "better fields")
+                        f"{','.join(DIAGNOSTICS)}, only where named (the diagnostic "
+                        "described above: the 'dynremove' run, with the same preset and "
+                        "flags, its fill's matches across the mask taken from "
+                        "background.png)")
     e.add_argument("--ablation", action="store_true",
                    help="instead of the methods: variants of the preset, each one setting "
                         "changed (listed under --variants); prints mean J / PSNR per variant")

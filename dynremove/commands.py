@@ -36,8 +36,8 @@ from dynremove.batch import at_output_size, load_for_reference, write_outputs
 from dynremove.errors import InputError, interruption
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.bench import run_bench
-from dynremove.evaluation.evaluate import (METHODS, format_ablation, format_table, image_files,
-                                          run_ablation, run_eval)
+from dynremove.evaluation.evaluate import (METHODS, find_sets, format_ablation, format_table,
+                                          image_files, run_ablation, run_eval)
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask
 from dynremove.params import PRESETS, Params, preset
 from dynremove import pipeline
@@ -719,6 +719,23 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _check_true_fields(args: argparse.Namespace, methods: list[str]) -> None:
+    """``--methods true-fields`` scores only sets with a background.png: an error when it
+    is the only method and no set has one, a note when some sets lack it (a trial's
+    run on such sets printed a column of '-' and exit 0, with no word)."""
+    found = find_sets(args.data_dir, args.sets)
+    lacking = [es.name for es in found if es.background is None]
+    if not found or not lacking:
+        return  # (no set at all: run_eval says so)
+    if len(lacking) == len(found) and methods == ["true-fields"]:
+        raise InputError(f"--methods true-fields: none of the {len(found)} set(s) under "
+                         f"{args.data_dir} has a background.png (what 'dynremove composite' "
+                         "and the synthetic scenes write): nothing to score")
+    few = ", ".join(lacking[:3]) + (f" and {len(lacking) - 3} more" if len(lacking) > 3 else "")
+    _note(args, f"true-fields: {len(lacking)} of {len(found)} set(s) have no background.png "
+                f"({few}): no true-fields figures there ('-')")
+
+
 def cmd_eval(args: argparse.Namespace) -> int:
     params = params_from_args(args)
     # each once, in the order given (a trial's dynremove,dynremove counted one set twice)
@@ -739,6 +756,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
             f", --{k.replace('_', '-')} {v}" for k, v in changed.items()) + ") apply to the "
             "'dynremove' and 'true-fields' methods only, which --methods does not list: not "
             "used ('paper' and 'single-scan' are the paper's method as written)")
+    if "true-fields" in methods and not args.ablation:
+        _check_true_fields(args, methods)
     progress = not args.quiet
     if args.ablation or any(m not in ("median", "median-flow", "telea") for m in methods):
         _note_compile(args)  # (each set's seconds leave the compilation out)

@@ -483,19 +483,33 @@ def test_true_fields_bound_what_better_fill_geometry_gives(tmp_path):
 
 
 def test_true_fields_needs_a_background(data, tmp_path, capsys):
-    """A set without background.png gets no true-fields figures, and a note says why;
-    an unknown method is refused with the diagnostics among the choices."""
+    """true-fields on sets without a background.png: a one-line error when nothing could
+    be scored, else a note naming them and '-' there (a trial's run printed a column of
+    '-' with exit 0 and no word); the table's legend and the JSON say what the column
+    is; an unknown method is refused with the diagnostics among the choices."""
     import shutil
 
     shutil.copytree(data / "syn1", tmp_path / "nobg")
     (tmp_path / "nobg" / "background.png").unlink()
+    assert main(["eval", str(tmp_path), "--methods", "true-fields", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "--methods true-fields: none of the 1 set(s)" in err and "background.png" in err
+    assert err.count("\n") == 1  # one line, no traceback
+    # beside a set that has one: scored there, '-' and a note for the other
+    shutil.copytree(data / "syn2", tmp_path / "withbg")
     out = tmp_path / "e.json"
-    assert main(["eval", str(tmp_path), "--methods", "true-fields", "--json", str(out),
-                 "--quiet"]) == 0
+    assert main(["eval", str(tmp_path), "--methods", "dynremove,true-fields", "--json",
+                 str(out)]) == 0
+    cap = capsys.readouterr()
+    assert "true-fields: 1 of 2 set(s) have no background.png (nobg)" in cap.err
+    assert "true-fields is a diagnostic, not a method" in cap.out  # the table's legend
     rep = json.loads(out.read_text())
-    row = rep["sets"][0]
-    assert row["method"] == "true-fields" and row["leftover"] is None and row["damage"] is None
-    assert "true-fields: no background.png" in rep["set_info"][0]["notes"]
-    capsys.readouterr()
+    by = {(r["set"], r["method"]): r for r in rep["sets"]}
+    assert by[("nobg", "true-fields")]["leftover"] is None
+    assert by[("withbg", "true-fields")]["leftover"] is not None
+    assert by[("nobg", "dynremove")]["jaccard"] is not None  # the others still scored
+    assert "true-fields: no background.png" in [i for i in rep["set_info"]
+                                                 if i["set"] == "nobg"][0]["notes"]
+    assert "true-fields" in rep["diagnostics"]
     assert main(["eval", str(tmp_path), "--methods", "oracle"]) == 2
     assert "true-fields" in capsys.readouterr().err

@@ -113,6 +113,12 @@ from dynremove.refine.concurrency import one_thread_per_worker, quiet_worker_res
 METHODS = ("dynremove", "paper", "median", "median-flow", "telea", "single-scan")
 #: Methods run only when ``--methods`` names them (not part of the default list).
 DIAGNOSTICS = ("true-fields",)
+#: What the table and the JSON (``diagnostics``) say the ``true-fields`` column is.
+TRUE_FIELDS_LEGEND = (
+    "true-fields is a diagnostic, not a method: the dynremove run (same preset and "
+    "flags) whose fill samples the other photos across the mask through the true "
+    "background's own matches in them (background.png; '-' without one); against "
+    "dynremove it shows what better fields could take off the wrong fill")
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
 #: Figures of a row (``null`` where they do not apply).
 SCORE_KEYS = ("jaccard", "psnr", "ssim", "psnr_whole", "ssim_whole", "damage", "leftover",
@@ -657,6 +663,8 @@ def _eval_report(results: list[dict], methods: Sequence[str], variants: list, t0
         "preset": preset_name,
         "params": _params_dict(chosen),
         "method_params": {m: pd for m, pd in variants if pd is not None},
+        **({"diagnostics": {"true-fields": TRUE_FIELDS_LEGEND}}
+           if "true-fields" in methods else {}),
     }
 
 
@@ -805,6 +813,8 @@ def format_table(report: dict) -> str:
     if "telea" in methods:  # (a trial read its column of '-' as a failure)
         head += ("\n  telea is given the true mask: it has no Jaccard ('-'); it scores "
                  "only the fill, where a background is known")
+    if "true-fields" in methods:  # (a trial found nothing in the table saying what it is)
+        head += ("\n  " + TRUE_FIELDS_LEGEND)
     out = [head] + _render(table, len(set_names))
     if any_bg:
         out += [""] + _format_whole(report, methods, by, info, set_names)
