@@ -659,13 +659,15 @@ def _edge_bounds(pf):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, labels, is_core, stack):
+def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, Gd, labels, is_core, stack):
     """DBSCAN of P on 𝓑(x1, x2) = 1 − λ4 S_e(f_c) − λ5 S_e(f_g), Eq. (DB_cost).
 
     Mirrors ``reference.cluster``. DBSCAN reads 𝓑 only as 𝓑 ≤ ε, so A (n × n
     bool) gets that; 𝓑 itself is computed only where the SIFT distance alone
     does not settle it (``_edge_bounds`` gives g_in, g_out), which is exact.
-    Fills A and labels (−1 = noise); returns the number of clusters k.
+    Fills A, Gd (n × n int64: the candidates' squared SIFT distances, in
+    descriptor units, for ``_decide``) and labels (−1 = noise); returns the
+    number of clusters k.
     """
     if n == 0:
         return 0
@@ -675,6 +677,8 @@ def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, labels, is_core,
         A[i, i] = 1.0 - lam4 - lam5 <= eps
         for j in range(i + 1, n):
             g = _sift_d2_ss(fg_s, cs[i], cy[i], cx[i], cs[j], cy[j], cx[j])
+            Gd[i, j] = g
+            Gd[j, i] = g
             if g <= g_in:
                 e = True
             elif g >= g_out:
@@ -689,14 +693,23 @@ def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, labels, is_core,
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
-            fhat_c, fhat_g):
-    """Winning cluster A_m, consensus (f̂_c, f̂_g) and M(x_r) (Sec. 3.2.1).
+def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk, Gd,
+            fhat_c):
+    """Winning cluster A_m, consensus f̂_c and M(x_r) (Sec. 3.2.1).
 
     Mirrors ``reference.decide``. b_k = Σ B_l over cluster k; m = argmax b_k
-    (first on ties); f̂ = Σ_{A_m} B_l f(x_l) / b_m (uniform if b_m = 0);
-    M = λ4 S_e(f_c(x_r), f̂_c) + λ5 S_e(f_g(x_r), f̂_g). Requires k > 0.
-    Fills fhat_c, fhat_g; returns (m, b_m, M, ‖f_g(x_r) − f̂_g‖²).
+    (first on ties); f̂ = Σ_{A_m} w_l f(x_l), w_l = B_l / b_m (uniform if
+    b_m = 0); M = λ4 S_e(f_c(x_r), f̂_c) + λ5 S_e(f_g(x_r), f̂_g). Requires k > 0.
+    Fills fhat_c; returns (m, b_m, M, ‖f_g(x_r) − f̂_g‖², |A_m|).
+
+    f̂_g itself (128 numbers) is not formed here, only its distance, from the
+    candidates' own: with Σ w_l = 1, ‖r − Σ w_l x_l‖² = Σ w_l ‖r − x_l‖² −
+    Σ_{l<l'} w_l w_l' ‖x_l − x_l'‖² (the weighted variance's decomposition),
+    whose ‖x_l − x_l'‖² ``_cluster`` has left in Gd and whose ‖r − x_l‖² are
+    integer distances. It is the same number up to rounding (the reference,
+    which forms f̂_g, agrees to 1e-9 relative), at a fraction of the cost of 128
+    weighted sums per member: the decision is most of a static pixel's visit.
+    ``_consensus_g`` forms f̂_g where a removal needs it.
     """
     u = pf[SIFT_UNIT]
     for c in range(k):
@@ -713,32 +726,44 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk,
     for i in range(n):
         if labels[i] == m:
             cnt += 1
-    G = fhat_g.shape[0]
     for c in range(3):
         fhat_c[c] = 0.0
-    for j in range(G):
-        fhat_g[j] = 0.0
+    sr = 0.0  # Σ w_l ‖r − x_l‖²
+    sp = 0.0  # Σ_{l<l'} w_l w_l' ‖x_l − x_l'‖²
     for i in range(n):
         if labels[i] != m:
             continue
         w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
         for c in range(3):
             fhat_c[c] += w * fc_s[cs[i], cy[i], cx[i], c]
-        # read in place, by uint64 indices (the note before ``_lab_d2_rs``): it vectorises
-        si, yi, xi = np.uint64(cs[i]), np.uint64(cy[i]), np.uint64(cx[i])
-        for j in range(np.uint64(G)):
-            fhat_g[j] += w * (fg_s[si, yi, xi, j] * u)
+        sr += w * float(_sift_d2_rs(fg_r, y, x, fg_s, cs[i], cy[i], cx[i]))
+        for j in range(i + 1, n):
+            if labels[j] == m:
+                wj = cB[j] / bm if bm > 0.0 else 1.0 / cnt
+                sp += w * wj * float(Gd[i, j])
     dc = 0.0
     for c in range(3):
         t = fc_r[y, x, c] - fhat_c[c]
         dc += t * t
-    dg = 0.0
-    yr, xr = np.uint64(y), np.uint64(x)
-    for j in range(np.uint64(G)):
-        t = fg_r[yr, xr, j] * u - fhat_g[j]
-        dg += t * t
+    dg = max(sr - sp, 0.0) * u * u
     M = pf[LAM4] * _se(dc, pf[SIG_C]) + pf[LAM5] * _se(dg, pf[SIG_G])
-    return m, bm, M, dg
+    return m, bm, M, dg, cnt
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _consensus_g(fg_s, n, cs, cx, cy, cB, labels, m, bm, cnt, u, fhat_g):
+    """f̂_g = Σ_{A_m} w_l f_g(x_l) · u (``_decide``'s weights; fhat_g (G,) float64)."""
+    G = fhat_g.shape[0]
+    for j in range(G):
+        fhat_g[j] = 0.0
+    for i in range(n):
+        if labels[i] != m:
+            continue
+        w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
+        # read in place, by uint64 indices (the note before ``_lab_d2_rs``): it vectorises
+        si, yi, xi = np.uint64(cs[i]), np.uint64(cy[i]), np.uint64(cx[i])
+        for j in range(np.uint64(G)):
+            fhat_g[j] += w * (fg_s[si, yi, xi, j] * u)
 
 
 # --- Sec. 3.2.2: removal ----------------------------------------------------------
@@ -1012,10 +1037,12 @@ def _update_correspondences(N, C, fc_r, fg_r, fc_s, fg_s, F, hasF, pf, pi, x, y,
 @numba.njit(cache=True, nogil=True)
 def _work_arrays(K, G):
     """Per-pixel work arrays of a decision: candidates (cs, cx, cy, cB, slot),
-    DBSCAN (A, the ε-graph; labels, is_core, stack), b_k and f̂ (bk, fhat_c, fhat_g; G = the
-    SIFT length), and the scan neighbours (nx_, ny_, ox_, oy_)."""
+    DBSCAN (A, the ε-graph; Gd, the SIFT distances; labels, is_core, stack), b_k
+    and f̂ (bk, fhat_c, fhat_g; G = the SIFT length), and the scan neighbours
+    (nx_, ny_, ox_, oy_)."""
     return (np.empty(K, np.int64), np.empty(K, np.int64), np.empty(K, np.int64),
             np.empty(K, np.float64), np.empty(K, np.int64), np.empty((K, K), np.bool_),
+            np.empty((K, K), np.int64),
             np.empty(K, np.int64), np.empty(K, np.bool_), np.empty(K * K + 1, np.int64),
             np.empty(K + 1, np.float64), np.empty(3, np.float64), np.empty(G, np.float64),
             np.empty(2, np.int64), np.empty(2, np.int64), np.empty(2, np.int64),
@@ -1033,7 +1060,7 @@ def _scan_neighbours(direction):
 
 @numba.njit(cache=True, nogil=True, inline="always")
 def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction,
-              cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
+              cs, cx, cy, cB, slot, A, Gd, labels, is_core, stack, bk, fhat_c,
               nx_, ny_, ox_, oy_):
     """``_candidates`` → ``_cluster`` → ``_decide`` at (x, y), in a scan of
     ``direction``; g_in, g_out from ``_edge_bounds(pf)``; the work arrays of
@@ -1041,7 +1068,8 @@ def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction
 
     Returns (n, nn, k, m, b_m, M, ‖f_g(x_r) − f̂_g‖², |A_m|, the bitmask of
     A_m's sources); m = −1 and M = NaN when no cluster formed. The candidates,
-    labels and f̂ stay in the work arrays; ``_store_decision`` writes the maps.
+    labels and f̂_c stay in the work arrays (f̂_g: ``_consensus_g``);
+    ``_store_decision`` writes the maps.
 
     The work arrays come one by one, not as the tuple that ``_work_arrays``
     returns: inlined, unpacking the tuple at every pixel took a reference
@@ -1052,19 +1080,19 @@ def _decision(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction
     ndx0, ndy0, ndx1, ndy1 = _scan_neighbours(direction)
     n, nn = _candidates(N, C, x, y, ndx0, ndy0, ndx1, ndy1, pi[CAND_SET] != 0, cs, cx, cy,
                         cB, slot, nx_, ny_, ox_, oy_)
-    k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, labels, is_core, stack)
+    k = _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, Gd, labels, is_core,
+                 stack)
     M = np.nan
     m = -1
     bm = 0.0
     cdist = np.nan
-    if k > 0:
-        m, bm, M, cdist = _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB,
-                                  labels, k, pf, bk, fhat_c, fhat_g)
     wsize = 0
+    if k > 0:
+        m, bm, M, cdist, wsize = _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB,
+                                         labels, k, pf, bk, Gd, fhat_c)
     wsrc = 0
     for i in range(n):
         if k > 0 and labels[i] == m:
-            wsize += 1
             wsrc |= 1 << cs[i]
     return n, nn, k, m, bm, M, cdist, wsize, wsrc
 
@@ -1100,12 +1128,12 @@ def _decide_all(N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, direction, preM, preB, pre
     K = 2 * S
     g_in, g_out = _edge_bounds(pf)
     for y in numba.prange(H):
-        (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
+        (cs, cx, cy, cB, slot, A, Gd, labels, is_core, stack, bk, fhat_c, fhat_g,
          nx_, ny_, ox_, oy_) = _work_arrays(K, fg_r.shape[2])
         for x in range(W):
             n, _, k, _, bm, M, _, wsize, wsrc = _decision(
                 N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction, cs, cx,
-                cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g, nx_, ny_, ox_,
+                cy, cB, slot, A, Gd, labels, is_core, stack, bk, fhat_c, nx_, ny_, ox_,
                 oy_)
             _store_decision(preM, preB, preK, x, y, M, bm, n, k, wsize, wsrc)
 
@@ -1148,7 +1176,7 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
     nb = pi[HOG_BINS]
     half = pi[P] // 2 if pi[WRITE_PATCH] != 0 else 0
     work, score, gc0, gc1, gh0, gh1, chg, pbufs = scratch
-    (cs, cx, cy, cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g,
+    (cs, cx, cy, cB, slot, A, Gd, labels, is_core, stack, bk, fhat_c, fhat_g,
      nx_, ny_, ox_, oy_) = work
     # the two scan neighbours (x + dx, y + dy): left/up, or right/down
     ndx0, ndy0, ndx1, ndy1 = _scan_neighbours(direction)
@@ -1198,7 +1226,7 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
         # ---- decision (Sec. 3.2.1) --------------------------------------------
         n, nn, k, m, bm, M, cdist, wsize, wsrc = _decision(
             N, C, fc_r, fg_r, fc_s, fg_s, pf, pi, g_in, g_out, x, y, direction, cs, cx, cy,
-            cB, slot, A, labels, is_core, stack, bk, fhat_c, fhat_g, nx_, ny_, ox_, oy_)
+            cB, slot, A, Gd, labels, is_core, stack, bk, fhat_c, nx_, ny_, ox_, oy_)
         _store_decision(Mmap, Bmap, Kmap, x, y, M, bm, n, k, wsize, wsrc)
         dynamic = k > 0 and M <= pf[T_R]
         if k == 0:
@@ -1208,6 +1236,7 @@ def _scan_span(img, lab, gray, fc_r, fg_r, src_img, src_lab, src_gray, fc_s, fg_
             stats[0] += 1
             L[y, x] = 1
             # ---- removal (Sec. 3.2.2) -----------------------------------------
+            _consensus_g(fg_s, n, cs, cx, cy, cB, labels, m, bm, wsize, pf[SIFT_UNIT], fhat_g)
             ib, best, ntie = _choose_patch_in(lab, hb_r, hm_r, src_lab, hb_s, hm_s, fc_s,
                                               fg_s, F, hasF, pf, pi, x, y, ndx0, ndy0, ndx1,
                                               ndy1, n, cs, cx, cy, labels, m, fhat_c, fhat_g,
