@@ -15,7 +15,7 @@ kernel                          reference
 ``_sim_H``, ``_similarity_map``  ``_Ctx.H``, ``similarity_map`` (Eq. 1, H)
 ``_candidates``                 ``candidates`` (P, B; Sec. 3.2.1)
 ``_cluster``, ``_dbscan``       ``cluster`` (𝓑, Eq. DB_cost)
-``_decide``                     ``decide`` (b_k, f̂, M; Eq. decision)
+``_decide``, ``_consensus_g``   ``decide`` (b_k, f̂, M; Eq. decision)
 ``_choose_patch``               ``choose_patch`` (q*, q̂; Sec. 3.2.2)
 ``_write_patch``                ``write_patch``
 ``_update_correspondences``     ``update_correspondences`` (Sec. 3.2.3)
