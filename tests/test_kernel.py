@@ -288,3 +288,39 @@ def test_perf_map_names_the_compiled_functions(tmp_path):
               if not f.is_declaration and "triple_sum" in f.name and "cpython" not in f.name)
     assert int(next(a for a, _, name in rows if name == fn), 16) == \
         lib._codegen._engine.get_function_address(fn)
+
+
+def _atan2_bins(gray: np.ndarray, nb: int) -> tuple[np.ndarray, np.ndarray]:
+    """The HoG bin and magnitude of every pixel as the reference computes them
+    (central differences clamped at the border; atan2 + π cut into nb bins)."""
+    g = gray.astype(np.float64)
+    H, W = g.shape
+    gx = (g[:, np.minimum(np.arange(W) + 1, W - 1)] - g[:, np.maximum(np.arange(W) - 1, 0)]) * 0.5
+    gy = (g[np.minimum(np.arange(H) + 1, H - 1)] - g[np.maximum(np.arange(H) - 1, 0)]) * 0.5
+    m = np.sqrt(gx * gx + gy * gy)
+    b = np.minimum(((np.arctan2(gy, gx) + np.pi) * nb / (2.0 * np.pi)).astype(np.int64), nb - 1)
+    return np.where(m > 0, b, -1), m
+
+
+@pytest.mark.parametrize("nb", [8, 6])
+def test_gradient_bins_equal_the_atan2_bins(nb):
+    """The compiled bins (for nb = 8 read from the octant, without atan2) are the
+    reference's atan2 bins, on noise and on gradients on and next to the octants'
+    edges (g_x = ±g_y to the last float32 step, g_x = 0, g_y = 0)."""
+    rng = np.random.default_rng(11)
+    noise = (rng.random((64, 80)) * 255).astype(np.float32)
+    # ramps whose two gradient components are equal, or one float32 step apart
+    y, x = np.mgrid[0:64, 0:80].astype(np.float32)
+    diag = (x + y) * np.float32(1.7)
+    near = diag.copy()
+    near[::3] = np.nextafter(near[::3], np.float32(np.inf))
+    near[1::3] = np.nextafter(near[1::3], np.float32(-np.inf))
+    anti = (x - y) * np.float32(0.37) + 100
+    flat_rows = np.repeat(rng.random((64, 1)).astype(np.float32) * 255, 80, axis=1)
+    steps = np.where(rng.random((64, 80)) < 0.5, np.float32(10), np.float32(10.5))
+    for gray in (noise, diag, near, anti, flat_rows, steps, np.float32(1e-3) * noise):
+        want_b, want_m = _atan2_bins(gray, nb)
+        got_b, got_m = kn._gradient_bins(np.ascontiguousarray(gray), nb)
+        np.testing.assert_array_equal(got_b, want_b)
+        np.testing.assert_array_equal(got_m, want_m)
+    assert (want_b >= 0).any()
