@@ -706,9 +706,11 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk, 
     candidates' own: with Σ w_l = 1, ‖r − Σ w_l x_l‖² = Σ w_l ‖r − x_l‖² −
     Σ_{l<l'} w_l w_l' ‖x_l − x_l'‖² (the weighted variance's decomposition),
     whose ‖x_l − x_l'‖² ``_cluster`` has left in Gd and whose ‖r − x_l‖² are
-    integer distances. It is the same number up to rounding (the reference,
-    which forms f̂_g, agrees to 1e-9 relative), at a fraction of the cost of 128
-    weighted sums per member: the decision is most of a static pixel's visit.
+    integer distances. It is the same number up to rounding (the scans' float32
+    M maps came out the same as when f̂_g was formed, on the synthetic scenes of
+    README's session 81; the reference, which forms it, agrees within
+    ``test_kernel``'s 1e-6), at a fraction of the cost of 128 weighted sums per
+    member: the decision is most of a static pixel's visit.
     ``_consensus_g`` forms f̂_g where a removal needs it.
     """
     u = pf[SIFT_UNIT]
