@@ -474,9 +474,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "default preset, 8 s for the paper's, 1-4 s for each median stack "
                         "and under 1 s for telea, on 2 cores with --jobs 2); also "
                         f"{','.join(DIAGNOSTICS)}, only where named (the diagnostic "
-                        "described above: the 'dynremove' run, with the same preset and "
-                        "flags, its fill's matches across the mask taken from "
-                        "background.png)")
+                        "described above)")
     e.add_argument("--ablation", action="store_true",
                    help="instead of the methods: variants of the preset, each one setting "
                         "changed (listed under --variants); prints mean J / PSNR per variant")
