@@ -25,8 +25,9 @@ import pytest
 from dynremove.evaluation import composite, synth
 from dynremove.evaluation.evaluate import SCORE_KEYS, find_sets, format_table, run_eval
 from dynremove.evaluation.metrics import psnr_in_mask, ssim_in_mask
-from dynremove.evaluation.whole_photo import (damage_percent, delta_e76, leftover_percent,
-                                              leftover_split, misplaced_fill_percent,
+from dynremove.evaluation.whole_photo import (damage_percent, delta_e76, kept_by_step,
+                                              leftover_percent, leftover_split,
+                                              misplaced_fill_percent,
                                               own_mover_fill_percent, psnr, ssim)
 
 N = 200
@@ -148,6 +149,66 @@ def test_leftover_split_tells_a_missed_mover_from_a_wrong_fill(case, sigma):
     assert leftover_split(out, ref, bg, mask, np.zeros((N, N), bool)) == (None, None)
     with pytest.raises(ValueError):
         leftover_split(out, ref[:10], bg, mask)
+
+
+def test_kept_by_step_names_the_step_that_left_each_kept_pixel(case):
+    """The mover's 60 x 60 square, its top four 15-row bands left as the input showed
+    them by four different steps; a fifth map, the right half, restored. Each band
+    counts for the first step that applies: replaced, then the fill's map, then the
+    scans' map, else missed."""
+    bg, ref, _, mask = case
+    out = ref.copy()
+    out[20:80, 50:80] = bg[20:80, 50:80]  # the right 30 columns restored
+    band = [np.zeros((N, N), bool) for _ in range(4)]
+    for i, b in enumerate(band):
+        b[20 + 15 * i:35 + 15 * i, 20:80] = True
+    # band 0 never scanned; band 1 scanned, dropped before the fill; band 2 in the
+    # fill's map, kept; band 3 replaced (and in both maps), still alike the input
+    scanned = band[1] | band[2] | band[3]
+    fill_input = band[2] | band[3]
+    replaced = band[3] | (mask & (np.arange(N) >= 50)[None])
+    split = kept_by_step(out, ref, bg, mask, scanned=scanned, fill_input=fill_input,
+                         replaced=replaced, blur_sigma=0)
+    # each band's left 30 columns are kept (450 px of the 3600 of the mask)
+    assert split == {k: pytest.approx(100 * 450 / 3600)
+                     for k in ("missed", "refinement", "fill", "replaced")}
+    kept, _ = leftover_split(out, ref, bg, mask, blur_sigma=0)
+    assert sum(split.values()) == pytest.approx(kept)
+    # a map that covers a band moves it to a later step only through precedence:
+    # the scans' map over everything moves the missed band to "refinement"
+    more = kept_by_step(out, ref, bg, mask, scanned=np.ones((N, N), bool),
+                        fill_input=fill_input, replaced=replaced, blur_sigma=0)
+    assert more["missed"] == 0.0 and more["refinement"] == pytest.approx(100 * 900 / 3600)
+    # blurred, the parts still add up to the kept leftover
+    blurred = kept_by_step(out, ref, bg, mask, scanned=scanned, fill_input=fill_input,
+                           replaced=replaced)
+    assert sum(blurred.values()) == pytest.approx(leftover_split(out, ref, bg, mask)[0])
+    assert kept_by_step(out, ref, bg, mask, np.zeros((N, N), bool), scanned=scanned,
+                        fill_input=fill_input, replaced=replaced) is None
+    with pytest.raises(ValueError, match="scanned"):
+        kept_by_step(out, ref, bg, mask, scanned=scanned[:10], fill_input=fill_input,
+                     replaced=replaced)
+
+
+def test_eval_splits_dynremoves_kept_leftover_by_step(tmp_path):
+    # three photos of two movers: some of each mover is left (a quarter of the
+    # mask, kept as the input showed it by more than one step)
+    synth.write_scene(synth.make_scene(seed=1, n_views=3, size=(96, 128), n_objects=2),
+                      tmp_path / "syn")
+    rep = run_eval(tmp_path, methods=["dynremove", "paper", "median"], progress=False)
+    by = {r["method"]: r for r in rep["sets"]}
+    for m in ("dynremove", "paper"):
+        r = by[m]
+        parts = [r[f"kept_{k}"] for k in ("missed", "refinement", "fill", "replaced")]
+        assert all(p is not None and 0 <= p <= 100 for p in parts), r
+        assert sum(parts) == pytest.approx(r["leftover_kept"])
+    assert by["dynremove"]["leftover_kept"] > 5
+    assert sum(by["dynremove"][f"kept_{k}"] > 0 for k in ("missed", "refinement", "fill")) >= 2
+    # the paper preset has no refinement and no fill of its own
+    assert by["paper"]["kept_refinement"] == 0.0 and by["paper"]["kept_fill"] == 0.0
+    # a baseline has no steps to name
+    assert by["median"]["kept_missed"] is None and by["median"]["leftover_kept"] is not None
+    assert "kept by the fill %" in format_table(rep)
 
 
 @pytest.mark.parametrize("sigma", [0.0, 1.0])

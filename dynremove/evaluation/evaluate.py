@@ -52,7 +52,12 @@ and those it changed into something still wrong (a wrong fill)
 (:func:`~dynremove.evaluation.whole_photo.leftover_split`); of the wrong fill,
 ``leftover_misplaced`` is the part that shows the true background shifted by at most
 2 px (the right content, misplaced:
-:func:`~dynremove.evaluation.whole_photo.misplaced_fill_percent`).
+:func:`~dynremove.evaluation.whole_photo.misplaced_fill_percent`). For dynremove's
+own runs the kept part is split by the step that left it
+(:func:`~dynremove.evaluation.whole_photo.kept_by_step`): ``kept_missed`` (never
+in the scans' map), ``kept_refinement`` (dropped by the clean-up, the votes or the
+snap), ``kept_fill`` (in the map the fill started from, kept by the fill) and
+``kept_replaced`` (replaced, yet alike the input); they add up to ``leftover_kept``.
 
 Parallelism and clusters
 ------------------------
@@ -103,8 +108,8 @@ from dynremove import io
 from dynremove.errors import InputError
 from dynremove.evaluation import baselines
 from dynremove.evaluation.metrics import jaccard, psnr_in_mask, ssim_in_mask
-from dynremove.evaluation.whole_photo import (damage_percent, leftover_percent, leftover_split,
-                                              misplaced_fill_percent,
+from dynremove.evaluation.whole_photo import (damage_percent, kept_by_step, leftover_percent,
+                                              leftover_split, misplaced_fill_percent,
                                               own_mover_fill_percent, psnr, ssim)
 from dynremove.params import Params, preset
 from dynremove.pipeline import Result, remove_dynamic
@@ -122,8 +127,8 @@ TRUE_FIELDS_LEGEND = (
 PSNR_CAP_DB = 100.0  # an exact match would be +inf; JSON has no infinity
 #: Figures of a row (``null`` where they do not apply).
 SCORE_KEYS = ("jaccard", "psnr", "ssim", "psnr_whole", "ssim_whole", "damage", "leftover",
-              "leftover_kept", "leftover_refilled", "leftover_misplaced", "unrecoverable",
-              "own_mover")
+              "leftover_kept", "leftover_refilled", "leftover_misplaced", "kept_missed",
+              "kept_refinement", "kept_fill", "kept_replaced", "unrecoverable", "own_mover")
 
 # Variants of the base preset for ``--ablation`` (field -> value). A variant whose
 # fields are not all Params fields, or whose values Params rejects, is skipped with
@@ -340,7 +345,21 @@ def score(ls: LoadedSet, clean: np.ndarray | None, dynamic: np.ndarray | None,
             clean, ls.images[ls.ref], ls.background, ls.gt, ls.free)
         out["leftover_misplaced"] = misplaced_fill_percent(
             clean, ls.images[ls.ref], ls.background, ls.gt, ls.free)
+        if result is not None and result.stages and out["leftover_kept"] is not None:
+            split = kept_by_step(clean, ls.images[ls.ref], ls.background, ls.gt, ls.free,
+                                 **_steps(result))
+            out.update({f"kept_{k}": v for k, v in split.items()})
     return out
+
+
+def _steps(result: Result) -> dict[str, np.ndarray]:
+    """A dynremove run's maps for ``kept_by_step``: the scans' map, the map its fill
+    started from (the stage before "select"; the final map without a fill by
+    selection) and the pixels it replaced (its final map)."""
+    names = list(result.stages)
+    fill_input = (result.stages[names[names.index("select") - 1]] if "select" in names
+                  else result.dynamic)
+    return dict(scanned=result.dynamic_raw, fill_input=fill_input, replaced=result.dynamic)
 
 
 def own_mover_fill(ls: LoadedSet, result: Result) -> float | None:
@@ -853,6 +872,11 @@ def _format_whole(report: dict, methods: Sequence[str], by: dict, info: dict,
     table.append(["mean leftover %", ""] + [_fmt(summ[m]["leftover"], ".1f") for m in methods])
     table.append(["  kept as input %", ""]
                  + [_fmt(summ[m]["leftover_kept"], ".1f") for m in methods])
+    for key, label in (("kept_missed", "never detected"),
+                       ("kept_refinement", "dropped after scans"),
+                       ("kept_fill", "kept by the fill"), ("kept_replaced", "replaced, alike")):
+        if any(summ[m][key] is not None for m in methods):
+            table.append([f"    {label} %", ""] + [_fmt(summ[m][key], ".1f") for m in methods])
     table.append(["  refilled wrong %", ""]
                  + [_fmt(summ[m]["leftover_refilled"], ".1f") for m in methods])
     table.append(["    of it misplaced %", ""]
@@ -866,6 +890,9 @@ def _format_whole(report: dict, methods: Sequence[str], by: dict, info: dict,
             "output still shows the input there; refilled wrong: changed, still wrong; "
             "of it misplaced: the true background shifted up to 2 px on each axis matches "
             "it; kept + refilled = leftover, all of the same recoverable true mask)",
+            "  kept as input, by the step that left it (dynremove's runs): never in the "
+            "scans' map; in it but dropped after (clean-up, votes, snap); in the map the "
+            "fill started from, kept by the fill; replaced, but alike the input",
             "  unrec%: of the true mask, seen free by no other view"]
     return head + _render(table, len(bg_sets), n_left=1)
 

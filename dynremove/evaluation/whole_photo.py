@@ -27,6 +27,7 @@ __all__ = [
     "damage_percent",
     "leftover_percent",
     "leftover_split",
+    "kept_by_step",
     "misplaced_fill_percent",
     "own_mover_fill_percent",
     "DAMAGE_DILATE_PX",
@@ -455,6 +456,94 @@ def leftover_split(
     kept = 100.0 * int(np.count_nonzero(wrong & as_input & count)) / n
     refilled = 100.0 * int(np.count_nonzero(wrong & ~as_input & count)) / n
     return kept, refilled
+
+
+def kept_by_step(
+    output: npt.ArrayLike,
+    reference: npt.ArrayLike,
+    background: npt.ArrayLike,
+    true_mask: npt.ArrayLike,
+    recoverable: npt.ArrayLike | None = None,
+    *,
+    scanned: npt.ArrayLike,
+    fill_input: npt.ArrayLike,
+    replaced: npt.ArrayLike,
+    de_max: float = DE_MAX,
+    blur_sigma: float = DE_BLUR_SIGMA,
+) -> dict[str, float] | None:
+    """The *kept* leftover of :func:`leftover_split`, split by the step that left it.
+
+    Each kept pixel (recoverable, true mask, still wrong, the output as the input)
+    counts once, for the first that applies:
+
+    - ``replaced``: the method replaced it, yet the output shows what the input did
+      (a source's own copy of the mover, or a blend that took the fill back);
+    - ``fill``: in the dynamic map the fill started from, which kept the reference
+      there (dynremove's fill by selection: its consensus, graph cut or region rules);
+    - ``refinement``: in the scans' map, dropped before the fill (the clean-up, the
+      border votes, the snap to edges);
+    - ``missed``: never in the scans' map.
+
+    They add up to :func:`leftover_split`'s kept part, in percents of the same
+    recoverable true mask: where work on the detection, on the refinement or on
+    the fill would pay off.
+
+    Parameters
+    ----------
+    output, reference, background, true_mask, recoverable, de_max, blur_sigma
+        As in :func:`leftover_split`.
+    scanned, fill_input, replaced : (H, W) bool array_like
+        The scans' map, the map the fill took, and the pixels the method replaced
+        (for a method without a refinement or a fill of its own, the same map may be
+        given twice or three times).
+
+    Returns
+    -------
+    dict or None
+        ``{"missed", "refinement", "fill", "replaced"}`` percents in ``[0, 100]``;
+        None where :func:`leftover_percent` gives None.
+
+    Raises
+    ------
+    ValueError
+        As :func:`leftover_split`, and when a map is not the image's (H, W).
+
+    Examples
+    --------
+    A 4x4 mover, output as the input on rows 2 to 4: row 2 never scanned, row 3
+    scanned but dropped, row 4 in the fill's map and kept; row 5 restored.
+
+    >>> import numpy as np
+    >>> bg = np.full((8, 8, 3), 128, np.uint8)
+    >>> mask = np.zeros((8, 8), bool); mask[2:6, 2:6] = True
+    >>> ref = bg.copy(); ref[mask] = (0, 0, 255)
+    >>> out = ref.copy(); out[5, 2:6] = 128
+    >>> scan = np.zeros((8, 8), bool); scan[3:6, 2:6] = True
+    >>> fill_in = np.zeros((8, 8), bool); fill_in[4:6, 2:6] = True
+    >>> rep = np.zeros((8, 8), bool); rep[5, 2:6] = True
+    >>> kept_by_step(out, ref, bg, mask, scanned=scan, fill_input=fill_in,
+    ...              replaced=rep, blur_sigma=0)
+    {'missed': 25.0, 'refinement': 25.0, 'fill': 25.0, 'replaced': 0.0}
+    """
+    count, _, wrong, lab_out = _leftover_pixels(output, background, true_mask, recoverable,
+                                                de_max, blur_sigma)
+    if wrong is None:
+        return None
+    maps = {}
+    for name, m in (("scanned", scanned), ("fill_input", fill_input), ("replaced", replaced)):
+        maps[name] = _as_mask(m, name)
+        if maps[name].shape != count.shape:
+            raise ValueError(f"{name} must have the image's (H, W) = {count.shape}, "
+                             f"got {maps[name].shape}")
+    kept = wrong & _as_input(lab_out, reference, de_max, blur_sigma) & count
+    rep = kept & maps["replaced"]
+    fill = kept & ~rep & maps["fill_input"]
+    refinement = kept & ~rep & ~fill & maps["scanned"]
+    missed = kept & ~rep & ~fill & ~refinement
+    n = int(np.count_nonzero(count))
+    return {k: 100.0 * int(np.count_nonzero(v)) / n
+            for k, v in (("missed", missed), ("refinement", refinement), ("fill", fill),
+                         ("replaced", rep))}
 
 
 def misplaced_fill_percent(
