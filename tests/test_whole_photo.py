@@ -152,10 +152,10 @@ def test_leftover_split_tells_a_missed_mover_from_a_wrong_fill(case, sigma):
 
 
 def test_kept_by_step_names_the_step_that_left_each_kept_pixel(case):
-    """The mover's 60 x 60 square, its top four 15-row bands left as the input showed
-    them by four different steps; a fifth map, the right half, restored. Each band
-    counts for the first step that applies: replaced, then the fill's map, then the
-    scans' map, else missed."""
+    """The mover's 60 x 60 square in four 15-row bands: the left half of each left
+    as the input showed it by a different step, the right half restored. A kept
+    pixel counts for the first step that applies: replaced, then the fill's map,
+    then the scans' map, else missed."""
     bg, ref, _, mask = case
     out = ref.copy()
     out[20:80, 50:80] = bg[20:80, 50:80]  # the right 30 columns restored
