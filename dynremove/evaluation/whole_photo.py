@@ -532,9 +532,7 @@ def kept_by_step(
     maps = {}
     for name, m in (("scanned", scanned), ("fill_input", fill_input), ("replaced", replaced)):
         maps[name] = _as_mask(m, name)
-        if maps[name].shape != count.shape:
-            raise ValueError(f"{name} must have the image's (H, W) = {count.shape}, "
-                             f"got {maps[name].shape}")
+        _check_same_shape(maps[name], count, name, "true_mask")
     kept = wrong & _as_input(lab_out, reference, de_max, blur_sigma) & count
     rep = kept & maps["replaced"]
     fill = kept & ~rep & maps["fill_input"]

@@ -693,6 +693,12 @@ def _cluster(fc_s, fg_s, n, cs, cx, cy, pf, pi, g_in, g_out, A, Gd, labels, is_c
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _member_weight(cB, i, bm, cnt):
+    """w_l of candidate i in the consensus f̂: B_l / b_m, or 1 / |A_m| when b_m = 0."""
+    return cB[i] / bm if bm > 0.0 else 1.0 / cnt
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk, Gd,
             fhat_c):
     """Winning cluster A_m, consensus f̂_c and M(x_r) (Sec. 3.2.1).
@@ -735,14 +741,13 @@ def _decide(fc_r, fg_r, fc_s, fg_s, x, y, n, cs, cx, cy, cB, labels, k, pf, bk, 
     for i in range(n):
         if labels[i] != m:
             continue
-        w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
+        w = _member_weight(cB, i, bm, cnt)
         for c in range(3):
             fhat_c[c] += w * fc_s[cs[i], cy[i], cx[i], c]
         sr += w * float(_sift_d2_rs(fg_r, y, x, fg_s, cs[i], cy[i], cx[i]))
         for j in range(i + 1, n):
             if labels[j] == m:
-                wj = cB[j] / bm if bm > 0.0 else 1.0 / cnt
-                sp += w * wj * float(Gd[i, j])
+                sp += w * _member_weight(cB, j, bm, cnt) * float(Gd[i, j])
     dc = 0.0
     for c in range(3):
         t = fc_r[y, x, c] - fhat_c[c]
@@ -761,7 +766,7 @@ def _consensus_g(fg_s, n, cs, cx, cy, cB, labels, m, bm, cnt, u, fhat_g):
     for i in range(n):
         if labels[i] != m:
             continue
-        w = cB[i] / bm if bm > 0.0 else 1.0 / cnt
+        w = _member_weight(cB, i, bm, cnt)
         # read in place, by uint64 indices (the note before ``_lab_d2_rs``): it vectorises
         si, yi, xi = np.uint64(cs[i]), np.uint64(cy[i]), np.uint64(cx[i])
         for j in range(np.uint64(G)):
